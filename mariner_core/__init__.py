@@ -1,0 +1,1 @@
+"""MaRINeR core: reference-based render enhancement (standalone PyTorch package)."""

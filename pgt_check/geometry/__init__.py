@@ -1,0 +1,1 @@
+"""Geometry: rigid transforms, homography estimation, corner error, pose correction (PnP)."""

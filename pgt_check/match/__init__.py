@@ -1,0 +1,1 @@
+"""Matching: keypoint correspondences between a render (image0) and a photo (image1)."""

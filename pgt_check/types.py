@@ -1,0 +1,211 @@
+"""Value types shared by every pipeline step.
+
+Conventions (one for the whole package, converted at the reader edge):
+
+* Poses are ``world_from_cam``: 4x4 float64 rigid transforms, OpenCV camera axes
+  (x right, y down, z forward), ``X_world = world_from_cam @ X_cam``.
+* Pixels follow OpenCV: the centre of the top-left pixel is (0, 0). COLMAP / LaMAR files put it
+  at (0.5, 0.5); their readers subtract 0.5 from cx, cy.
+* Images are HxWx3 RGB float32 in [0, 1].
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+# COLMAP camera models we accept, with their parameter names (COLMAP order).
+CAMERA_MODELS: dict[str, tuple[str, ...]] = {
+    "SIMPLE_PINHOLE": ("f", "cx", "cy"),
+    "PINHOLE": ("fx", "fy", "cx", "cy"),
+    "SIMPLE_RADIAL": ("f", "cx", "cy", "k1"),
+    "RADIAL": ("f", "cx", "cy", "k1", "k2"),
+    "OPENCV": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"),
+    "FULL_OPENCV": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"),
+}
+
+
+def check_shape(name: str, array: np.ndarray, shape: tuple[int | None, ...]) -> None:
+    """Raise ``ValueError`` unless ``array.shape`` matches ``shape`` (None = any size)."""
+    if array.ndim != len(shape) or any(
+        want is not None and have != want for have, want in zip(array.shape, shape)
+    ):
+        pretty = "x".join("N" if s is None else str(s) for s in shape)
+        raise ValueError(f"{name}: expected shape ({pretty}), got {tuple(array.shape)}")
+
+
+@dataclass(frozen=True)
+class Camera:
+    """A camera in OpenCV pixel convention (top-left pixel centre at (0, 0)).
+
+    ``model`` is a COLMAP model name; ``params`` are in COLMAP order but with the principal
+    point already converted to OpenCV convention (readers of COLMAP/LaMAR files subtract 0.5).
+    """
+
+    model: str
+    width: int
+    height: int
+    params: tuple[float, ...]
+
+    def __post_init__(self) -> None:
+        if self.model not in CAMERA_MODELS:
+            raise ValueError(
+                f"unknown camera model {self.model!r} (allowed: {', '.join(CAMERA_MODELS)})"
+            )
+        names = CAMERA_MODELS[self.model]
+        if len(self.params) != len(names):
+            raise ValueError(
+                f"camera model {self.model} takes {len(names)} parameters "
+                f"({', '.join(names)}), got {len(self.params)}"
+            )
+        if int(self.width) <= 0 or int(self.height) <= 0:
+            raise ValueError(f"camera size must be positive, got {self.width}x{self.height}")
+        if not all(np.isfinite(p) for p in self.params):
+            raise ValueError(f"camera parameters must be finite, got {self.params}")
+        object.__setattr__(self, "width", int(self.width))
+        object.__setattr__(self, "height", int(self.height))
+        object.__setattr__(self, "params", tuple(float(p) for p in self.params))
+        fx, fy = self.focal
+        if fx <= 0 or fy <= 0:
+            raise ValueError(f"focal length must be positive, got fx={fx}, fy={fy}")
+
+    @classmethod
+    def pinhole(cls, width: int, height: int, fx: float, fy: float, cx: float, cy: float) -> Camera:
+        """A PINHOLE camera from OpenCV-convention intrinsics."""
+        return cls("PINHOLE", width, height, (fx, fy, cx, cy))
+
+    @property
+    def _named(self) -> dict[str, float]:
+        return dict(zip(CAMERA_MODELS[self.model], self.params))
+
+    @property
+    def focal(self) -> tuple[float, float]:
+        p = self._named
+        return (p["f"], p["f"]) if "f" in p else (p["fx"], p["fy"])
+
+    @property
+    def principal_point(self) -> tuple[float, float]:
+        p = self._named
+        return p["cx"], p["cy"]
+
+    @property
+    def K(self) -> np.ndarray:  # noqa: N802 (standard name)
+        """(3, 3) float64 intrinsic matrix, OpenCV pixel convention."""
+        fx, fy = self.focal
+        cx, cy = self.principal_point
+        return np.array([[fx, 0.0, cx], [0.0, fy, cy], [0.0, 0.0, 1.0]])
+
+    @property
+    def dist_coeffs(self) -> np.ndarray:
+        """OpenCV distortion coefficients (k1, k2, p1, p2[, k3, k4, k5, k6]); zeros if none."""
+        p = self._named
+        if self.model == "FULL_OPENCV":
+            return np.array([p[k] for k in ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")])
+        return np.array([p.get("k1", 0.0), p.get("k2", 0.0), p.get("p1", 0.0), p.get("p2", 0.0)])
+
+    @property
+    def is_distorted(self) -> bool:
+        return bool(np.any(self.dist_coeffs != 0.0))
+
+    @property
+    def diagonal(self) -> float:
+        return float(np.hypot(self.width, self.height))
+
+    def as_pinhole(self) -> Camera:
+        """The same camera with distortion dropped (the model the renderer uses)."""
+        fx, fy = self.focal
+        cx, cy = self.principal_point
+        return Camera.pinhole(self.width, self.height, fx, fy, cx, cy)
+
+    def scaled(self, sx: float, sy: float | None = None) -> Camera:
+        """The camera for an image resized by (sx, sy): pixel centres map as (x+.5)*s-.5."""
+        sy = sx if sy is None else sy
+        fx, fy = self.focal
+        cx, cy = self.principal_point
+        width = max(1, round(self.width * sx))
+        height = max(1, round(self.height * sy))
+        return Camera.pinhole(width, height, fx * sx, fy * sy, (cx + 0.5) * sx - 0.5,
+                              (cy + 0.5) * sy - 0.5)
+
+    def to_colmap_params(self) -> tuple[float, ...]:
+        """Parameters in COLMAP convention (principal point + 0.5), for writers."""
+        out = dict(self._named)
+        out["cx"] += 0.5
+        out["cy"] += 0.5
+        return tuple(out[k] for k in CAMERA_MODELS[self.model])
+
+
+@dataclass(frozen=True, eq=False)
+class Frame:
+    """One captured image with its pose to check.
+
+    ``image_path`` is the path exactly as written in the input file (reported verbatim);
+    ``image_file`` is the resolved path used to read it (None if the input named no image).
+    """
+
+    frame_id: str
+    camera: Camera
+    world_from_cam: np.ndarray
+    image_path: str = ""
+    image_file: Path | None = None
+    timestamp: float | None = None
+
+    def __post_init__(self) -> None:
+        m = np.asarray(self.world_from_cam, dtype=np.float64)
+        check_shape(f"frame {self.frame_id}: world_from_cam", m, (4, 4))
+        if not np.all(np.isfinite(m)):
+            raise ValueError(f"frame {self.frame_id}: world_from_cam is not finite")
+        if not np.allclose(m[3], [0, 0, 0, 1]):
+            raise ValueError(f"frame {self.frame_id}: world_from_cam last row must be 0 0 0 1")
+        r = m[:3, :3]
+        if not np.allclose(r @ r.T, np.eye(3), atol=1e-5) or np.linalg.det(r) < 0:
+            raise ValueError(f"frame {self.frame_id}: world_from_cam rotation is not a rotation")
+        m = m.copy()
+        m.setflags(write=False)
+        object.__setattr__(self, "world_from_cam", m)
+
+    @property
+    def cam_from_world(self) -> np.ndarray:
+        from pgt_check.geometry.transforms import invert_rigid
+
+        return invert_rigid(self.world_from_cam)
+
+    @property
+    def center(self) -> np.ndarray:
+        """(3,) camera centre in world coordinates."""
+        return self.world_from_cam[:3, 3].copy()
+
+    def with_pose(self, world_from_cam: np.ndarray) -> Frame:
+        return replace(self, world_from_cam=world_from_cam)
+
+
+@dataclass(frozen=True, eq=False)
+class Trajectory:
+    """An ordered list of frames read from one pose file."""
+
+    frames: tuple[Frame, ...]
+    source: str = ""
+    format: str = ""
+    metadata: dict[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "frames", tuple(self.frames))
+        seen: set[str] = set()
+        for f in self.frames:
+            if f.frame_id in seen:
+                raise ValueError(f"duplicate frame id {f.frame_id!r} in {self.source}")
+            seen.add(f.frame_id)
+
+    def __len__(self) -> int:
+        return len(self.frames)
+
+    def __iter__(self):
+        return iter(self.frames)
+
+    def __getitem__(self, i: int) -> Frame:
+        return self.frames[i]
+
+    def by_id(self) -> dict[str, Frame]:
+        return {f.frame_id: f for f in self.frames}
