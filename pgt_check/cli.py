@@ -1,0 +1,168 @@
+"""Command line: ``pgt-check TRAJECTORY --mesh MESH --out DIR`` (and ``pgt-check report DIR``).
+
+Exit codes: 0 gate passed, 1 gate failed (too many FAIL frames), 2 usage or input error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+from collections.abc import Sequence
+from typing import Any
+
+from pgt_check import __version__
+from pgt_check.config import RunConfig, load_config_file, merge
+from pgt_check.errors import InputError
+
+logger = logging.getLogger("pgt_check")
+
+EXIT_PASSED, EXIT_FAILED, EXIT_INPUT = 0, 1, 2
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="pgt-check",
+        description="Check pseudo-ground-truth camera poses frame by frame against a mesh.",
+        epilog="Subcommand: 'pgt-check report OUT_DIR' rebuilds the report of a finished run. "
+        "Exit codes: 0 gate passed, 1 gate failed, 2 usage or input error.",
+    )
+    p.add_argument("trajectory", help="pose file or COLMAP model directory")
+    p.add_argument("--mesh", required=True, help="mesh (PLY/OBJ/GLB) in the poses' world frame")
+    p.add_argument("--out", default=None, help="output directory (default: pgt-check-out)")
+    p.add_argument("--config", default=None, help="JSON or TOML config file (CLI options win)")
+    g = p.add_argument_group("input")
+    g.add_argument(
+        "--format", default=None, choices=["auto", "lamar", "colmap", "tum", "pgt", "nerfstudio"]
+    )
+    g.add_argument("--images", default=None, help="image folder or list (TUM, pgt, COLMAP)")
+    g.add_argument("--camera", default=None, help="intrinsics, e.g. PINHOLE,640,480,fx,fy,cx,cy "
+                   "(COLMAP convention: top-left pixel centre at 0.5,0.5)")
+    g.add_argument("--sensors", default=None, help="LaMAR sensors file (default: paired by suffix)")
+    g = p.add_argument_group("render")
+    g.add_argument("--renderer", default=None, choices=["moderngl", "pyrender"])
+    g.add_argument("--shading", default=None, choices=["auto", "vertex", "texture", "shaded"],
+                   help="'shaded' renders geometry only (for colourless meshes)")
+    g = p.add_argument_group("match")
+    g.add_argument("--matcher", default=None, help="sift (default), orb, akaze")
+    g.add_argument("--max-keypoints", type=int, default=None)
+    g.add_argument("--resize-max", type=int, default=None,
+                   help="longest side used for matching, px (0 = original size)")
+    g = p.add_argument_group("verdict and gate")
+    g.add_argument("--threshold-px", type=float, default=None,
+                   help="PASS threshold on the corner error (default: 2%% of the image diagonal)")
+    g.add_argument("--threshold-rel-diag", type=float, default=None)
+    g.add_argument("--min-inliers", type=int, default=None)
+    g.add_argument("--min-coverage", type=float, default=None)
+    g.add_argument("--max-fail-fraction", type=float, default=None,
+                   help="gate: largest allowed fraction of FAIL frames (default 0)")
+    g.add_argument("--max-unverifiable-fraction", type=float, default=None)
+    g = p.add_argument_group("run")
+    g.add_argument("--limit", type=int, default=None, help="check only the first N frames")
+    g.add_argument("--fail-fast", action="store_true", help="re-raise internal errors")
+    g.add_argument("-v", "--verbose", action="count", default=0)
+    g.add_argument("-q", "--quiet", action="store_true")
+    g.add_argument("--version", action="version", version=f"pgt-check {__version__}")
+    return p
+
+
+def _cli_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    table = {
+        ("input", "trajectory"): args.trajectory,
+        ("input", "mesh"): args.mesh,
+        ("input", "format"): args.format,
+        ("input", "images"): args.images,
+        ("input", "camera"): args.camera,
+        ("input", "sensors"): args.sensors,
+        ("render", "backend"): args.renderer,
+        ("render", "shading"): args.shading,
+        ("match", "method"): args.matcher,
+        ("match", "max_keypoints"): args.max_keypoints,
+        ("match", "resize_max"): (None if args.resize_max == 0 else args.resize_max)
+        if args.resize_max is not None
+        else ...,
+        ("verdict", "threshold_px"): args.threshold_px,
+        ("verdict", "threshold_rel_diag"): args.threshold_rel_diag,
+        ("verdict", "min_inliers"): args.min_inliers,
+        ("verdict", "min_coverage"): args.min_coverage,
+        ("verdict", "max_fail_fraction"): args.max_fail_fraction,
+        ("verdict", "max_unverifiable_fraction"): args.max_unverifiable_fraction,
+        ("out",): args.out,
+        ("limit",): args.limit,
+    }
+    out: dict[str, Any] = {}
+    for path, value in table.items():
+        if value is None or value is ...:
+            continue
+        node = out
+        for key in path[:-1]:
+            node = node.setdefault(key, {})
+        node[path[-1]] = value
+    if args.fail_fast:
+        out["fail_fast"] = True
+    return out
+
+
+def load_config(args: argparse.Namespace) -> RunConfig:
+    base = load_config_file(args.config) if args.config else {}
+    return RunConfig.from_dict(merge(base, _cli_overrides(args)))
+
+
+def configure_logging(verbose: int, quiet: bool) -> None:
+    level = logging.WARNING if quiet else (logging.DEBUG if verbose > 1 else logging.INFO)
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(logging.Formatter("[%(levelname)s] %(name)s: %(message)s"))
+    root = logging.getLogger("pgt_check")
+    root.handlers[:] = [handler]
+    root.setLevel(level)
+    root.propagate = False
+
+
+def _print_summary(summary: dict[str, Any], out: str) -> None:
+    c = summary["counts"]
+    err = summary["statistics"]["corner_error_px"]
+    med = "-" if err["median"] is None else f"{err['median']:.2f}"
+    print(
+        f"pgt-check: {summary['n_frames']} frames: {c['PASS']} PASS, {c['FAIL']} FAIL, "
+        f"{c['UNVERIFIABLE']} UNVERIFIABLE; median corner error {med} px "
+        f"(threshold {summary['threshold_px']:.1f} px)"
+    )
+    sysoff = summary["statistics"]["systematic_offset"]
+    if sysoff.get("systematic"):
+        print(f"pgt-check: {sysoff['message']}")
+    gate = summary["gate"]
+    print(f"pgt-check: gate {'PASSED' if gate['passed'] else 'FAILED'}: {gate['explanation']}")
+    print(f"pgt-check: outputs in {out}")
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == "report":
+        from pgt_check.report.cli import report_main
+
+        return report_main(argv[1:])
+    parser = build_parser()
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:  # argparse exits 2 on usage errors, 0 on --help/--version
+        return int(exc.code or 0)
+    configure_logging(args.verbose, args.quiet)
+    try:
+        config = load_config(args)
+        from pgt_check.runner import run
+
+        summary = run(config)
+    except InputError as err:
+        if args.verbose:
+            logger.exception("input error")
+        print(f"pgt-check: error: {err}", file=sys.stderr)
+        return EXIT_INPUT
+    except KeyboardInterrupt:
+        print("pgt-check: interrupted", file=sys.stderr)
+        return 130
+    _print_summary(summary, config.out)
+    return EXIT_PASSED if summary["gate"]["passed"] else EXIT_FAILED
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,178 @@
+"""Typed run configuration: frozen dataclasses, strict loading (unknown keys are errors).
+
+``RunConfig.from_dict`` builds a config from plain data (a JSON/TOML file or the CLI) and raises
+``ConfigError`` naming the bad key and the allowed ones. The resolved config is written to the
+run directory; ``measurement_fingerprint`` hashes the fields that change per-frame measurements
+(thresholds of the verdict do not: a new threshold never re-renders).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import types
+import typing
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+from pgt_check.errors import ConfigError
+from pgt_check.geometry.homography import HomographyConfig
+
+
+@dataclass(frozen=True)
+class InputConfig:
+    trajectory: str = ""
+    format: Literal["auto", "lamar", "colmap", "tum", "pgt", "nerfstudio"] = "auto"
+    images: str | None = None
+    camera: str | None = None
+    sensors: str | None = None
+    mesh: str = ""
+
+
+@dataclass(frozen=True)
+class RenderConfig:
+    backend: Literal["moderngl", "pyrender"] = "moderngl"
+    #: "auto" picks texture > vertex colours > shaded geometry from what the mesh has
+    shading: Literal["auto", "vertex", "texture", "shaded"] = "auto"
+
+
+@dataclass(frozen=True)
+class MatchConfig:
+    method: str = "sift"
+    max_keypoints: int = 4096
+    #: longest image side used for matching (render is made at that size); None = original
+    resize_max: int | None = 640
+
+
+@dataclass(frozen=True)
+class VerdictConfig:
+    #: PASS threshold on the corner error in original photo pixels; None = rel_diag * diagonal
+    threshold_px: float | None = None
+    threshold_rel_diag: float = 0.02
+    #: render coverage below this fraction -> UNVERIFIABLE(low_coverage)
+    min_coverage: float = 0.05
+    min_inliers: int = 15
+    min_inlier_ratio: float = 0.0
+    #: the gate passes while FAIL frames / all frames <= this
+    max_fail_fraction: float = 0.0
+    #: and while UNVERIFIABLE frames / all frames <= this (1.0 = never gate on them)
+    max_unverifiable_fraction: float = 1.0
+
+
+@dataclass(frozen=True)
+class RunConfig:
+    input: InputConfig = field(default_factory=InputConfig)
+    render: RenderConfig = field(default_factory=RenderConfig)
+    match: MatchConfig = field(default_factory=MatchConfig)
+    homography: HomographyConfig = field(default_factory=HomographyConfig)
+    verdict: VerdictConfig = field(default_factory=VerdictConfig)
+    out: str = "pgt-check-out"
+    limit: int | None = None
+    fail_fast: bool = False
+    absolute_paths: bool = False
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> RunConfig:
+        return from_dict(cls, data)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def measurement_fingerprint(self) -> str:
+        """Hash of everything that changes per-frame measurements (not verdict thresholds)."""
+        d = self.to_dict()
+        keep = {k: d[k] for k in ("input", "render", "match", "homography")}
+        blob = json.dumps(keep, sort_keys=True, default=str).encode()
+        return hashlib.sha256(blob).hexdigest()[:16]
+
+
+def _check_value(cls_name: str, name: str, tp: Any, value: Any) -> Any:
+    origin = typing.get_origin(tp)
+    if origin is Literal:
+        if value not in typing.get_args(tp):
+            raise ConfigError(
+                f"{cls_name}.{name}: {value!r} is not one of {list(typing.get_args(tp))}"
+            )
+        return value
+    if origin in (typing.Union, types.UnionType):
+        args = typing.get_args(tp)
+        if value is None and type(None) in args:
+            return None
+        for a in args:
+            if a is type(None):
+                continue
+            try:
+                return _check_value(cls_name, name, a, value)
+            except ConfigError:
+                continue
+        raise ConfigError(f"{cls_name}.{name}: {value!r} does not fit {tp}")
+    if dataclasses.is_dataclass(tp):
+        if isinstance(value, tp):
+            return value
+        if not isinstance(value, dict):
+            raise ConfigError(f"{cls_name}.{name}: expected a table, got {value!r}")
+        return from_dict(tp, value)
+    if tp is bool:
+        if not isinstance(value, bool):
+            raise ConfigError(f"{cls_name}.{name}: expected true/false, got {value!r}")
+        return value
+    if tp is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{cls_name}.{name}: expected an integer, got {value!r}")
+        return value
+    if tp is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{cls_name}.{name}: expected a number, got {value!r}")
+        return float(value)
+    if tp is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{cls_name}.{name}: expected a string, got {value!r}")
+        return value
+    return value
+
+
+def from_dict(cls: type, data: dict[str, Any]):
+    """Build dataclass ``cls`` from ``data``; unknown keys and mistyped values raise ConfigError."""
+    if not isinstance(data, dict):
+        raise ConfigError(f"{cls.__name__}: expected a table, got {type(data).__name__}")
+    hints = typing.get_type_hints(cls)
+    fields = {f.name for f in dataclasses.fields(cls)}
+    unknown = sorted(set(data) - fields)
+    if unknown:
+        raise ConfigError(
+            f"{cls.__name__}: unknown key {unknown[0]!r} (allowed: {', '.join(sorted(fields))})"
+        )
+    kwargs = {k: _check_value(cls.__name__, k, hints[k], v) for k, v in data.items()}
+    try:
+        return cls(**kwargs)
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f"{cls.__name__}: {err}") from err
+
+
+def load_config_file(path: str | Path) -> dict[str, Any]:
+    """Read a JSON or TOML config file into a dict (validated later by ``from_dict``)."""
+    path = Path(path)
+    if not path.is_file():
+        raise ConfigError(f"config file not found: {path}")
+    text = path.read_text()
+    try:
+        if path.suffix == ".toml":
+            import tomllib
+
+            return tomllib.loads(text)
+        return json.loads(text)
+    except (ValueError, json.JSONDecodeError) as err:
+        raise ConfigError(f"{path}: cannot parse config: {err}") from err
+
+
+def merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
+    """Recursive dict merge: values in ``override`` win; nested tables merge."""
+    out = dict(base)
+    for k, v in override.items():
+        if isinstance(v, dict) and isinstance(out.get(k), dict):
+            out[k] = merge(out[k], v)
+        else:
+            out[k] = v
+    return out

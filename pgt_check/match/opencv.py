@@ -1,0 +1,116 @@
+"""Classical OpenCV matchers: SIFT (default), ORB, AKAZE with ratio test and mutual check."""
+
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+import numpy as np
+
+from pgt_check.match.base import Matches
+from pgt_check.types import check_shape
+
+logger = logging.getLogger(__name__)
+
+OPENCV_METHODS = ("sift", "orb", "akaze")
+
+
+def to_gray_u8(image: np.ndarray) -> np.ndarray:
+    """(H, W, 3) RGB float32 [0, 1] (or (H, W)) -> (H, W) uint8 grey."""
+    import cv2
+
+    image = np.asarray(image)
+    if image.ndim == 3:
+        check_shape("image", image, (None, None, 3))
+        if image.dtype != np.uint8:
+            image = (np.clip(image, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+        return cv2.cvtColor(image, cv2.COLOR_RGB2GRAY)
+    check_shape("image", image, (None, None))
+    if image.dtype != np.uint8:
+        image = (np.clip(image, 0.0, 1.0) * 255.0 + 0.5).astype(np.uint8)
+    return image
+
+
+@dataclass
+class OpenCVMatcher:
+    """Detect + describe with an OpenCV feature, match with Lowe's ratio test + mutual check.
+
+    method: "sift" | "orb" | "akaze"; max_keypoints: cap per image (strongest kept);
+    ratio: Lowe's ratio; mutual: keep only matches that are each other's nearest neighbour.
+    """
+
+    method: str = "sift"
+    max_keypoints: int = 4096
+    ratio: float = 0.85
+    mutual: bool = True
+
+    def __post_init__(self) -> None:
+        if self.method not in OPENCV_METHODS:
+            raise ValueError(f"unknown OpenCV method {self.method!r} (allowed: {OPENCV_METHODS})")
+        if not 0.0 < self.ratio <= 1.0:
+            raise ValueError(f"ratio must be in (0, 1], got {self.ratio}")
+        self.name = self.method
+        self._detector = None
+
+    def _detector_and_norm(self):
+        import cv2
+
+        if self._detector is None:
+            if self.method == "sift":
+                det, norm = cv2.SIFT_create(nfeatures=self.max_keypoints), cv2.NORM_L2
+            elif self.method == "orb":
+                det, norm = cv2.ORB_create(nfeatures=self.max_keypoints), cv2.NORM_HAMMING
+            else:
+                # OpenCV 5 moved AKAZE into the contrib module xfeatures2d
+                create = getattr(cv2, "AKAZE_create", None) or cv2.xfeatures2d.AKAZE_create
+                det, norm = create(threshold=1e-4), cv2.NORM_HAMMING
+            self._detector = (det, norm)
+        return self._detector
+
+    def _detect(self, gray: np.ndarray, mask: np.ndarray | None):
+        det, _ = self._detector_and_norm()
+        m = None if mask is None else mask.astype(np.uint8) * 255
+        kpts, desc = det.detectAndCompute(gray, m)
+        if desc is None or len(kpts) == 0:
+            return np.zeros((0, 2)), None
+        if len(kpts) > self.max_keypoints:
+            order = np.argsort([-k.response for k in kpts])[: self.max_keypoints]
+            kpts = [kpts[i] for i in order]
+            desc = desc[order]
+        return np.array([k.pt for k in kpts], dtype=np.float64), desc
+
+    def match(
+        self, image0: np.ndarray, image1: np.ndarray, mask0: np.ndarray | None = None
+    ) -> Matches:
+        """Match image0 (render) to image1 (photo); both (H, W, 3) RGB float32 in [0, 1]."""
+        import cv2
+
+        g0, g1 = to_gray_u8(image0), to_gray_u8(image1)
+        if mask0 is not None:
+            check_shape("mask0", np.asarray(mask0), g0.shape)
+        k0, d0 = self._detect(g0, mask0)
+        k1, d1 = self._detect(g1, None)
+        if d0 is None or d1 is None or len(k0) < 2 or len(k1) < 2:
+            return Matches(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), len(k0), len(k1))
+        _, norm = self._detector_and_norm()
+        bf = cv2.BFMatcher(norm)
+        knn = bf.knnMatch(d0, d1, k=2)
+        i0, i1, dist = [], [], []
+        for pair in knn:
+            if len(pair) < 2:
+                continue
+            m, second = pair
+            if m.distance < self.ratio * second.distance:
+                i0.append(m.queryIdx)
+                i1.append(m.trainIdx)
+                dist.append(m.distance)
+        i0, i1, dist = np.array(i0, int), np.array(i1, int), np.array(dist, float)
+        if self.mutual and len(i0):
+            back = bf.match(d1, d0)
+            nn10 = np.full(len(k1), -1)
+            for m in back:
+                nn10[m.queryIdx] = m.trainIdx
+            keep = nn10[i1] == i0
+            i0, i1, dist = i0[keep], i1[keep], dist[keep]
+        scores = 1.0 / (1.0 + dist) if len(dist) else np.zeros(0)
+        return Matches(k0[i0], k1[i1], scores, len(k0), len(k1))

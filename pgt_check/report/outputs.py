@@ -1,0 +1,160 @@
+"""Machine-readable outputs: records.jsonl, frames.csv, summary.json (written atomically)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+import logging
+import math
+import os
+import platform
+import statistics
+from importlib import metadata
+from pathlib import Path
+from typing import Any
+
+from pgt_check import __version__
+from pgt_check.config import RunConfig
+
+logger = logging.getLogger(__name__)
+
+#: frames.csv columns, in order. ``corner_error_px`` is the one the verdict used.
+FRAME_COLUMNS = (
+    "frame_id",
+    "timestamp",
+    "image_path",
+    "verdict",
+    "reason",
+    "corner_error_px",
+    "threshold_px",
+    "n_matches",
+    "n_inliers",
+    "inlier_ratio",
+    "coverage",
+    "shift_dx_px",
+    "shift_dy_px",
+    "zoom",
+    "n_kpts_render",
+    "n_kpts_photo",
+    "width",
+    "height",
+    "match_width",
+    "match_height",
+    "shading",
+    "t_load_s",
+    "t_render_s",
+    "t_match_s",
+    "t_homography_s",
+    "time_s",
+)
+
+STAGES = ("t_load_s", "t_render_s", "t_match_s", "t_homography_s", "time_s")
+
+
+def atomic_write_text(path: Path, text: str) -> None:
+    """Write to a temporary name beside ``path`` and rename, so readers never see half a file."""
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text, encoding="utf-8")
+    os.replace(tmp, path)
+
+
+def _clean(value: Any) -> Any:
+    """JSON-safe value: non-finite floats become None."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return None
+    if isinstance(value, dict):
+        return {k: _clean(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_clean(v) for v in value]
+    return value
+
+
+def _csv_value(value: Any) -> Any:
+    if value is None:
+        return ""
+    if isinstance(value, float):
+        return "" if not math.isfinite(value) else f"{value:.6g}"
+    return value
+
+
+def frames_csv_text(records: list[dict[str, Any]]) -> str:
+    buf = io.StringIO()
+    writer = csv.writer(buf, lineterminator="\n")
+    writer.writerow(FRAME_COLUMNS)
+    for r in records:
+        writer.writerow([_csv_value(r.get(c)) for c in FRAME_COLUMNS])
+    return buf.getvalue()
+
+
+def versions() -> dict[str, str]:
+    out = {"pgt-check": __version__, "python": platform.python_version()}
+    for pkg in ("numpy", "opencv-contrib-python-headless", "moderngl", "trimesh", "torch", "kornia"):
+        try:
+            out[pkg] = metadata.version(pkg)
+        except metadata.PackageNotFoundError:
+            continue
+    return out
+
+
+def timing_summary(records: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
+    out = {}
+    for key in STAGES:
+        vals = sorted(r[key] for r in records if isinstance(r.get(key), (int, float)))
+        if not vals:
+            continue
+        p90 = vals[min(len(vals) - 1, math.ceil(0.9 * len(vals)) - 1)]
+        out[key.removesuffix("_s")] = {
+            "median_s": statistics.median(vals),
+            "p90_s": p90,
+            "total_s": sum(vals),
+        }
+    return out
+
+
+def build_summary(
+    records: list[dict[str, Any]], config: RunConfig, extra: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    from pgt_check.verdict import gate, run_statistics
+    from pgt_check.verdict.decide import resolve_threshold_px
+
+    if records:
+        w, h = int(records[0]["width"]), int(records[0]["height"])
+    else:
+        w, h = 0, 0
+    threshold = resolve_threshold_px(config.verdict, w, h)
+    stats = run_statistics(records, threshold)
+    passed, why = gate(stats["counts"], config.verdict)
+    summary = {
+        "tool": "pgt-check",
+        "version": __version__,
+        "gate": {"passed": passed, "explanation": why},
+        "counts": stats["counts"],
+        "n_frames": stats["n_frames"],
+        "threshold_px": threshold,
+        "statistics": stats,
+        "timing": timing_summary(records),
+        "settings": config.to_dict(),
+        "fingerprint": config.measurement_fingerprint(),
+        "versions": versions(),
+    }
+    if extra:
+        summary.update(extra)
+    return _clean(summary)
+
+
+def write_outputs(
+    out: Path, records: list[dict[str, Any]], config: RunConfig, extra: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """Write records.jsonl, frames.csv and summary.json into ``out``; return the summary."""
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(
+        out / "records.jsonl", "".join(json.dumps(_clean(r)) + "\n" for r in records)
+    )
+    atomic_write_text(out / "frames.csv", frames_csv_text(records))
+    atomic_write_text(out / "config.json", json.dumps(config.to_dict(), indent=2) + "\n")
+    summary = build_summary(records, config, extra)
+    atomic_write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
+    logger.info("wrote %s", out)
+    return summary

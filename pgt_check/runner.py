@@ -1,0 +1,301 @@
+"""Composes the pipeline steps: read -> render -> match -> homography -> verdict -> outputs.
+
+Stage 1 (``FrameChecker.measure``) produces a JSON-serialisable measurement per frame and never
+raises for one bad frame; stage 2 (``pgt_check.verdict``) applies thresholds; stage 3
+(``pgt_check.report``) only reads records.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+import traceback
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pgt_check.config import RunConfig
+from pgt_check.errors import InputError
+from pgt_check.types import Camera, Frame, Trajectory
+
+logger = logging.getLogger(__name__)
+
+
+def working_scale(width: int, height: int, resize_max: int | None) -> tuple[int, int]:
+    """Size (w, h) of the working images: the longest side capped at ``resize_max``."""
+    if resize_max is None or max(width, height) <= resize_max:
+        return width, height
+    s = resize_max / max(width, height)
+    return max(1, round(width * s)), max(1, round(height * s))
+
+
+def _resize(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    import cv2
+
+    if (image.shape[1], image.shape[0]) == size:
+        return image
+    return cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+
+
+def prepare_photo(image: np.ndarray, camera: Camera) -> tuple[np.ndarray, Camera]:
+    """Bring a photo to the camera's pinhole model and size.
+
+    A photo whose size differs from the camera's but has the same aspect ratio (within 1 %) is
+    treated as a resized capture and the camera is scaled to it. Distorted camera models are
+    undistorted to their pinhole part. Raises InputError for an incompatible size.
+    """
+    import cv2
+
+    h, w = image.shape[:2]
+    if (w, h) != (camera.width, camera.height):
+        if abs(w / h - camera.width / camera.height) > 0.01 * camera.width / camera.height:
+            raise InputError(
+                f"image size {w}x{h} does not match camera {camera.width}x{camera.height}"
+            )
+        camera = camera.scaled(w / camera.width, h / camera.height) if not camera.is_distorted else camera
+    if camera.is_distorted:
+        pinhole = camera.as_pinhole()
+        image = cv2.undistort(image, camera.K, camera.dist_coeffs, None, pinhole.K)
+        camera = pinhole
+    return image, camera
+
+
+@dataclass
+class FrameChecker:
+    """Holds the per-process resources (mesh, renderer, matcher) and measures frames.
+
+    Build it inside the process that uses it: GL contexts and models are not shared.
+    """
+
+    config: RunConfig
+    _renderer: Any = field(default=None, init=False, repr=False)
+    _matcher: Any = field(default=None, init=False, repr=False)
+    _mesh: Any = field(default=None, init=False, repr=False)
+
+    @property
+    def mesh(self):
+        if self._mesh is None:
+            from pgt_check.render import load_mesh
+
+            self._mesh = load_mesh(self.config.input.mesh, shading=self.config.render.shading)
+        return self._mesh
+
+    @property
+    def renderer(self):
+        if self._renderer is None:
+            from pgt_check.render import make_renderer
+
+            self._renderer = make_renderer(self.mesh, backend=self.config.render.backend)
+        return self._renderer
+
+    @property
+    def matcher(self):
+        if self._matcher is None:
+            from pgt_check.match import make_matcher
+
+            self._matcher = make_matcher(
+                self.config.match.method, max_keypoints=self.config.match.max_keypoints
+            )
+        return self._matcher
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    def measure(self, frame: Frame) -> dict[str, Any]:
+        """Stage-1 measurement of one frame; expected problems become ``error`` reasons."""
+        rec = base_record(frame)
+        t_start = time.perf_counter()
+        try:
+            self._measure_into(frame, rec)
+        except InputError as err:
+            rec["error"] = "image_unreadable"
+            rec["error_detail"] = str(err)
+        except Exception as err:  # one frame must not kill the run: recorded and counted
+            if self.config.fail_fast:
+                raise
+            logger.error("frame %s: internal error: %s", frame.frame_id, err)
+            rec["error"] = "internal_error"
+            rec["error_detail"] = "".join(traceback.format_exception(err))[-2000:]
+        rec["time_s"] = time.perf_counter() - t_start
+        return rec
+
+    def _measure_into(self, frame: Frame, rec: dict[str, Any]) -> None:
+        from pgt_check.geometry.homography import (
+            corner_error,
+            corner_shift_and_zoom,
+            estimate_homography,
+            scale_homography,
+        )
+        from pgt_check.io import load_image
+
+        t = time.perf_counter()
+        if frame.image_file is None or not Path(frame.image_file).is_file():
+            rec["error"] = "image_missing"
+            return
+        photo = load_image(frame.image_file)
+        photo, camera = prepare_photo(photo, frame.camera)
+        rec["width"], rec["height"] = camera.width, camera.height
+        size = working_scale(camera.width, camera.height, self.config.match.resize_max)
+        sx, sy = size[0] / camera.width, size[1] / camera.height
+        cam_w = camera.scaled(sx, sy)
+        photo_w = _resize(photo, size)
+        rec["match_width"], rec["match_height"] = size
+        rec["t_load_s"] = time.perf_counter() - t
+
+        t = time.perf_counter()
+        render = self.renderer.render(cam_w, frame.world_from_cam)
+        rec["t_render_s"] = time.perf_counter() - t
+        rec["coverage"] = render.coverage_fraction
+        rec["shading"] = render.shading
+        if rec["coverage"] < self.config.verdict.min_coverage:
+            rec["error"] = "low_coverage"
+            return
+
+        t = time.perf_counter()
+        matches = self.matcher.match(render.rgb, photo_w, mask0=render.coverage)
+        rec["t_match_s"] = time.perf_counter() - t
+        rec["n_kpts_render"], rec["n_kpts_photo"] = matches.n_kpts0, matches.n_kpts1
+        rec["n_matches"] = len(matches)
+
+        t = time.perf_counter()
+        result = estimate_homography(
+            matches.kpts0, matches.kpts1, size[0], size[1], self.config.homography
+        )
+        rec["t_homography_s"] = time.perf_counter() - t
+        rec["n_inliers"] = result.n_inliers
+        rec["inlier_ratio"] = result.n_inliers / len(matches) if len(matches) else 0.0
+        if not result.success:
+            rec["homography_reason"] = result.reason.value
+            return
+        h = scale_homography(result.photo_from_render, sx, sy)
+        rec["photo_from_render"] = h.tolist()
+        rec["corner_error_px"] = corner_error(h, camera.width, camera.height)
+        dx, dy, zoom = corner_shift_and_zoom(h, camera.width, camera.height)
+        rec["shift_dx_px"], rec["shift_dy_px"], rec["zoom"] = dx, dy, zoom
+
+
+def base_record(frame: Frame) -> dict[str, Any]:
+    """An empty measurement record for ``frame`` (every key present, values None)."""
+    return {
+        "frame_id": frame.frame_id,
+        "timestamp": frame.timestamp,
+        "image_path": frame.image_path,
+        "width": frame.camera.width,
+        "height": frame.camera.height,
+        "error": "",
+        "error_detail": "",
+        "coverage": None,
+        "shading": None,
+        "n_kpts_render": None,
+        "n_kpts_photo": None,
+        "n_matches": 0,
+        "n_inliers": 0,
+        "inlier_ratio": 0.0,
+        "homography_reason": "",
+        "corner_error_px": None,
+        "shift_dx_px": None,
+        "shift_dy_px": None,
+        "zoom": None,
+        "photo_from_render": None,
+        "match_width": None,
+        "match_height": None,
+        "t_load_s": None,
+        "t_render_s": None,
+        "t_match_s": None,
+        "t_homography_s": None,
+        "time_s": None,
+        "center": frame.center.tolist(),
+    }
+
+
+def load_trajectory(config: RunConfig) -> Trajectory:
+    from pgt_check.io import read_trajectory
+
+    inp = config.input
+    if not inp.trajectory:
+        raise InputError("no trajectory given")
+    if not inp.mesh:
+        raise InputError("no mesh given (--mesh)")
+    if not Path(inp.mesh).is_file():
+        raise InputError(f"mesh not found: {inp.mesh}")
+    traj = read_trajectory(
+        inp.trajectory, inp.format, images=inp.images, camera=inp.camera, sensors=inp.sensors
+    )
+    if len(traj) == 0:
+        raise InputError(f"{inp.trajectory}: no frames with both a pose and an image")
+    return traj
+
+
+def _progress(iterable, total: int, desc: str):
+    try:
+        from tqdm import tqdm
+    except ImportError:  # pragma: no cover - tqdm is a core dependency
+        return iterable
+    return tqdm(iterable, total=total, desc=desc, unit="frame", disable=None)
+
+
+def apply_verdicts(records: list[dict[str, Any]], config: RunConfig) -> list[dict[str, Any]]:
+    """Stage 2 on stored measurements: adds verdict, reason and threshold_px to each record."""
+    from pgt_check.verdict import decide, resolve_threshold_px
+
+    out = []
+    for rec in records:
+        r = dict(rec)
+        verdict, reason = decide(r, config.verdict)
+        r["verdict"], r["reason"] = verdict.value, reason
+        r["threshold_px"] = resolve_threshold_px(config.verdict, int(r["width"]), int(r["height"]))
+        out.append(r)
+    return out
+
+
+def run(config: RunConfig) -> dict[str, Any]:
+    """Check every frame of the configured trajectory and write the outputs to ``config.out``.
+
+    Returns the summary (also written as summary.json). Raises InputError for user errors.
+    """
+    from pgt_check.report.outputs import write_outputs
+
+    t0 = time.perf_counter()
+    traj = load_trajectory(config)
+    frames = list(traj.frames)
+    if config.limit is not None:
+        frames = frames[: config.limit]
+    out = Path(config.out)
+    out.mkdir(parents=True, exist_ok=True)
+    logger.info("checking %d frames of %s (%s)", len(frames), traj.source, traj.format)
+    checker = FrameChecker(config)
+    records: list[dict[str, Any]] = []
+    try:
+        t_setup = time.perf_counter()
+        _ = checker.renderer
+        _ = checker.matcher
+        setup_s = time.perf_counter() - t_setup
+        for frame in _progress(frames, len(frames), "pgt-check"):
+            records.append(checker.measure(frame))
+        shading = checker.mesh.shading
+    finally:
+        checker.close()
+    records = apply_verdicts(records, config)
+    summary = write_outputs(
+        out,
+        records,
+        config,
+        extra={
+            "trajectory_format": traj.format,
+            "shading": shading,
+            "setup_s": setup_s,
+            "wall_time_s": time.perf_counter() - t0,
+        },
+    )
+    return summary
+
+
+def finite_or_none(x: Any) -> Any:
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x

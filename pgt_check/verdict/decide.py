@@ -1,0 +1,170 @@
+"""Stage 2: thresholds applied to stored measurements. Never re-renders or re-matches."""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from collections.abc import Iterable, Mapping
+from enum import Enum
+from typing import Any
+
+import numpy as np
+
+from pgt_check.config import VerdictConfig
+from pgt_check.geometry.homography import auc_at_thresholds
+
+
+class Verdict(str, Enum):
+    PASS = "PASS"
+    FAIL = "FAIL"
+    UNVERIFIABLE = "UNVERIFIABLE"
+
+
+def resolve_threshold_px(config: VerdictConfig, width: int, height: int) -> float:
+    """The PASS threshold in original photo pixels for an image of this size."""
+    if config.threshold_px is not None:
+        return float(config.threshold_px)
+    return float(config.threshold_rel_diag * math.hypot(width, height))
+
+
+def decide(m: Mapping[str, Any], config: VerdictConfig) -> tuple[Verdict, str]:
+    """Verdict and reason for one frame's measurement record.
+
+    ``m`` needs: ``error`` (a reason string set by the measurement stage, or "") ,
+    ``coverage``, ``n_inliers``, ``inlier_ratio``, ``homography_reason``, ``corner_error_px``,
+    ``width``, ``height``. Order of checks: measurement error (missing image, internal error),
+    render coverage, homography failure, inlier count/ratio, then the threshold.
+    """
+    if m.get("error"):
+        return Verdict.UNVERIFIABLE, str(m["error"])
+    coverage = m.get("coverage")
+    if coverage is not None and coverage < config.min_coverage:
+        return Verdict.UNVERIFIABLE, "low_coverage"
+    if m.get("homography_reason"):
+        return Verdict.UNVERIFIABLE, str(m["homography_reason"])
+    if (m.get("n_inliers") or 0) < config.min_inliers:
+        return Verdict.UNVERIFIABLE, "too_few_inliers"
+    if (m.get("inlier_ratio") or 0.0) < config.min_inlier_ratio:
+        return Verdict.UNVERIFIABLE, "low_inlier_ratio"
+    err = m.get("corner_error_px")
+    if err is None or not math.isfinite(err):
+        return Verdict.UNVERIFIABLE, "non_finite_homography"
+    threshold = resolve_threshold_px(config, int(m["width"]), int(m["height"]))
+    if err <= threshold:
+        return Verdict.PASS, ""
+    return Verdict.FAIL, f"corner_error {err:.1f} px > {threshold:.1f} px"
+
+
+def gate(counts: Mapping[str, int], config: VerdictConfig) -> tuple[bool, str]:
+    """Run-level gate over verdict counts; returns (passed, explanation)."""
+    total = sum(counts.values())
+    if total == 0:
+        return False, "no frames were checked"
+    fail = counts.get(Verdict.FAIL.value, 0) / total
+    unv = counts.get(Verdict.UNVERIFIABLE.value, 0) / total
+    if fail > config.max_fail_fraction:
+        return False, f"FAIL fraction {fail:.3f} > max {config.max_fail_fraction:.3f}"
+    if unv > config.max_unverifiable_fraction:
+        return False, f"UNVERIFIABLE fraction {unv:.3f} > max {config.max_unverifiable_fraction:.3f}"
+    return True, f"FAIL fraction {fail:.3f} <= max {config.max_fail_fraction:.3f}"
+
+
+def systematic_offset(
+    shifts: Iterable[tuple[float, float]], zooms: Iterable[float], threshold_px: float
+) -> dict[str, Any]:
+    """Detect a consistent image-space offset across frames (a calibration hint).
+
+    shifts: per-frame mean corner displacement (dx, dy) in px of successfully measured frames;
+    zooms: per-frame warped/original diagonal ratio. A pose error moves frames in varying
+    directions; a calibration error (intrinsics, camera-to-rig, RGB vs depth camera) moves
+    every frame the same way. We report the median shift and zoom, and ``consistency``: the
+    fraction of frames whose shift lies within 45 degrees of the median direction. The offset is
+    flagged systematic when its magnitude >= 25 % of the threshold (or the zoom differs from 1
+    by >= 1 %) and consistency >= 0.7 over at least 5 frames.
+    """
+    s = np.asarray(list(shifts), dtype=np.float64).reshape(-1, 2)
+    z = np.asarray(list(zooms), dtype=np.float64).reshape(-1)
+    s = s[np.all(np.isfinite(s), axis=1)]
+    z = z[np.isfinite(z)]
+    out: dict[str, Any] = {"n_frames": int(len(s)), "systematic": False}
+    if len(s) == 0:
+        out["message"] = "no frame was measured"
+        return out
+    med = np.median(s, axis=0)
+    mag = float(np.hypot(*med))
+    zoom = float(np.median(z)) if len(z) else 1.0
+    if mag > 1e-9:
+        u = med / mag
+        n = np.linalg.norm(s, axis=1)
+        cosang = (s @ u) / np.maximum(n, 1e-12)
+        consistency = float(np.mean(cosang >= math.cos(math.radians(45))))
+    else:
+        consistency = 0.0
+    direction = float(math.degrees(math.atan2(med[1], med[0])))
+    systematic = len(s) >= 5 and (
+        (mag >= 0.25 * threshold_px and consistency >= 0.7) or abs(zoom - 1.0) >= 0.01
+    )
+    out.update(
+        median_dx_px=float(med[0]),
+        median_dy_px=float(med[1]),
+        median_shift_px=mag,
+        direction_deg=direction,
+        consistency=consistency,
+        median_zoom=zoom,
+        systematic=bool(systematic),
+    )
+    if systematic:
+        parts = []
+        if mag >= 0.25 * threshold_px and consistency >= 0.7:
+            parts.append(
+                f"every frame's render is shifted by about ({med[0]:+.1f}, {med[1]:+.1f}) px "
+                f"({consistency:.0%} of frames in the same direction)"
+            )
+        if abs(zoom - 1.0) >= 0.01:
+            parts.append(f"the render is scaled by {zoom:.3f} relative to the photos")
+        out["message"] = (
+            "systematic offset: "
+            + " and ".join(parts)
+            + ". A constant offset points at calibration (intrinsics, camera-to-rig or "
+            "RGB-vs-depth camera extrinsics), not at individual bad poses."
+        )
+    else:
+        out["message"] = (
+            f"no systematic offset (median shift {mag:.1f} px, consistency {consistency:.0%}, "
+            f"zoom {zoom:.3f})"
+        )
+    return out
+
+
+def run_statistics(records: list[Mapping[str, Any]], threshold_px: float) -> dict[str, Any]:
+    """Run-level statistics: verdict and reason counts, error percentiles, AUC, systematic offset."""
+    counts = Counter(str(r["verdict"]) for r in records)
+    reasons = Counter(str(r["reason"]) for r in records if r["verdict"] == Verdict.UNVERIFIABLE.value)
+    errs = np.array(
+        [
+            r["corner_error_px"] if r.get("corner_error_px") is not None else np.inf
+            for r in records
+        ],
+        dtype=np.float64,
+    )
+    finite = errs[np.isfinite(errs)]
+    ok = [r for r in records if r.get("shift_dx_px") is not None and r.get("corner_error_px") is not None
+          and math.isfinite(r["corner_error_px"])]
+    stats: dict[str, Any] = {
+        "n_frames": len(records),
+        "counts": {v.value: counts.get(v.value, 0) for v in Verdict},
+        "unverifiable_reasons": dict(reasons),
+        "corner_error_px": {
+            "median": float(np.median(finite)) if len(finite) else None,
+            "p90": float(np.percentile(finite, 90)) if len(finite) else None,
+            "max": float(np.max(finite)) if len(finite) else None,
+            "n_measured": int(len(finite)),
+        },
+        "auc": auc_at_thresholds(errs, (1.0, 3.0, 5.0, 10.0)),
+        "systematic_offset": systematic_offset(
+            [(r["shift_dx_px"], r["shift_dy_px"]) for r in ok],
+            [r.get("zoom", 1.0) for r in ok],
+            threshold_px,
+        ),
+    }
+    return stats

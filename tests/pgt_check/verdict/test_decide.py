@@ -1,0 +1,85 @@
+import math
+
+import pytest
+
+from pgt_check.config import VerdictConfig
+from pgt_check.verdict import Verdict, decide, gate, resolve_threshold_px, systematic_offset
+from pgt_check.verdict.decide import run_statistics
+
+
+def _m(**kw):
+    base = dict(error="", coverage=0.8, homography_reason="", n_inliers=100, inlier_ratio=0.5,
+                corner_error_px=2.0, width=640, height=480)
+    base.update(kw)
+    return base
+
+
+def test_threshold_defaults_to_fraction_of_diagonal():
+    assert resolve_threshold_px(VerdictConfig(), 640, 480) == pytest.approx(16.0)
+    assert resolve_threshold_px(VerdictConfig(threshold_px=7.5), 640, 480) == 7.5
+
+
+@pytest.mark.parametrize(
+    "kw,verdict,reason",
+    [
+        ({}, Verdict.PASS, ""),
+        ({"corner_error_px": 20.0}, Verdict.FAIL, "corner_error 20.0 px > 16.0 px"),
+        ({"error": "image_missing"}, Verdict.UNVERIFIABLE, "image_missing"),
+        ({"coverage": 0.01}, Verdict.UNVERIFIABLE, "low_coverage"),
+        ({"homography_reason": "orientation_flip"}, Verdict.UNVERIFIABLE, "orientation_flip"),
+        ({"n_inliers": 3}, Verdict.UNVERIFIABLE, "too_few_inliers"),
+        ({"corner_error_px": math.inf}, Verdict.UNVERIFIABLE, "non_finite_homography"),
+        ({"corner_error_px": None}, Verdict.UNVERIFIABLE, "non_finite_homography"),
+    ],
+)
+def test_decide(kw, verdict, reason):
+    assert decide(_m(**kw), VerdictConfig()) == (verdict, reason)
+
+
+def test_threshold_boundary_is_inclusive():
+    assert decide(_m(corner_error_px=16.0), VerdictConfig())[0] == Verdict.PASS
+
+
+def test_gate():
+    cfg = VerdictConfig(max_fail_fraction=0.1)
+    assert gate({"PASS": 9, "FAIL": 1, "UNVERIFIABLE": 0}, cfg)[0]
+    assert not gate({"PASS": 8, "FAIL": 2, "UNVERIFIABLE": 0}, cfg)[0]
+    assert not gate({}, cfg)[0]
+    assert not gate({"PASS": 5, "UNVERIFIABLE": 5}, VerdictConfig(max_unverifiable_fraction=0.2))[0]
+
+
+def test_systematic_offset_detected_for_consistent_shift():
+    shifts = [(-8.0 + 0.5 * (i % 2), -2.0) for i in range(20)]
+    out = systematic_offset(shifts, [1.0] * 20, threshold_px=16.0)
+    assert out["systematic"] and out["consistency"] == 1.0
+    assert out["median_dx_px"] == pytest.approx(-8.0, abs=0.5)
+    assert "calibration" in out["message"]
+
+
+def test_random_shifts_are_not_systematic():
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    ang = rng.uniform(0, 2 * np.pi, 40)
+    shifts = list(zip(8 * np.cos(ang), 8 * np.sin(ang)))
+    out = systematic_offset(shifts, [1.0] * 40, threshold_px=16.0)
+    assert not out["systematic"]
+
+
+def test_zoom_is_systematic():
+    out = systematic_offset([(0.1, 0.0)] * 10, [0.89] * 10, threshold_px=16.0)
+    assert out["systematic"] and "scaled by 0.890" in out["message"]
+
+
+def test_run_statistics_counts_and_auc():
+    recs = [
+        {"verdict": "PASS", "reason": "", "corner_error_px": 0.5, "shift_dx_px": 0.1, "shift_dy_px": 0, "zoom": 1},
+        {"verdict": "FAIL", "reason": "x", "corner_error_px": 30.0, "shift_dx_px": 30, "shift_dy_px": 0, "zoom": 1},
+        {"verdict": "UNVERIFIABLE", "reason": "low_coverage", "corner_error_px": None},
+    ]
+    s = run_statistics(recs, 16.0)
+    assert s["counts"] == {"PASS": 1, "FAIL": 1, "UNVERIFIABLE": 1}
+    assert s["unverifiable_reasons"] == {"low_coverage": 1}
+    assert s["corner_error_px"]["n_measured"] == 2
+    assert s["auc"]["auc@1px"] == pytest.approx((1 / 3) * 0.5 + (1 / 3) * 0.5 * 0.5 / 1 * 1, rel=0.5)
+    assert 0 < s["auc"]["auc@1px"] < 1 / 3 + 1e-9
