@@ -64,6 +64,22 @@ def prepare_photo(image: np.ndarray, camera: Camera) -> tuple[np.ndarray, Camera
 
 
 @dataclass
+class FrameImages:
+    """Working-resolution images and matches of one frame, kept only for report assets.
+
+    photo / render / enhanced: (h, w, 3) float32 RGB [0, 1]; kpts_*: (N, 2) working pixels;
+    inliers: (N,) bool of the homography that the verdict used.
+    """
+
+    photo: np.ndarray | None = None
+    render: np.ndarray | None = None
+    enhanced: np.ndarray | None = None
+    kpts_render: np.ndarray | None = None
+    kpts_photo: np.ndarray | None = None
+    inliers: np.ndarray | None = None
+
+
+@dataclass
 class FrameChecker:
     """Holds the per-process resources (mesh, renderer, matcher) and measures frames.
 
@@ -106,12 +122,16 @@ class FrameChecker:
             self._renderer.close()
             self._renderer = None
 
-    def measure(self, frame: Frame) -> dict[str, Any]:
-        """Stage-1 measurement of one frame; expected problems become ``error`` reasons."""
+    def measure(self, frame: Frame, keep: FrameImages | None = None) -> dict[str, Any]:
+        """Stage-1 measurement of one frame; expected problems become ``error`` reasons.
+
+        If ``keep`` is given, the working-resolution images and matches are stored in it
+        (for report assets); the measurement itself is the same.
+        """
         rec = base_record(frame)
         t_start = time.perf_counter()
         try:
-            self._measure_into(frame, rec)
+            self._measure_into(frame, rec, keep)
         except InputError as err:
             rec["error"] = "image_unreadable"
             rec["error_detail"] = str(err)
@@ -124,7 +144,7 @@ class FrameChecker:
         rec["time_s"] = time.perf_counter() - t_start
         return rec
 
-    def _measure_into(self, frame: Frame, rec: dict[str, Any]) -> None:
+    def _measure_into(self, frame: Frame, rec: dict[str, Any], keep: FrameImages | None) -> None:
         from pgt_check.geometry.homography import (
             corner_error,
             corner_shift_and_zoom,
@@ -152,6 +172,8 @@ class FrameChecker:
         rec["t_render_s"] = time.perf_counter() - t
         rec["coverage"] = render.coverage_fraction
         rec["shading"] = render.shading
+        if keep is not None:
+            keep.photo, keep.render = photo_w, render.rgb
         if rec["coverage"] < self.config.verdict.min_coverage:
             rec["error"] = "low_coverage"
             return
@@ -167,6 +189,9 @@ class FrameChecker:
             matches.kpts0, matches.kpts1, size[0], size[1], self.config.homography
         )
         rec["t_homography_s"] = time.perf_counter() - t
+        if keep is not None:
+            keep.kpts_render, keep.kpts_photo = matches.kpts0, matches.kpts1
+            keep.inliers = result.inliers
         rec["n_inliers"] = result.n_inliers
         rec["inlier_ratio"] = result.n_inliers / len(matches) if len(matches) else 0.0
         if not result.success:
