@@ -146,7 +146,7 @@ def camera_from_colmap(
         )
     if width != int(width) or height != int(height):
         raise FormatError(path, line, f"expected integer image size; got {width}x{height}")
-    values = [p - 0.5 if n in ("cx", "cy") else p for n, p in zip(names, params)]
+    values = [p - 0.5 if n in ("cx", "cy") else p for n, p in zip(names, params, strict=True)]
     try:
         return Camera(model, int(width), int(height), tuple(values))
     except ValueError as err:

@@ -35,7 +35,7 @@ def parse_camera_spec(spec: str) -> Camera:
         raise InputError(
             f"camera spec {spec!r}: expected integer width, height and numeric parameters ({layout})"
         ) from None
-    values = [p - 0.5 if n in ("cx", "cy") else p for n, p in zip(names, params)]
+    values = [p - 0.5 if n in ("cx", "cy") else p for n, p in zip(names, params, strict=True)]
     try:
         return Camera(model, width, height, tuple(values))
     except ValueError as err:

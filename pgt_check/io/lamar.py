@@ -157,7 +157,8 @@ def read_rigs(path: Path, sensor_ids: set[str]) -> dict[tuple[str, str], np.ndar
                 f"expected unique (rig, sensor) pairs; got {rig_id}, {sensor_id} again (first on line {lines[key]})",
             )
         values = [
-            parse_float(path, line, v, n) for v, n in zip(fields[2:], POSE_LAYOUT.split(", "))
+            parse_float(path, line, v, n)
+            for v, n in zip(fields[2:], POSE_LAYOUT.split(", "), strict=True)
         ]
         rigs[key] = quats.rigid(line, values[:4], values[4:])
         lines[key] = line
@@ -190,7 +191,8 @@ def read_poses(path: Path, device_ids: set[str]) -> dict[tuple[float, str], np.n
                 f"expected one pose per (timestamp, device); got {fields[0]}, {device_id} again (first on line {lines[key]})",
             )
         values = [
-            parse_float(path, line, v, n) for v, n in zip(fields[2:], POSE_LAYOUT.split(", "))
+            parse_float(path, line, v, n)
+            for v, n in zip(fields[2:], POSE_LAYOUT.split(", "), strict=True)
         ]
         poses[key] = quats.rigid(line, values[:4], values[4:])
         lines[key] = line
@@ -319,7 +321,7 @@ def write_lamar(trajectory: Trajectory, directory: str | Path, suffix: str = "")
     for frame in trajectory:
         camera_ids.setdefault(frame.camera, f"cam{len(camera_ids)}")
     stamps = [f.timestamp for f in trajectory]
-    keys = {(s, camera_ids[f.camera]) for s, f in zip(stamps, trajectory)}
+    keys = {(s, camera_ids[f.camera]) for s, f in zip(stamps, trajectory, strict=True)}
     if any(s is None or float(s) != int(s) for s in stamps) or len(keys) != len(trajectory):
         if trajectory.frames:
             logger.info(
@@ -337,7 +339,7 @@ def write_lamar(trajectory: Trajectory, directory: str | Path, suffix: str = "")
         )
     images_rows = ["# timestamp, sensor_id, image_path"]
     traj_rows = [f"# timestamp, device_id, {POSE_LAYOUT}"]
-    for stamp, frame in zip(stamp_text, trajectory):
+    for stamp, frame in zip(stamp_text, trajectory, strict=True):
         cam_id = camera_ids[frame.camera]
         if frame.image_file is not None:
             image = Path(

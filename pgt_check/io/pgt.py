@@ -49,7 +49,10 @@ def read_pgt(path: str | Path, *, images: str | Path | None = None) -> Trajector
                 f"expected unique image names; got {name!r} again (first on line {seen[name]})",
             )
         seen[name] = line
-        v = [parse_float(path, line, f, n) for f, n in zip(fields[1:], LAYOUT.split()[1:])]
+        v = [
+            parse_float(path, line, f, n)
+            for f, n in zip(fields[1:], LAYOUT.split()[1:], strict=True)
+        ]
         cam_from_world = quats.rigid(line, v[:4], v[4:7])
         if v[7] <= 0:
             raise FormatError(path, line, f"expected a positive focal length f; got {fields[8]}")

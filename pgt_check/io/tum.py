@@ -158,7 +158,7 @@ def read_tum(
         seen[stamp] = line
         v = [
             parse_float(path, line, f, n)
-            for f, n in zip(fields[1:], ("tx", "ty", "tz", "qx", "qy", "qz", "qw"))
+            for f, n in zip(fields[1:], ("tx", "ty", "tz", "qx", "qy", "qz", "qw"), strict=True)
         ]
         rows.append((line, fields[0], stamp, quats.rigid(line, (v[6], v[3], v[4], v[5]), v[:3])))
     quats.report()
@@ -181,7 +181,7 @@ def read_tum(
     matched = match_images([(s, is_integer_token(t)) for _, t, s, _ in rows], timed, max_time_diff)
     frames: list[Frame] = []
     dropped: list[str] = []
-    for (_line, token, stamp, world_from_cam), image in zip(rows, matched):
+    for (_line, token, stamp, world_from_cam), image in zip(rows, matched, strict=True):
         if image is None:
             dropped.append(token)
             continue
