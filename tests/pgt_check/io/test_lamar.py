@@ -5,10 +5,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 from numpy.testing import assert_allclose
 
 from pgt_check.errors import FormatError, InputError
-from pgt_check.geometry.transforms import axis_angle_to_rotmat, make_rigid
+from pgt_check.geometry.transforms import axis_angle_to_rotmat, make_rigid, quat_to_rotmat
 from pgt_check.io import read_trajectory, write_lamar
 from pgt_check.io.lamar import read_lamar
 from pgt_check.types import Camera, Frame, Trajectory
@@ -310,3 +312,25 @@ def test_real_sceaux_colmap_pairing(shared_data: Path) -> None:
     assert colmap[0].camera == Camera.pinhole(1416, 1064, 1485.855, 1485.855, 707.5, 531.5)
     assert mvs[0].camera.focal == (1492.664171, 1492.664171)
     assert_allclose(colmap[0].center, _first_pose(scene / "trajectories_colmap.txt")[4:])
+
+
+@settings(
+    max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+@given(
+    q=st.lists(st.floats(-1, 1), min_size=4, max_size=4).filter(lambda v: np.linalg.norm(v) > 0.1),
+    t=st.lists(st.floats(-1e6, 1e6), min_size=3, max_size=3),
+    cx=st.floats(0, 639),
+)
+def test_round_trip_property(tmp_path_factory, q, t, cx) -> None:
+    """Any rotation, georeferenced-size translations and any principal point survive a round trip."""
+    directory = tmp_path_factory.mktemp("rt")
+    q = np.asarray(q) / np.linalg.norm(q)
+    pose = make_rigid(quat_to_rotmat(q), t)
+    cam = Camera.pinhole(640, 480, 500.0, 500.0, cx, 240.0)
+    write_lamar(Trajectory((Frame("x", cam, pose, "a.png", None, timestamp=7.0),)), directory)
+    back = read_lamar(directory / "trajectories.txt")[0]
+    assert_allclose(back.world_from_cam[:3, :3], pose[:3, :3], atol=1e-12)
+    assert_allclose(back.world_from_cam[:3, 3], pose[:3, 3], rtol=0, atol=1e-9)
+    assert_allclose(back.camera.params, cam.params, rtol=0, atol=1e-12)  # cx +0.5 -0.5: 1 ulp
+    assert back.frame_id == "7/cam0"
