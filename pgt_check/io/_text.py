@@ -1,0 +1,153 @@
+"""Shared parsing helpers for the text readers: every failure becomes a FormatError(path, line)."""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+
+from pgt_check.errors import FormatError, InputError
+from pgt_check.geometry.transforms import QuaternionError, make_rigid, quat_to_rotmat
+from pgt_check.types import CAMERA_MODELS, Camera
+
+logger = logging.getLogger(__name__)
+
+#: quaternions further than this from unit norm are normalised with a (counted) warning
+QUAT_WARN_TOLERANCE = 1e-4
+
+
+def read_text(path: Path) -> list[str]:
+    """All lines of a UTF-8 text file; InputError if missing, FormatError if not text."""
+    if not path.is_file():
+        raise InputError(f"{path}: file not found")
+    try:
+        return path.read_text(encoding="utf-8-sig").splitlines()
+    except UnicodeDecodeError as err:
+        raise FormatError(path, None, f"expected a UTF-8 text file; got {err.reason}") from err
+    except OSError as err:
+        raise InputError(f"{path}: cannot read ({err.strerror or err})") from err
+
+
+def data_lines(path: Path, *, allow_empty: bool = False) -> list[tuple[int, str]]:
+    """(1-based line number, stripped text) of every non-blank line not starting with '#'.
+
+    Raises FormatError on a file with no data row unless ``allow_empty``.
+    """
+    lines = read_text(path)
+    rows = [(i, s) for i, s in enumerate((raw.strip() for raw in lines), start=1)]
+    rows = [(i, s) for i, s in rows if s and not s.startswith("#")]
+    if not rows and not allow_empty:
+        raise FormatError(path, max(len(lines), 1), "expected at least one data row; got none")
+    return rows
+
+
+def split_row(
+    path: Path, line: int, text: str, *, count: int | Sequence[int], sep: str | None, layout: str
+) -> list[str]:
+    """Split a row on ``sep`` (None = whitespace), strip fields, check the field count."""
+    fields = [f.strip() for f in (text.split(sep) if sep else text.split())]
+    counts = (count,) if isinstance(count, int) else tuple(count)
+    if len(fields) not in counts:
+        want = " or ".join(str(c) for c in counts)
+        raise FormatError(path, line, f"expected {want} fields ({layout}); got {len(fields)}")
+    return fields
+
+
+def parse_float(path: Path, line: int, token: str, what: str) -> float:
+    """A finite float, else FormatError naming the field."""
+    try:
+        value = float(token)
+    except ValueError:
+        raise FormatError(path, line, f"expected a number for {what}; got {token!r}") from None
+    if not math.isfinite(value):
+        raise FormatError(path, line, f"expected a finite number for {what}; got {token!r}")
+    return value
+
+
+def parse_int(path: Path, line: int, token: str, what: str) -> int:
+    try:
+        return int(token)
+    except ValueError:
+        raise FormatError(path, line, f"expected an integer for {what}; got {token!r}") from None
+
+
+def is_integer_token(token: str) -> bool:
+    """True for tokens like '10' or '000010' (no decimal point or exponent)."""
+    return token.lstrip("+-").isdigit()
+
+
+def parse_timestamp(path: Path, line: int, token: str) -> float:
+    """A timestamp as a float (integers stay exact up to 2**53)."""
+    return (
+        float(parse_int(path, line, token, "timestamp"))
+        if is_integer_token(token)
+        else parse_float(path, line, token, "timestamp")
+    )
+
+
+class QuaternionCounter:
+    """Counts quaternions that needed normalising, to log one WARNING per file."""
+
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self.count = 0
+        self.worst = 0.0
+
+    def rotation(self, line: int, wxyz: Sequence[float]) -> np.ndarray:
+        """(4,) Hamilton (w, x, y, z) -> (3, 3); FormatError beyond the norm tolerance."""
+        q = np.asarray(wxyz, dtype=np.float64)
+        try:
+            r = quat_to_rotmat(q)
+        except QuaternionError as err:
+            raise FormatError(
+                self.path, line, f"expected a unit quaternion (qw qx qy qz); got {err}"
+            ) from None
+        off = abs(float(np.linalg.norm(q)) - 1.0)
+        if off > QUAT_WARN_TOLERANCE:
+            self.count += 1
+            self.worst = max(self.worst, off)
+        return r
+
+    def rigid(self, line: int, wxyz: Sequence[float], t: Sequence[float]) -> np.ndarray:
+        return make_rigid(self.rotation(line, wxyz), np.asarray(t, dtype=np.float64))
+
+    def report(self) -> None:
+        if self.count:
+            logger.warning(
+                "%s: normalised %d quaternion(s) that were not unit (largest |norm - 1| = %.2g)",
+                self.path,
+                self.count,
+                self.worst,
+            )
+
+
+def camera_from_colmap(
+    path: Path | str,
+    line: int | None,
+    model: str,
+    width: float,
+    height: float,
+    params: Sequence[float],
+) -> Camera:
+    """A Camera from COLMAP-convention values (principal point at +0.5): subtracts 0.5 from cx, cy."""
+    if model not in CAMERA_MODELS:
+        raise FormatError(
+            path, line, f"expected a camera model in {', '.join(CAMERA_MODELS)}; got {model!r}"
+        )
+    names = CAMERA_MODELS[model]
+    if len(params) != len(names):
+        raise FormatError(
+            path,
+            line,
+            f"expected {len(names)} parameters for {model} ({', '.join(names)}); got {len(params)}",
+        )
+    if width != int(width) or height != int(height):
+        raise FormatError(path, line, f"expected integer image size; got {width}x{height}")
+    values = [p - 0.5 if n in ("cx", "cy") else p for n, p in zip(names, params, strict=True)]
+    try:
+        return Camera(model, int(width), int(height), tuple(values))
+    except ValueError as err:
+        raise FormatError(path, line, f"expected a valid camera; got {err}") from None

@@ -1,0 +1,125 @@
+"""COLMAP sparse models (text or binary), read with pycolmap.
+
+What the files store: ``images.{txt,bin}`` hold **cam_from_world** (``p_cam = R(q) p_world + t``),
+OpenCV camera axes; ``cameras.{txt,bin}`` hold COLMAP camera models in the COLMAP pixel convention
+(top-left pixel centre at (0.5, 0.5)). The reader inverts the poses and subtracts 0.5 from cx, cy.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from pgt_check.errors import FormatError, InputError
+from pgt_check.geometry.transforms import invert_rigid
+from pgt_check.io._text import camera_from_colmap
+from pgt_check.types import Camera, Frame, Trajectory
+
+logger = logging.getLogger(__name__)
+
+MODEL_FILES = ("cameras", "images", "points3D", "rigs", "frames")
+
+
+def colmap_model_dir(path: str | Path) -> Path | None:
+    """The model directory for a model directory or one of its files, else None."""
+    path = Path(path)
+    directory = path if path.is_dir() else path.parent
+    if path.is_file() and path.stem not in MODEL_FILES:
+        return None
+    if any((directory / f"cameras.{ext}").is_file() for ext in ("txt", "bin")):
+        return directory
+    return None
+
+
+def default_images_dir(model_dir: Path) -> Path:
+    """``<model>/../images`` (or ``<model>/../../images`` for ``sparse/0``), else the model dir."""
+    for candidate in (model_dir.parent / "images", model_dir.parent.parent / "images"):
+        if candidate.is_dir():
+            return candidate
+    return model_dir
+
+
+def _cam_from_world(image: object) -> np.ndarray:
+    """(4, 4) cam_from_world of a pycolmap Image (a method in pycolmap >= 3.12, a property before)."""
+    pose = image.cam_from_world  # type: ignore[attr-defined]
+    if callable(pose):
+        pose = pose()
+    matrix = np.eye(4)
+    matrix[:3, :] = np.asarray(pose.matrix(), dtype=np.float64)
+    return matrix
+
+
+def read_colmap(path: str | Path, *, images: str | Path | None = None) -> Trajectory:
+    """Read a COLMAP model directory (or one of its files) into world_from_cam frames.
+
+    frame_id and image_path are the image names; image files are resolved against ``images``
+    (default: ``<model dir>/../images`` if it exists, else the model dir). Images without a pose
+    are skipped with a WARNING; frames are sorted by name.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: COLMAP model not found")
+    model_dir = colmap_model_dir(path)
+    if model_dir is None:
+        raise FormatError(
+            path,
+            None,
+            "expected a COLMAP model directory with cameras.txt or cameras.bin; got none",
+        )
+    try:
+        import pycolmap
+    except ImportError as err:
+        raise InputError("reading COLMAP models needs pycolmap: pip install pycolmap") from err
+    try:
+        reconstruction = pycolmap.Reconstruction(str(model_dir))
+    except (RuntimeError, ValueError, OSError) as err:
+        message = " ".join(str(err).split())
+        raise FormatError(
+            model_dir, None, f"expected a readable COLMAP model; pycolmap failed: {message}"
+        ) from None
+    cameras_file = next(
+        model_dir / f"cameras.{e}" for e in ("txt", "bin") if (model_dir / f"cameras.{e}").is_file()
+    )
+
+    cameras: dict[int, Camera] = {}
+    for camera_id, cam in reconstruction.cameras.items():
+        model = cam.model.name if hasattr(cam.model, "name") else str(cam.model)
+        cameras[camera_id] = camera_from_colmap(
+            cameras_file, None, model, cam.width, cam.height, [float(p) for p in cam.params]
+        )
+
+    root = Path(images) if images is not None else default_images_dir(model_dir)
+    if images is not None and not root.is_dir():
+        raise InputError(f"{root}: images folder not found")
+    frames: list[Frame] = []
+    unposed: list[str] = []
+    for image in reconstruction.images.values():
+        if not getattr(image, "has_pose", True):
+            unposed.append(image.name)
+            continue
+        world_from_cam = invert_rigid(_cam_from_world(image))
+        frames.append(
+            Frame(
+                frame_id=image.name,
+                camera=cameras[image.camera_id],
+                world_from_cam=world_from_cam,
+                image_path=image.name,
+                image_file=root / image.name,
+            )
+        )
+    if unposed:
+        logger.warning(
+            "%s: skipped %d image(s) without a pose (first: %s)",
+            model_dir,
+            len(unposed),
+            unposed[0],
+        )
+    if not frames:
+        raise FormatError(model_dir, None, "expected at least one posed image; got none")
+    frames.sort(key=lambda f: f.frame_id)
+    logger.info("read %d frames from COLMAP model %s", len(frames), model_dir)
+    return Trajectory(
+        tuple(frames), source=str(model_dir), format="colmap", metadata={"images_dir": str(root)}
+    )

@@ -1,0 +1,70 @@
+"""Image loading at the package edge: HxWx3 RGB float32 in [0, 1].
+
+Pixels are read as stored: EXIF orientation tags are ignored, as COLMAP and the pose files
+refer to the stored pixel grid.
+"""
+
+from __future__ import annotations
+
+import logging
+from pathlib import Path
+
+import numpy as np
+
+from pgt_check.errors import InputError
+
+logger = logging.getLogger(__name__)
+
+#: file extensions treated as images when scanning a folder
+IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm", ".webp")
+
+
+def load_image(path: str | Path) -> np.ndarray:
+    """Read an image as (H, W, 3) float32 RGB in [0, 1].
+
+    8- and 16-bit integer images are scaled by their type's maximum; grayscale is repeated to
+    three channels; an alpha channel is dropped. Raises InputError if the file is missing or
+    cannot be decoded.
+    """
+    import cv2  # heavy: imported on first use
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: image not found")
+    try:
+        data = np.fromfile(path, dtype=np.uint8)  # works for non-ASCII paths, unlike imread
+    except OSError as err:
+        raise InputError(f"{path}: cannot read image ({err.strerror or err})") from err
+    image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    if image is None:
+        raise InputError(f"{path}: cannot decode image (unsupported or corrupt file)")
+    if image.ndim == 3 and image.shape[2] == 1:
+        image = image[:, :, 0]
+    if image.ndim == 2:
+        image = np.repeat(image[:, :, None], 3, axis=2)
+    elif image.shape[2] == 4:
+        image = cv2.cvtColor(image, cv2.COLOR_BGRA2RGB)
+    elif image.shape[2] == 3:
+        image = cv2.cvtColor(image, cv2.COLOR_BGR2RGB)
+    else:
+        raise InputError(f"{path}: expected 1, 3 or 4 channels; got {image.shape[2]}")
+    if np.issubdtype(image.dtype, np.integer):
+        out = image.astype(np.float32) / np.float32(np.iinfo(image.dtype).max)
+    else:
+        out = np.clip(np.nan_to_num(image.astype(np.float32)), 0.0, 1.0)
+    return np.ascontiguousarray(out)
+
+
+def image_size(path: str | Path) -> tuple[int, int]:
+    """(width, height) of an image from its header (no decoding); InputError if unreadable."""
+    from PIL import Image, UnidentifiedImageError
+
+    path = Path(path)
+    if not path.is_file():
+        raise InputError(f"{path}: image not found")
+    try:
+        with Image.open(path) as im:
+            width, height = im.size
+    except (UnidentifiedImageError, OSError) as err:
+        raise InputError(f"{path}: cannot read image header ({err})") from err
+    return int(width), int(height)

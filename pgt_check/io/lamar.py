@@ -1,0 +1,369 @@
+"""LaMAR "Capture" text format: sensors, images, trajectories and (optional) rigs files.
+
+What the files store:
+
+* ``trajectories*.txt``: ``timestamp, device_id, qw, qx, qy, qz, tx, ty, tz`` = **world_from_device**
+  (camera-to-world, ``X_world = R(q) X_device + t``), OpenCV camera axes, Hamilton quaternion with
+  the scalar first. ``device_id`` is a camera sensor or a rig.
+* ``rigs*.txt``: ``rig_id, sensor_id, qw, qx, qy, qz, tx, ty, tz`` = **rig_from_sensor**, so
+  ``world_from_cam = world_from_rig @ rig_from_cam``.
+* ``sensors*.txt``: ``sensor_id, name, sensor_type, [params]``; camera rows are
+  ``cam0, name, camera, MODEL, width, height, params...`` with COLMAP parameters in the COLMAP pixel
+  convention (top-left pixel centre at (0.5, 0.5)); the reader subtracts 0.5 from cx, cy.
+* ``images*.txt``: ``timestamp, sensor_id, image_path``, paths relative to the file's folder.
+
+Lines starting with ``#`` are comments; whitespace around commas is ignored.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import re
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pgt_check.errors import FormatError, InputError
+from pgt_check.geometry.transforms import rotmat_to_quat
+from pgt_check.io._text import (
+    QuaternionCounter,
+    camera_from_colmap,
+    data_lines,
+    parse_float,
+    parse_timestamp,
+    split_row,
+)
+from pgt_check.types import Camera, Frame, Trajectory
+
+logger = logging.getLogger(__name__)
+
+POSE_LAYOUT = "qw, qx, qy, qz, tx, ty, tz"
+
+
+@dataclass(frozen=True)
+class LamarFiles:
+    """The files of one LaMAR session, paired by suffix (``trajectories_sfm.txt`` -> ``_sfm``)."""
+
+    trajectories: Path
+    sensors: Path
+    images: Path
+    rigs: Path | None
+    suffix: str
+
+
+def _sibling(directory: Path, kind: str, suffix: str) -> Path | None:
+    """``{kind}{suffix}.txt`` if it exists, else ``{kind}.txt`` if it exists, else None."""
+    for name in (f"{kind}{suffix}.txt", f"{kind}.txt"):
+        candidate = directory / name
+        if candidate.is_file():
+            return candidate
+    return None
+
+
+def find_lamar_files(
+    path: str | Path, *, sensors: str | Path | None = None, images: str | Path | None = None
+) -> LamarFiles:
+    """Locate the files that go with a trajectories file (or a session directory).
+
+    ``trajectories{suffix}.txt`` pairs with ``sensors{suffix}.txt`` if it exists, else
+    ``sensors.txt``; the same for images and rigs. ``sensors`` / ``images`` (a list file)
+    override the pairing.
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / "trajectories.txt"
+    if not path.is_file():
+        raise InputError(f"{path}: trajectories file not found")
+    match = re.fullmatch(r"trajectories(.*)", path.stem)
+    suffix = match.group(1) if match else ""
+    directory = path.parent
+    tried = f"sensors{suffix}.txt" + (" or sensors.txt" if suffix else "")
+    if sensors is not None:
+        sensors_file: Path | None = Path(sensors)
+        if not sensors_file.is_file():
+            raise InputError(f"{sensors_file}: sensors file not found")
+    else:
+        sensors_file = _sibling(directory, "sensors", suffix)
+        if sensors_file is None:
+            raise FormatError(path, None, f"expected a sensors file ({tried}) beside it; got none")
+    if images is not None and Path(images).is_file():
+        images_file: Path | None = Path(images)
+    else:
+        images_file = _sibling(directory, "images", suffix)
+        if images_file is None:
+            tried = f"images{suffix}.txt" + (" or images.txt" if suffix else "")
+            raise FormatError(path, None, f"expected an images file ({tried}) beside it; got none")
+    return LamarFiles(path, sensors_file, images_file, _sibling(directory, "rigs", suffix), suffix)
+
+
+def read_sensors(path: Path) -> tuple[dict[str, Camera], set[str]]:
+    """Cameras by sensor id, and the ids of every sensor (cameras or not)."""
+    cameras: dict[str, Camera] = {}
+    seen: dict[str, int] = {}
+    for line, text in data_lines(path):
+        fields = [f.strip() for f in text.split(",")]
+        if len(fields) < 3:
+            raise FormatError(
+                path,
+                line,
+                f"expected sensor_id, name, sensor_type[, params]; got {len(fields)} fields",
+            )
+        sensor_id, _name, sensor_type = fields[:3]
+        if not sensor_id:
+            raise FormatError(path, line, "expected a sensor id; got an empty field")
+        if sensor_id in seen:
+            raise FormatError(
+                path,
+                line,
+                f"expected unique sensor ids; got {sensor_id!r} again (first on line {seen[sensor_id]})",
+            )
+        seen[sensor_id] = line
+        if sensor_type != "camera":
+            continue
+        if len(fields) < 6:
+            raise FormatError(
+                path,
+                line,
+                f"expected a camera row (id, name, camera, MODEL, width, height, params...); got {len(fields)} fields",
+            )
+        width = parse_float(path, line, fields[4], "width")
+        height = parse_float(path, line, fields[5], "height")
+        params = [parse_float(path, line, p, "camera parameter") for p in fields[6:]]
+        cameras[sensor_id] = camera_from_colmap(path, line, fields[3], width, height, params)
+    return cameras, set(seen)
+
+
+def read_rigs(path: Path, sensor_ids: set[str]) -> dict[tuple[str, str], np.ndarray]:
+    """rig_from_sensor (4x4) by (rig_id, sensor_id)."""
+    quats = QuaternionCounter(path)
+    rigs: dict[tuple[str, str], np.ndarray] = {}
+    lines: dict[tuple[str, str], int] = {}
+    for line, text in data_lines(path, allow_empty=True):
+        fields = split_row(
+            path, line, text, count=9, sep=",", layout=f"rig_id, sensor_id, {POSE_LAYOUT}"
+        )
+        rig_id, sensor_id = fields[:2]
+        if sensor_id not in sensor_ids:
+            raise FormatError(
+                path, line, f"expected a sensor id from the sensors file; got {sensor_id!r}"
+            )
+        key = (rig_id, sensor_id)
+        if key in rigs:
+            raise FormatError(
+                path,
+                line,
+                f"expected unique (rig, sensor) pairs; got {rig_id}, {sensor_id} again (first on line {lines[key]})",
+            )
+        values = [
+            parse_float(path, line, v, n)
+            for v, n in zip(fields[2:], POSE_LAYOUT.split(", "), strict=True)
+        ]
+        rigs[key] = quats.rigid(line, values[:4], values[4:])
+        lines[key] = line
+    quats.report()
+    return rigs
+
+
+def read_poses(path: Path, device_ids: set[str]) -> dict[tuple[float, str], np.ndarray]:
+    """world_from_device (4x4) by (timestamp, device_id)."""
+    quats = QuaternionCounter(path)
+    poses: dict[tuple[float, str], np.ndarray] = {}
+    lines: dict[tuple[float, str], int] = {}
+    for line, text in data_lines(path):
+        fields = split_row(
+            path, line, text, count=9, sep=",", layout=f"timestamp, device_id, {POSE_LAYOUT}"
+        )
+        timestamp = parse_timestamp(path, line, fields[0])
+        device_id = fields[1]
+        if device_id not in device_ids:
+            raise FormatError(
+                path,
+                line,
+                f"expected a device id from the sensors or rigs file ({', '.join(sorted(device_ids))}); got {device_id!r}",
+            )
+        key = (timestamp, device_id)
+        if key in poses:
+            raise FormatError(
+                path,
+                line,
+                f"expected one pose per (timestamp, device); got {fields[0]}, {device_id} again (first on line {lines[key]})",
+            )
+        values = [
+            parse_float(path, line, v, n)
+            for v, n in zip(fields[2:], POSE_LAYOUT.split(", "), strict=True)
+        ]
+        poses[key] = quats.rigid(line, values[:4], values[4:])
+        lines[key] = line
+    quats.report()
+    return poses
+
+
+def read_lamar(
+    path: str | Path, *, sensors: str | Path | None = None, images: str | Path | None = None
+) -> Trajectory:
+    """Read a LaMAR trajectories file with its sensors, images and rigs files.
+
+    ``images`` may be a list file (replaces ``images*.txt``) or a folder (the root that image
+    paths are resolved against; default: the images file's folder). frame_id is
+    ``"{timestamp}/{sensor_id}"`` as written in the images file. Images without a pose are
+    skipped (one WARNING with the count); frames are sorted by timestamp, then sensor id.
+    """
+    if images is not None and not Path(images).exists():
+        raise InputError(f"{images}: images folder or list file not found")
+    files = find_lamar_files(path, sensors=sensors, images=images)
+    cameras, sensor_ids = read_sensors(files.sensors)
+    rigs = read_rigs(files.rigs, sensor_ids) if files.rigs is not None else {}
+    rig_ids = {rig for rig, _ in rigs}
+    clash = rig_ids & sensor_ids
+    if clash and files.rigs is not None:
+        raise FormatError(
+            files.rigs,
+            None,
+            f"expected rig ids distinct from sensor ids; got {', '.join(sorted(clash))}",
+        )
+    poses = read_poses(files.trajectories, sensor_ids | rig_ids)
+    rigs_of: dict[str, list[str]] = {}
+    for rig, sensor in rigs:
+        rigs_of.setdefault(sensor, []).append(rig)
+
+    root = Path(images) if images is not None and Path(images).is_dir() else files.images.parent
+    frames: list[tuple[float, str, Frame]] = []
+    seen: dict[str, int] = {}
+    unposed: list[str] = []
+    for line, text in data_lines(files.images):
+        fields = split_row(
+            files.images, line, text, count=3, sep=",", layout="timestamp, sensor_id, image_path"
+        )
+        stamp_text, sensor_id, image_path = fields
+        timestamp = parse_timestamp(files.images, line, stamp_text)
+        if sensor_id not in cameras:
+            known = ", ".join(sorted(cameras)) or "none"
+            what = "a camera" if sensor_id in sensor_ids else "a sensor id"
+            raise FormatError(
+                files.images,
+                line,
+                f"expected {what} from {files.sensors.name} ({known}); got {sensor_id!r}",
+            )
+        if not image_path:
+            raise FormatError(files.images, line, "expected an image path; got an empty field")
+        frame_id = f"{stamp_text}/{sensor_id}"
+        if frame_id in seen:
+            raise FormatError(
+                files.images,
+                line,
+                f"expected one image per (timestamp, sensor); got {frame_id} again (first on line {seen[frame_id]})",
+            )
+        seen[frame_id] = line
+        world_from_cam = poses.get((timestamp, sensor_id))
+        if world_from_cam is None:
+            for rig in rigs_of.get(sensor_id, ()):
+                world_from_rig = poses.get((timestamp, rig))
+                if world_from_rig is not None:
+                    world_from_cam = world_from_rig @ rigs[(rig, sensor_id)]
+                    break
+        if world_from_cam is None:
+            unposed.append(frame_id)
+            continue
+        frame = Frame(
+            frame_id=frame_id,
+            camera=cameras[sensor_id],
+            world_from_cam=world_from_cam,
+            image_path=image_path,
+            image_file=root / image_path,
+            timestamp=timestamp,
+        )
+        frames.append((timestamp, sensor_id, frame))
+    if unposed:
+        logger.warning(
+            "%s: skipped %d image(s) with no pose in %s (first: %s)",
+            files.images,
+            len(unposed),
+            files.trajectories.name,
+            unposed[0],
+        )
+    frames.sort(key=lambda item: (item[0], item[1]))
+    logger.info(
+        "read %d frames from %s (sensors: %s)", len(frames), files.trajectories, files.sensors.name
+    )
+    metadata = {
+        "trajectories_file": str(files.trajectories),
+        "sensors_file": str(files.sensors),
+        "images_file": str(files.images),
+    }
+    if files.rigs is not None:
+        metadata["rigs_file"] = str(files.rigs)
+    return Trajectory(
+        tuple(f for _, _, f in frames),
+        source=str(files.trajectories),
+        format="lamar",
+        metadata=metadata,
+    )
+
+
+def _fmt(value: float) -> str:
+    return repr(float(value))
+
+
+def write_lamar(trajectory: Trajectory, directory: str | Path, suffix: str = "") -> dict[str, Path]:
+    """Write ``sensors{suffix}.txt``, ``images{suffix}.txt``, ``trajectories{suffix}.txt``.
+
+    Cameras get ids ``cam0, cam1, ...`` (one per distinct Camera), written in COLMAP pixel
+    convention (0.5 added to cx, cy). Timestamps are the frames' timestamps when they are all
+    integers and unique per camera, else the frame indices. Image paths are written relative to
+    ``directory`` when the frame has a resolved ``image_file``, else ``image_path`` verbatim.
+    Poses are world_from_cam, one row per frame (no rigs). Returns the written paths by kind.
+    """
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    camera_ids: dict[Camera, str] = {}
+    for frame in trajectory:
+        camera_ids.setdefault(frame.camera, f"cam{len(camera_ids)}")
+    stamps = [f.timestamp for f in trajectory]
+    keys = {(s, camera_ids[f.camera]) for s, f in zip(stamps, trajectory, strict=True)}
+    if any(s is None or float(s) != int(s) for s in stamps) or len(keys) != len(trajectory):
+        if trajectory.frames:
+            logger.info(
+                "%s: timestamps are missing, non-integer or repeated; writing frame indices",
+                directory,
+            )
+        stamps = list(range(len(trajectory)))
+    stamp_text = [str(int(s)) for s in stamps]
+
+    sensors_rows = ["# sensor_id, name, sensor_type, [sensor_params]+"]
+    for camera, cam_id in camera_ids.items():
+        values = ", ".join(_fmt(p) for p in camera.to_colmap_params())
+        sensors_rows.append(
+            f"{cam_id}, {cam_id}, camera, {camera.model}, {camera.width}, {camera.height}, {values}"
+        )
+    images_rows = ["# timestamp, sensor_id, image_path"]
+    traj_rows = [f"# timestamp, device_id, {POSE_LAYOUT}"]
+    for stamp, frame in zip(stamp_text, trajectory, strict=True):
+        cam_id = camera_ids[frame.camera]
+        if frame.image_file is not None:
+            image = Path(
+                os.path.relpath(Path(frame.image_file).absolute(), directory.absolute())
+            ).as_posix()
+        else:
+            image = frame.image_path
+        if "," in image or not image:
+            raise InputError(
+                f"frame {frame.frame_id}: image path {image!r} cannot be written to a LaMAR file"
+            )
+        images_rows.append(f"{stamp}, {cam_id}, {image}")
+        q = rotmat_to_quat(frame.world_from_cam[:3, :3])
+        t = frame.world_from_cam[:3, 3]
+        traj_rows.append(f"{stamp}, {cam_id}, " + ", ".join(_fmt(v) for v in (*q, *t)))
+    out = {
+        "sensors": directory / f"sensors{suffix}.txt",
+        "images": directory / f"images{suffix}.txt",
+        "trajectories": directory / f"trajectories{suffix}.txt",
+    }
+    for kind, rows in (
+        ("sensors", sensors_rows),
+        ("images", images_rows),
+        ("trajectories", traj_rows),
+    ):
+        out[kind].write_text("\n".join(rows) + "\n", encoding="utf-8")
+    return out

@@ -1,0 +1,199 @@
+"""nerfstudio / instant-ngp ``transforms.json``.
+
+What the file stores: ``frames[].transform_matrix`` is **cam-to-world in OpenGL camera axes**
+(x right, y up, z backwards); the reader converts to OpenCV axes with
+``world_from_cam = M @ diag(1, -1, -1, 1)``. Intrinsics (``fl_x, fl_y, cx, cy, w, h``, optional
+``k1, k2, k3, p1, p2``; or instant-ngp's ``camera_angle_x``) are global or per frame; nerfstudio's
+principal point puts the top-left pixel centre at (0.5, 0.5), so 0.5 is subtracted from cx, cy.
+``file_path`` is relative to the json's folder. An ``applied_transform`` (nerfstudio's record of
+the world-axis change it made when converting from COLMAP) is not undone; it is kept in the
+trajectory metadata.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import math
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pgt_check.errors import FormatError, InputError
+from pgt_check.io.images import image_size
+from pgt_check.types import Camera, Frame, Trajectory
+
+logger = logging.getLogger(__name__)
+
+#: OpenGL camera axes (x right, y up, z back) -> OpenCV (x right, y down, z forward)
+GL_FROM_CV = np.diag([1.0, -1.0, -1.0, 1.0])
+
+INTRINSIC_KEYS = ("fl_x", "fl_y", "cx", "cy", "w", "h", "camera_angle_x", "camera_angle_y")
+DISTORTION_KEYS = ("k1", "k2", "k3", "k4", "p1", "p2")
+SUPPORTED_MODELS = ("OPENCV", "PINHOLE", "SIMPLE_PINHOLE")
+
+
+def load_json(path: Path) -> Any:
+    if not path.is_file():
+        raise InputError(f"{path}: file not found")
+    try:
+        with path.open(encoding="utf-8") as fh:
+            return json.load(fh)
+    except json.JSONDecodeError as err:
+        raise FormatError(
+            path, err.lineno, f"expected valid JSON; got {err.msg} (column {err.colno})"
+        ) from None
+    except UnicodeDecodeError as err:
+        raise FormatError(path, None, f"expected a UTF-8 JSON file; got {err.reason}") from None
+
+
+def _number(path: Path, where: str, key: str, value: Any) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value):
+        raise FormatError(
+            path, None, f"{where}: expected a finite number for {key!r}; got {value!r}"
+        )
+    return float(value)
+
+
+def _resolve_image(directory: Path, file_path: str) -> Path:
+    """``directory / file_path``; instant-ngp's Blender files omit the extension: try .png."""
+    file = directory / file_path
+    if not file.suffix and not file.exists() and file.with_suffix(".png").exists():
+        return file.with_suffix(".png")
+    return file
+
+
+def _camera(path: Path, where: str, values: dict[str, Any], image: Path) -> Camera:
+    """A Camera from merged global + per-frame keys."""
+    model = values.get("camera_model", "OPENCV")
+    if model not in SUPPORTED_MODELS:
+        raise FormatError(
+            path,
+            None,
+            f"{where}: expected camera_model in {', '.join(SUPPORTED_MODELS)}; got {model!r}",
+        )
+    num = {
+        k: _number(path, where, k, values[k])
+        for k in (*INTRINSIC_KEYS, *DISTORTION_KEYS)
+        if k in values
+    }
+    if "w" in num and "h" in num:
+        width, height = num["w"], num["h"]
+    else:
+        try:
+            width, height = image_size(image)
+        except InputError as err:
+            raise FormatError(
+                path,
+                None,
+                f"{where}: expected 'w' and 'h' or a readable image to size the camera; got {err}",
+            ) from None
+    if width != int(width) or height != int(height) or width <= 0 or height <= 0:
+        raise FormatError(
+            path, None, f"{where}: expected positive integer 'w' and 'h'; got {width}x{height}"
+        )
+    if "fl_x" in num:
+        fx = num["fl_x"]
+    elif "camera_angle_x" in num:
+        fx = 0.5 * width / math.tan(0.5 * num["camera_angle_x"])
+    else:
+        raise FormatError(path, None, f"{where}: expected 'fl_x' or 'camera_angle_x'; got neither")
+    if "fl_y" in num:
+        fy = num["fl_y"]
+    elif "camera_angle_y" in num:
+        fy = 0.5 * height / math.tan(0.5 * num["camera_angle_y"])
+    else:
+        fy = fx
+    cx = num.get("cx", width / 2.0) - 0.5
+    cy = num.get("cy", height / 2.0) - 0.5
+    dist = {k: num.get(k, 0.0) for k in DISTORTION_KEYS}
+    if dist["k4"]:
+        raise FormatError(
+            path, None, f"{where}: expected no k4 for a perspective camera; got {dist['k4']}"
+        )
+    try:
+        if dist["k3"]:
+            params = (
+                fx,
+                fy,
+                cx,
+                cy,
+                dist["k1"],
+                dist["k2"],
+                dist["p1"],
+                dist["p2"],
+                dist["k3"],
+                0.0,
+                0.0,
+                0.0,
+            )
+            return Camera("FULL_OPENCV", int(width), int(height), params)
+        if any(dist[k] for k in ("k1", "k2", "p1", "p2")):
+            params = (fx, fy, cx, cy, dist["k1"], dist["k2"], dist["p1"], dist["p2"])
+            return Camera("OPENCV", int(width), int(height), params)
+        return Camera.pinhole(int(width), int(height), fx, fy, cx, cy)
+    except ValueError as err:
+        raise FormatError(path, None, f"{where}: expected a valid camera; got {err}") from None
+
+
+def read_nerfstudio(path: str | Path, *, images: str | Path | None = None) -> Trajectory:
+    """Read a ``transforms.json`` (or a folder holding one) into world_from_cam frames.
+
+    frame_id and image_path are ``file_path`` as written; files are resolved against ``images``
+    (default: the json's folder). Frames keep the file's order.
+    """
+    path = Path(path)
+    if path.is_dir():
+        path = path / "transforms.json"
+    data = load_json(path)
+    if not isinstance(data, dict) or not isinstance(data.get("frames"), list):
+        raise FormatError(path, None, "expected a JSON object with a 'frames' list; got none")
+    if not data["frames"]:
+        raise FormatError(path, None, "expected at least one entry in 'frames'; got an empty list")
+    root = Path(images) if images is not None else path.parent
+    shared = {k: v for k, v in data.items() if k != "frames"}
+    frames: list[Frame] = []
+    seen: set[str] = set()
+    for i, entry in enumerate(data["frames"]):
+        where = f"frames[{i}]"
+        if not isinstance(entry, dict):
+            raise FormatError(
+                path, None, f"{where}: expected an object; got {type(entry).__name__}"
+            )
+        file_path = entry.get("file_path")
+        if not isinstance(file_path, str) or not file_path:
+            raise FormatError(
+                path, None, f"{where}: expected a 'file_path' string; got {file_path!r}"
+            )
+        image = _resolve_image(root, file_path)
+        camera = _camera(path, where, {**shared, **entry}, image)
+        try:
+            matrix = np.asarray(entry.get("transform_matrix"), dtype=np.float64)
+        except (TypeError, ValueError):
+            matrix = np.zeros(0)
+        if matrix.shape == (3, 4):
+            matrix = np.vstack([matrix, [0.0, 0.0, 0.0, 1.0]])
+        if matrix.shape != (4, 4):
+            raise FormatError(
+                path,
+                None,
+                f"{where}: expected a 4x4 'transform_matrix'; got {entry.get('transform_matrix')!r:.80}",
+            )
+        if file_path in seen:
+            raise FormatError(
+                path, None, f"{where}: expected unique 'file_path'; got {file_path!r} again"
+            )
+        seen.add(file_path)
+        try:
+            frames.append(Frame(file_path, camera, matrix @ GL_FROM_CV, file_path, image))
+        except ValueError as err:
+            raise FormatError(
+                path, None, f"{where}: expected a rigid cam-to-world 'transform_matrix'; got {err}"
+            ) from None
+    metadata = {"images_dir": str(root)}
+    if "applied_transform" in data:
+        metadata["applied_transform"] = json.dumps(data["applied_transform"])
+        logger.info("%s: has an applied_transform; poses are kept in the file's world frame", path)
+    logger.info("read %d frames from %s", len(frames), path)
+    return Trajectory(tuple(frames), source=str(path), format="nerfstudio", metadata=metadata)
