@@ -95,6 +95,11 @@ class ModernGLRenderer:
 
         ctx = moderngl.create_standalone_context(backend="egl", require=330)
         self._ctx = ctx
+        with ctx:
+            self._upload()
+
+    def _upload(self) -> None:
+        ctx = self._ctx
         logger.debug("moderngl context: %s", ctx.info.get("GL_RENDERER"))
         prog = ctx.program(vertex_shader=_VERTEX_SHADER, fragment_shader=_FRAGMENT_SHADER)
         self._prog = prog
@@ -195,6 +200,19 @@ class ModernGLRenderer:
 
         if self._ctx is None:
             self._init_gl()
+        # several renderers may live in one process: make this context current for the draw
+        with self._ctx:
+            rgba, depth = self._draw(w, h, cam_from_centred, proj)
+        # row 0 of the read-back is the image top (see opengl_projection): no flip needed
+        coverage = depth > 0.0
+        depth[~coverage] = 0.0
+        rgb = np.ascontiguousarray(rgba[:, :, :3])
+        rgb[~coverage] = 0.0
+        return Render(rgb=rgb, depth=depth, coverage=coverage, shading=self.shading)
+
+    def _draw(
+        self, w: int, h: int, cam_from_centred: np.ndarray, proj: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         ctx = self._ctx
         fbo = self._framebuffer(w, h)
         fbo.use()
@@ -212,33 +230,28 @@ class ModernGLRenderer:
             vao.render()
         rgba = np.frombuffer(fbo.read(components=4, attachment=0, dtype="f4"), dtype=np.float32)
         z = np.frombuffer(fbo.read(components=1, attachment=1, dtype="f4"), dtype=np.float32)
-        rgba = rgba.reshape(h, w, 4)
-        depth = z.reshape(h, w).copy()
-        # row 0 of the read-back is the image top (see opengl_projection): no flip needed
-        coverage = depth > 0.0
-        depth[~coverage] = 0.0
-        rgb = np.ascontiguousarray(rgba[:, :, :3])
-        rgb[~coverage] = 0.0
-        return Render(rgb=rgb, depth=depth, coverage=coverage, shading=self.shading)
+        return rgba.reshape(h, w, 4), z.reshape(h, w).copy()
 
     def close(self) -> None:
         """Release GL resources and the context (safe to call twice)."""
-        if self._fbo is not None:
-            self._fbo.release()
-            for att in self._fbo_attachments:
-                att.release()
-            self._fbo = None
-            self._fbo_size = None
-        for r in reversed(self._resources):
-            r.release()
+        if self._ctx is None:
+            return
+        with self._ctx:
+            if self._fbo is not None:
+                self._fbo.release()
+                for att in self._fbo_attachments:
+                    att.release()
+            for r in reversed(self._resources):
+                r.release()
+            if self._prog is not None:
+                self._prog.release()
+        self._fbo = None
+        self._fbo_size = None
         self._resources = []
         self._draws = []
-        if self._prog is not None:
-            self._prog.release()
-            self._prog = None
-        if self._ctx is not None:
-            self._ctx.release()
-            self._ctx = None
+        self._prog = None
+        self._ctx.release()
+        self._ctx = None
 
     def __enter__(self) -> ModernGLRenderer:
         return self

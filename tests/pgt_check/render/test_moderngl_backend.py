@@ -324,3 +324,24 @@ def test_real_castle_mesh_shaded(shared_data, renderer_factory):
     grey = r.rgb[r.coverage]
     np.testing.assert_array_equal(grey[:, 0], grey[:, 1])
     assert grey[:, 0].std() > 0.03  # shading shows structure
+
+
+def test_interleaved_renderers_in_one_process(renderer_factory):
+    # each renderer owns a GL context; using one must not disturb the other
+    white = _tiny_quad(np.array([0.0, 0.0, 2.0]), 0.3)
+    v = white.vertices + [0.2, 0.1, 0.0]
+    red = MeshData(
+        vertices=v, faces=white.faces, shading="vertex", colors=np.tile([1.0, 0, 0], (4, 1))
+    )
+    a = renderer_factory(white)
+    first = a.render(CAM, np.eye(4))
+    b = renderer_factory(red)
+    for _ in range(2):
+        again = a.render(CAM, np.eye(4))
+        other = b.render(CAM, np.eye(4))
+        np.testing.assert_array_equal(again.rgb, first.rgb)
+        np.testing.assert_array_equal(again.depth, first.depth)
+        assert other.coverage.any() and np.all(other.rgb[other.coverage] == [1, 0, 0])
+    a.close()
+    a.close()  # idempotent
+    assert b.render(CAM, np.eye(4)).coverage.any()
