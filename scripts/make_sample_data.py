@@ -18,7 +18,8 @@ holds the true poses except for the perturbed frames, whose pose is
 ``world_from_cam_true @ cam_true_from_cam_stored`` (rotation about an axis in the camera frame
 and/or a translation in the camera frame, listed in perturbed.txt).
 
-Usage: python scripts/make_sample_data.py [--out sample_data/scene] [--check]
+Usage (pgt_check importable: pip install -e . or PYTHONPATH=.):
+    python scripts/make_sample_data.py [--out sample_data/scene] [--check [--side-by-side DIR]]
 ``--check`` renders mesh.glb at every stored pose, matches render and photo with SIFT and
 prints the homography corner error per frame (perturbed frames should stand out).
 """
@@ -29,20 +30,17 @@ import argparse
 import io
 import logging
 import string
-import sys
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from pgt_check.geometry.transforms import (  # noqa: E402
+from pgt_check.geometry.transforms import (
     axis_angle_to_rotmat,
     invert_rigid,
     make_rigid,
     rotmat_to_quat,
 )
-from pgt_check.types import Camera  # noqa: E402
+from pgt_check.types import Camera
 
 logger = logging.getLogger("make_sample_data")
 

@@ -345,3 +345,17 @@ def test_interleaved_renderers_in_one_process(renderer_factory):
     a.close()
     a.close()  # idempotent
     assert b.render(CAM, np.eye(4)).coverage.any()
+
+
+def test_sample_scene_renders_textured(renderer_factory):
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[3] / "sample_data" / "scene"
+    if not (root / "mesh.glb").is_file():
+        pytest.skip("sample_data/scene not generated")
+    mesh = load_mesh(root / "mesh.glb")
+    assert mesh.shading == "texture" and len(mesh.textures) > 5
+    cam = _first_camera(root / "sensors.txt")
+    r = renderer_factory(mesh).render(cam, _first_pose(root / "trajectories.txt"))
+    assert r.coverage.all() and r.rgb.std() > 0.1
+    assert 0.3 < r.depth.min() and r.depth.max() < 10.0
