@@ -91,8 +91,10 @@ def detect_format(path: str | Path) -> str:
     except InputError as err:
         raise InputError(f"{path}: cannot tell the format: {err}") from None
     rows = [s for s in (raw.strip() for raw in lines) if s and not s.startswith("#")][:_SNIFF_ROWS]
-    kinds = {_row_format(row) for row in rows}
-    if len(kinds) == 1 and None not in kinds:
+    # Rows that fit no format are left to the reader, which names their line; rows that fit
+    # two different formats make the file ambiguous.
+    kinds = {k for k in (_row_format(row) for row in rows) if k is not None}
+    if len(kinds) == 1:
         return kinds.pop()
     first = rows[0][:80] if rows else "(no data rows)"
     raise InputError(
