@@ -1,4 +1,8 @@
-"""``pgt-check report OUT_DIR``: rebuild verdicts and outputs from stored records (no recompute)."""
+"""``pgt-check report OUT_DIR``: rebuild verdicts and outputs from stored records (no recompute).
+
+Rewrites frames.csv, summary.json, report.html (+ plots) and junit.xml; the detail images already
+in ``OUT_DIR/assets/`` (listed in ``assets/index.json``) are reused, never re-rendered.
+"""
 
 from __future__ import annotations
 
@@ -35,6 +39,8 @@ def report_main(argv: Sequence[str]) -> int:
     p.add_argument("out_dir")
     p.add_argument("--threshold-px", type=float, default=None, help="re-judge with a new threshold")
     p.add_argument("--max-fail-fraction", type=float, default=None)
+    p.add_argument("--absolute-paths", action="store_true", default=None,
+                   help="show absolute paths of this machine in the report (default: shortened)")
     try:
         args = p.parse_args(list(argv))
     except SystemExit as exc:
@@ -50,6 +56,8 @@ def report_main(argv: Sequence[str]) -> int:
             override["verdict"]["threshold_px"] = args.threshold_px
         if args.max_fail_fraction is not None:
             override["verdict"]["max_fail_fraction"] = args.max_fail_fraction
+        if args.absolute_paths:
+            override["absolute_paths"] = True
         config = RunConfig.from_dict(merge(cfg, override))
         old = json.loads((out / "summary.json").read_text()) if (out / "summary.json").is_file() else {}
         extra = {k: old[k] for k in ("trajectory_format", "shading", "setup_s", "wall_time_s") if k in old}
