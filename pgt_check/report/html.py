@@ -254,7 +254,7 @@ def page_context(
         ],
         "threshold": _fmt(summary.get("threshold_px"), ".1f"),
         "err_stats": " / ".join(_fmt(err.get(k)) for k in ("median", "p90", "max")) + " px",
-        "auc": ", ".join(f"@{k} px: {_fmt(v, '.3f')}" for k, v in auc.items()) if isinstance(auc, Mapping) else "",
+        "auc": ", ".join(f"{k}: {_fmt(v, '.3f')}" for k, v in auc.items()) if isinstance(auc, Mapping) else "",
         "unverifiable_reasons": sorted(
             (stats.get("unverifiable_reasons") or {}).items(), key=lambda kv: -kv[1]
         ),

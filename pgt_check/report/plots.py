@@ -118,11 +118,12 @@ def plot_error_along_trajectory(records, summary, out_dir: Path) -> str:
                    color=VERDICT_COLOURS["UNVERIFIABLE"], label="UNVERIFIABLE", zorder=2)
     if math.isfinite(thr):
         ax.axhline(thr, color="k", ls="--", lw=1.0, label="threshold")
-    ax.set_yscale("log")
+    if len(finite) or math.isfinite(thr):
+        ax.set_yscale("log")
     ax.set_xlabel(xlabel)
     ax.set_ylabel("corner error [px] (log)")
     ax.set_title("Corner error along the trajectory", fontsize=10)
-    ax.legend(fontsize=8, loc="upper left")
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0))
     return _save(fig, out_dir, "error_time")
 
 

@@ -262,6 +262,11 @@
         check("detail_opens", !!document.querySelector("#frame-table tr.detail-row .detail"));
       }
       out.n_inspect_panels = document.querySelectorAll("#inspect-list .detail").length;
+      const imgs = Array.from(document.images);
+      out.n_images_loaded = imgs.filter(function (im) { return im.complete && im.naturalWidth > 0; }).length;
+      out.broken_images = imgs.filter(function (im) { return im.complete && im.naturalWidth === 0; })
+        .map(function (im) { return im.getAttribute("src"); });
+      check("no_broken_images", out.broken_images.length === 0);
       out.n_rows = rows.length;
     } catch (err) {
       out.ok = false;
@@ -271,5 +276,5 @@
     pre.textContent = JSON.stringify(out);
     pre.dataset.ok = String(out.ok);
   }
-  if (window.location.hash === "#selftest") { selftest(); }
+  if (window.location.hash === "#selftest") { window.addEventListener("load", selftest); }
 })();
