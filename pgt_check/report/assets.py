@@ -231,8 +231,16 @@ def write_frame_assets(
             s_fix = photo.shape[0] / left.shape[0]
             left = _resize(left, (max(1, round(left.shape[1] * s_fix)), photo.shape[0]))
             s_left *= s_fix
-        k0 = None if images.kpts_render is None else (np.asarray(images.kpts_render) + 0.5) * s_left - 0.5
-        k1 = None if images.kpts_photo is None else (np.asarray(images.kpts_photo) + 0.5) * scale["photo"] - 0.5
+        k0 = (
+            None
+            if images.kpts_render is None
+            else (np.asarray(images.kpts_render) + 0.5) * s_left - 0.5
+        )
+        k1 = (
+            None
+            if images.kpts_photo is None
+            else (np.asarray(images.kpts_photo) + 0.5) * scale["photo"] - 0.5
+        )
         put("matches", draw_matches(left, photo, k0, k1, images.inliers))
     logger.debug("frame %s: wrote %d report assets", record["frame_id"], len(written))
     return written

@@ -37,7 +37,7 @@ MAX_DETAIL_CHARS = 1200
 #: frame-table columns: (key, label, type, digits). type: num | int | str | verdict | bool
 BASE_COLUMNS: tuple[tuple[str, str, str, int | None], ...] = (
     ("frame_id", "frame", "str", None),
-    ("timestamp", "time", "num", 3),
+    ("timestamp", "time", "num", None),
     ("image_path", "image", "str", None),
     ("verdict", "verdict", "verdict", None),
     ("reason", "reason", "str", None),
@@ -175,7 +175,11 @@ def _title(summary: Mapping[str, Any], absolute_paths: bool) -> str:
     traj = str(summary.get("settings", {}).get("input", {}).get("trajectory") or "")
     if not traj:
         return ""
-    return display_path(traj, absolute_paths) if absolute_paths else traj.replace("\\", "/").split("/")[-1]
+    return (
+        display_path(traj, absolute_paths)
+        if absolute_paths
+        else traj.replace("\\", "/").split("/")[-1]
+    )
 
 
 def page_context(
@@ -224,8 +228,11 @@ def page_context(
     }
     auc = stats.get("auc") or {}
     timing = [
-        (k, f"{_fmt(v.get('median_s'), '.3f')} / {_fmt(v.get('p90_s'), '.3f')} / "
-            f"{_fmt(v.get('total_s'), '.1f')}")
+        (
+            k,
+            f"{_fmt(v.get('median_s'), '.3f')} / {_fmt(v.get('p90_s'), '.3f')} / "
+            f"{_fmt(v.get('total_s'), '.1f')}",
+        )
         for k, v in (summary.get("timing") or {}).items()
         if isinstance(v, Mapping)
     ]
@@ -248,13 +255,18 @@ def page_context(
         "gate_explanation": str(gate.get("explanation", "")),
         "n_frames": n,
         "verdicts": [
-            {"name": v, "count": counts.get(v, 0),
-             "fraction": f"{counts.get(v, 0) / n:.1%}" if n else "-"}
+            {
+                "name": v,
+                "count": counts.get(v, 0),
+                "fraction": f"{counts.get(v, 0) / n:.1%}" if n else "-",
+            }
             for v in ("PASS", "FAIL", "UNVERIFIABLE")
         ],
         "threshold": _fmt(summary.get("threshold_px"), ".1f"),
         "err_stats": " / ".join(_fmt(err.get(k)) for k in ("median", "p90", "max")) + " px",
-        "auc": ", ".join(f"{k}: {_fmt(v, '.3f')}" for k, v in auc.items()) if isinstance(auc, Mapping) else "",
+        "auc": ", ".join(f"{k}: {_fmt(v, '.3f')}" for k, v in auc.items())
+        if isinstance(auc, Mapping)
+        else "",
         "unverifiable_reasons": sorted(
             (stats.get("unverifiable_reasons") or {}).items(), key=lambda kv: -kv[1]
         ),
@@ -329,5 +341,7 @@ def build_report(
         out_dir / JUNIT_NAME,
         junit_xml_text(records, summary, lambda p: display_path(p, absolute_paths)),
     )
-    logger.info("wrote %s and %s (%d frames, %d with images)", path, JUNIT_NAME, len(records), len(assets))
+    logger.info(
+        "wrote %s and %s (%d frames, %d with images)", path, JUNIT_NAME, len(records), len(assets)
+    )
     return path

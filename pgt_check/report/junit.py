@@ -63,8 +63,13 @@ def junit_xml_text(
         for r in records
         if isinstance(r.get("time_s"), (int, float)) and math.isfinite(r["time_s"])
     )
-    counts = {"tests": str(n), "failures": str(n_fail), "errors": "0", "skipped": str(n_skip),
-              "time": _seconds(total_time)}
+    counts = {
+        "tests": str(n),
+        "failures": str(n_fail),
+        "errors": "0",
+        "skipped": str(n_skip),
+        "time": _seconds(total_time),
+    }
     root = ET.Element("testsuites", {"name": suite_name, **counts})
     suite = ET.SubElement(root, "testsuite", {"name": suite_name, **counts})
     props = ET.SubElement(suite, "properties")
@@ -84,17 +89,24 @@ def junit_xml_text(
         case = ET.SubElement(
             suite,
             "testcase",
-            {"name": xml_text(rec.get("frame_id")), "classname": classname,
-             "time": _seconds(rec.get("time_s"))},
+            {
+                "name": xml_text(rec.get("frame_id")),
+                "classname": classname,
+                "time": _seconds(rec.get("time_s")),
+            },
         )
         verdict = rec.get("verdict")
         if verdict == "FAIL":
-            el = ET.SubElement(case, "failure",
-                               {"message": xml_text(rec.get("reason") or "FAIL"), "type": "FAIL"})
+            el = ET.SubElement(
+                case, "failure", {"message": xml_text(rec.get("reason") or "FAIL"), "type": "FAIL"}
+            )
             el.text = xml_text(_frame_text(rec, path))
         elif verdict == "UNVERIFIABLE":
-            ET.SubElement(case, "skipped",
-                          {"message": xml_text(f"UNVERIFIABLE: {rec.get('reason') or 'unknown'}")})
+            ET.SubElement(
+                case,
+                "skipped",
+                {"message": xml_text(f"UNVERIFIABLE: {rec.get('reason') or 'unknown'}")},
+            )
         out = ET.SubElement(case, "system-out")
         out.text = xml_text(_frame_text(rec, path))
     so = ET.SubElement(suite, "system-out")

@@ -90,7 +90,14 @@ def frames_csv_text(records: list[dict[str, Any]]) -> str:
 
 def versions() -> dict[str, str]:
     out = {"pgt-check": __version__, "python": platform.python_version()}
-    for pkg in ("numpy", "opencv-contrib-python-headless", "moderngl", "trimesh", "torch", "kornia"):
+    for pkg in (
+        "numpy",
+        "opencv-contrib-python-headless",
+        "moderngl",
+        "trimesh",
+        "torch",
+        "kornia",
+    ):
         try:
             out[pkg] = metadata.version(pkg)
         except metadata.PackageNotFoundError:
@@ -159,9 +166,7 @@ def write_outputs(
     None keeps whatever ``assets/index.json`` already lists."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(
-        out / "records.jsonl", "".join(json.dumps(_clean(r)) + "\n" for r in records)
-    )
+    atomic_write_text(out / "records.jsonl", "".join(json.dumps(_clean(r)) + "\n" for r in records))
     atomic_write_text(out / "frames.csv", frames_csv_text(records))
     atomic_write_text(out / "config.json", json.dumps(config.to_dict(), indent=2) + "\n")
     summary = build_summary(records, config, extra)

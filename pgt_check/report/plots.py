@@ -67,16 +67,23 @@ def plot_histogram(records, summary, out_dir: Path) -> str:
     plt = _pyplot()
     thr = _threshold(records, summary)
     fig, ax = plt.subplots(figsize=(6, 3.6), layout="constrained")
-    errs = {v: np.array([_num(r, "corner_error_px") for r in records if r.get("verdict") == v])
-            for v in ("PASS", "FAIL")}
+    errs = {
+        v: np.array([_num(r, "corner_error_px") for r in records if r.get("verdict") == v])
+        for v in ("PASS", "FAIL")
+    }
     allv = np.concatenate([e[np.isfinite(e)] for e in errs.values()])
     if len(allv):
         lo = max(min(allv.min(), thr if math.isfinite(thr) else allv.min()), 1e-2)
         hi = max(allv.max(), thr if math.isfinite(thr) else allv.max(), lo * 10)
         bins = np.geomspace(lo, hi * 1.01, 40)
         data = [np.clip(e[np.isfinite(e)], lo, None) for e in errs.values()]
-        ax.hist(data, bins=bins, stacked=True, label=list(errs),
-                color=[VERDICT_COLOURS[v] for v in errs])
+        ax.hist(
+            data,
+            bins=bins,
+            stacked=True,
+            label=list(errs),
+            color=[VERDICT_COLOURS[v] for v in errs],
+        )
         ax.set_xscale("log")
     else:
         ax.text(0.5, 0.5, "no frame was measured", ha="center", transform=ax.transAxes)
@@ -111,14 +118,23 @@ def plot_error_along_trajectory(records, summary, out_dir: Path) -> str:
     ax.plot(x[order][ok], np.maximum(err[order][ok], floor), color="#90a4ae", lw=0.6, zorder=1)
     for v in ("PASS", "FAIL"):
         m = (verdict == v) & np.isfinite(err)
-        ax.scatter(x[m], np.maximum(err[m], floor), s=8, color=VERDICT_COLOURS[v], label=v, zorder=2)
+        ax.scatter(
+            x[m], np.maximum(err[m], floor), s=8, color=VERDICT_COLOURS[v], label=v, zorder=2
+        )
     m = verdict == "UNVERIFIABLE"
     if m.any():
-        ax.scatter(x[m], np.full(m.sum(), floor), marker="x", s=14,
-                   color=VERDICT_COLOURS["UNVERIFIABLE"], label="UNVERIFIABLE", zorder=2)
-    if math.isfinite(thr):
+        ax.scatter(
+            x[m],
+            np.full(m.sum(), floor),
+            marker="x",
+            s=14,
+            color=VERDICT_COLOURS["UNVERIFIABLE"],
+            label="UNVERIFIABLE",
+            zorder=2,
+        )
+    if math.isfinite(thr) and thr > 0:
         ax.axhline(thr, color="k", ls="--", lw=1.0, label="threshold")
-    if len(finite) or math.isfinite(thr):
+    if len(finite) or (math.isfinite(thr) and thr > 0):
         ax.set_yscale("log")
     ax.set_xlabel(xlabel)
     ax.set_ylabel("corner error [px] (log)")
@@ -199,8 +215,14 @@ def plot_top_view(records, summary, out_dir: Path) -> str | None:
     for verdict in ("PASS", "UNVERIFIABLE", "FAIL"):
         m = verdicts_a == verdict
         if m.any():
-            ax.scatter(xy[m, 0], xy[m, 1], s=10, color=VERDICT_COLOURS[verdict], label=verdict,
-                       zorder=3 if verdict == "FAIL" else 2)
+            ax.scatter(
+                xy[m, 0],
+                xy[m, 1],
+                s=10,
+                color=VERDICT_COLOURS[verdict],
+                label=verdict,
+                zorder=3 if verdict == "FAIL" else 2,
+            )
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("1st principal axis [world units]")
     ax.set_ylabel("2nd principal axis")

@@ -9,7 +9,7 @@
   cols.forEach(function (c, i) { ci[c.key] = i; });
   const ID = ci.frame_id;
   const VERDICT = ci.verdict;
-  const INSPECT_PAGE = 10;
+  const INSPECT_PAGE = 6;
   const state = { sortKey: null, sortDir: 1, verdict: "", text: "", page: 0,
                   pageSize: data.page_size || 100, open: null, inspectPage: 0 };
   let view = rows.map(function (_, i) { return i; });
@@ -34,7 +34,9 @@
   function fmt(v, c) {
     if (v === null || v === undefined || v === "") { return ""; }
     if (c.type === "num") {
-      return typeof v === "number" ? v.toFixed(c.digits == null ? 3 : c.digits) : String(v);
+      if (typeof v !== "number") { return String(v); }
+      if (c.digits == null) { return Number.isInteger(v) ? String(v) : v.toFixed(3); }
+      return v.toFixed(c.digits);
     }
     if (c.type === "bool") { return v ? "yes" : "no"; }
     return String(v);

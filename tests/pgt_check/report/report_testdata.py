@@ -6,6 +6,7 @@ import csv
 import json
 import os
 import re
+import xml.etree.ElementTree as ET
 from html.parser import HTMLParser
 from pathlib import Path
 from typing import Any
@@ -13,7 +14,9 @@ from typing import Any
 import numpy as np
 
 from pgt_check.config import RunConfig
+from pgt_check.report.outputs import FRAME_COLUMNS
 
+XSD = Path(__file__).parent / "fixtures" / "junit.xsd"
 HOSTILE_NAME = "<img src=x onerror=alert(1)>.jpg"
 SCRIPT_BREAKER = "</script><script>alert(2)</script><!--"
 
@@ -62,15 +65,32 @@ def synthetic_measurements(
         rec["n_inliers"] = int(rec["n_matches"] * rng.uniform(0.3, 0.9))
         rec["inlier_ratio"] = rec["n_inliers"] / rec["n_matches"]
         if i % 13 == 7:
-            rec.update(error="image_missing", corner_error_px=None, shift_dx_px=None,
-                       shift_dy_px=None, zoom=None, n_matches=0, n_inliers=0, inlier_ratio=0.0)
+            rec.update(
+                error="image_missing",
+                corner_error_px=None,
+                shift_dx_px=None,
+                shift_dy_px=None,
+                zoom=None,
+                n_matches=0,
+                n_inliers=0,
+                inlier_ratio=0.0,
+            )
         if i % 17 == 3:
-            rec.update(homography_reason="too_few_matches", corner_error_px=None, n_inliers=4,
-                       shift_dx_px=None, shift_dy_px=None, zoom=None)
+            rec.update(
+                homography_reason="too_few_matches",
+                corner_error_px=None,
+                n_inliers=4,
+                shift_dx_px=None,
+                shift_dy_px=None,
+                zoom=None,
+            )
         if i == 9:
-            rec.update(error="internal_error", corner_error_px=None,
-                       error_detail='Traceback:\n  File "/home/alice/secret/pgt_check/runner.py", '
-                       "line 3, in measure\nValueError: boom")
+            rec.update(
+                error="internal_error",
+                corner_error_px=None,
+                error_detail='Traceback:\n  File "/home/alice/secret/pgt_check/runner.py", '
+                "line 3, in measure\nValueError: boom",
+            )
         if enhanced:
             rec["enhanced"] = bool(i % 2)
             rec["corner_error_px_raw"] = None if rec["corner_error_px"] is None else err * 1.3
@@ -157,3 +177,59 @@ def shared_data_dir() -> Path:
 
 def strip_tags(html: str) -> str:
     return re.sub(r"<[^>]*>", "", html)
+
+
+def validate(text: str) -> None:
+    """Validate against fixtures/junit.xsd with xmlschema; a structural check if it is absent."""
+    try:
+        import xmlschema
+    except ImportError:
+        xmlschema = None
+    if xmlschema is not None:
+        xmlschema.XMLSchema(str(XSD)).validate(text)
+        return
+    root = ET.fromstring(text)  # pragma: no cover - fallback without xmlschema
+    assert root.tag == "testsuites"
+    for suite in root.iter("testsuite"):
+        for attr in ("name", "tests", "failures", "errors", "skipped", "time"):
+            assert attr in suite.attrib
+        for case in suite.iter("testcase"):
+            assert {"name", "classname", "time"} <= set(case.attrib)
+
+
+def check_report(out: Path, records: list[dict]) -> dict:
+    """The report checks of the issue: all frames, numbers equal to frames.csv, assets exist."""
+    page, data = parse_report(out / "report.html")
+    cols = [c["key"] for c in data["columns"]]
+    rows = [dict(zip(cols, row, strict=True)) for row in data["rows"]]
+    csv_rows = read_csv(out / "frames.csv")
+    assert [r["frame_id"] for r in rows] == [r["frame_id"] for r in records]
+    assert [r["frame_id"] for r in csv_rows] == [r["frame_id"] for r in records]
+    for row, crow in zip(rows, csv_rows, strict=True):
+        for key in cols:
+            if key not in FRAME_COLUMNS or key == "image_path":
+                continue
+            v, c = row[key], crow[key]
+            if c == "":
+                assert v in (None, ""), (key, v)
+            elif isinstance(v, (int, float)) and not isinstance(v, bool):
+                assert v == float(c), (key, v, c)
+            else:
+                assert str(v) == c, (key, v, c)
+    # every referenced file exists (page links, plots, detail images)
+    refs = [r for r in page.refs if not r.startswith(("#", "data:"))]
+    refs += [p for kinds in data["assets"].values() for p in kinds.values()]
+    assert refs
+    for ref in refs:
+        assert not ref.startswith(("http:", "https:", "//", "/")), ref
+        assert (out / ref).is_file(), ref
+    # no network assets at all
+    for tag, attrs in page.tags:
+        for key in ("src", "href"):
+            assert not str(attrs.get(key) or "").startswith(("http", "//")), (tag, attrs)
+    # summary numbers equal summary.json
+    summary = json.loads((out / "summary.json").read_text())
+    for v in ("PASS", "FAIL", "UNVERIFIABLE"):
+        assert page.text_by_id[f"count-{v}"].strip() == str(summary["counts"][v])
+    assert page.text_by_id["count-total"].strip() == str(len(records))
+    return data

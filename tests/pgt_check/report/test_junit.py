@@ -1,33 +1,12 @@
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
-from pathlib import Path
 
 import pytest
-from report_testdata import HOSTILE_NAME, judged, synthetic_measurements
+from report_testdata import HOSTILE_NAME, XSD, judged, synthetic_measurements, validate
 
 from pgt_check.report.junit import junit_xml_text, xml_text
 from pgt_check.report.outputs import build_summary
-
-XSD = Path(__file__).parent / "fixtures" / "junit.xsd"
-
-
-def validate(text: str) -> None:
-    """Validate against fixtures/junit.xsd with xmlschema; a structural check if it is absent."""
-    try:
-        import xmlschema
-    except ImportError:
-        xmlschema = None
-    if xmlschema is not None:
-        xmlschema.XMLSchema(str(XSD)).validate(text)
-        return
-    root = ET.fromstring(text)  # pragma: no cover - fallback without xmlschema
-    assert root.tag == "testsuites"
-    for suite in root.iter("testsuite"):
-        for attr in ("name", "tests", "failures", "errors", "skipped", "time"):
-            assert attr in suite.attrib
-        for case in suite.iter("testcase"):
-            assert {"name", "classname", "time"} <= set(case.attrib)
 
 
 def test_xsd_is_used_when_xmlschema_is_installed():
@@ -49,7 +28,11 @@ def test_junit_one_case_per_frame_and_valid(config):
     counts = summary["counts"]
     assert int(suite.get("tests")) == len(records)
     assert int(suite.get("failures")) == counts["FAIL"] == len(suite.findall("testcase/failure"))
-    assert int(suite.get("skipped")) == counts["UNVERIFIABLE"] == len(suite.findall("testcase/skipped"))
+    assert (
+        int(suite.get("skipped"))
+        == counts["UNVERIFIABLE"]
+        == len(suite.findall("testcase/skipped"))
+    )
     by_name = {c.get("name"): c for c in cases}
     for r in records:
         case = by_name[r["frame_id"]]
@@ -73,8 +56,10 @@ def test_junit_display_path_hides_absolute_paths(config):
 
 def test_xml_text_removes_control_characters():
     assert xml_text("a\x00b\x1bc\td") == "a\ufffdb\ufffdc\td"
-    text = junit_xml_text([{"frame_id": "f\x01", "verdict": "PASS", "reason": ""}],
-                          {"counts": {"PASS": 1}, "gate": {"passed": True}})
+    text = junit_xml_text(
+        [{"frame_id": "f\x01", "verdict": "PASS", "reason": ""}],
+        {"counts": {"PASS": 1}, "gate": {"passed": True}},
+    )
     validate(text)
 
 
