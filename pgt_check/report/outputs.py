@@ -1,4 +1,5 @@
-"""Machine-readable outputs: records.jsonl, frames.csv, summary.json (written atomically)."""
+"""Run outputs: records.jsonl, frames.csv, summary.json, config.json (written atomically), and
+the human/CI report (report.html, junit.xml; see ``pgt_check.report.html.build_report``)."""
 
 from __future__ import annotations
 
@@ -89,7 +90,14 @@ def frames_csv_text(records: list[dict[str, Any]]) -> str:
 
 def versions() -> dict[str, str]:
     out = {"pgt-check": __version__, "python": platform.python_version()}
-    for pkg in ("numpy", "opencv-contrib-python-headless", "moderngl", "trimesh", "torch", "kornia"):
+    for pkg in (
+        "numpy",
+        "opencv-contrib-python-headless",
+        "moderngl",
+        "trimesh",
+        "torch",
+        "kornia",
+    ):
         try:
             out[pkg] = metadata.version(pkg)
         except metadata.PackageNotFoundError:
@@ -144,17 +152,28 @@ def build_summary(
 
 
 def write_outputs(
-    out: Path, records: list[dict[str, Any]], config: RunConfig, extra: dict[str, Any] | None = None
+    out: Path,
+    records: list[dict[str, Any]],
+    config: RunConfig,
+    extra: dict[str, Any] | None = None,
+    *,
+    report: bool = True,
+    assets: dict[str, dict[str, str]] | None = None,
 ) -> dict[str, Any]:
-    """Write records.jsonl, frames.csv and summary.json into ``out``; return the summary."""
+    """Write records.jsonl, frames.csv, config.json and summary.json into ``out``; return the
+    summary. With ``report`` (default) also report.html, its plots and junit.xml; ``assets``
+    (``{frame_id: {kind: relative path}}`` from ``write_frame_assets``) become the detail images,
+    None keeps whatever ``assets/index.json`` already lists."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(
-        out / "records.jsonl", "".join(json.dumps(_clean(r)) + "\n" for r in records)
-    )
+    atomic_write_text(out / "records.jsonl", "".join(json.dumps(_clean(r)) + "\n" for r in records))
     atomic_write_text(out / "frames.csv", frames_csv_text(records))
     atomic_write_text(out / "config.json", json.dumps(config.to_dict(), indent=2) + "\n")
     summary = build_summary(records, config, extra)
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
+    if report:
+        from pgt_check.report.html import build_report
+
+        build_report(out, records, summary, assets, absolute_paths=config.absolute_paths)
     logger.info("wrote %s", out)
     return summary

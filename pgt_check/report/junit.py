@@ -1,0 +1,120 @@
+"""junit.xml: one testcase per frame (FAIL = failure, UNVERIFIABLE = skipped with its reason).
+
+Follows the common Jenkins / Surefire JUnit layout (testsuites > testsuite > properties,
+testcase > failure | skipped, system-out), which CI systems (GitLab, GitHub actions, Jenkins,
+Azure) display natively.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import xml.etree.ElementTree as ET
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
+
+#: characters XML 1.0 cannot carry, even escaped
+_XML_INVALID = re.compile("[\x00-\x08\x0b\x0c\x0e-\x1f\ufffe\uffff]")
+
+
+def xml_text(value: Any) -> str:
+    """Text safe for an XML attribute or element (control characters replaced by U+FFFD)."""
+    return _XML_INVALID.sub("\ufffd", "" if value is None else str(value))
+
+
+def _fmt(value: Any, spec: str = ".2f") -> str:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return "-" if value in (None, "") else str(value)
+    if not math.isfinite(value):
+        return "-"
+    return format(value, spec)
+
+
+def _seconds(value: Any) -> str:
+    if isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value):
+        return f"{max(float(value), 0.0):.3f}"
+    return "0.000"
+
+
+def _frame_text(rec: Mapping[str, Any], path: str) -> str:
+    return (
+        f"frame {rec.get('frame_id')} ({path}): corner error "
+        f"{_fmt(rec.get('corner_error_px'))} px, threshold {_fmt(rec.get('threshold_px'))} px, "
+        f"{_fmt(rec.get('n_inliers'), 'd')} inliers of {_fmt(rec.get('n_matches'), 'd')} matches, "
+        f"coverage {_fmt(rec.get('coverage'), '.3f')}"
+    )
+
+
+def junit_xml_text(
+    records: Sequence[Mapping[str, Any]],
+    summary: Mapping[str, Any],
+    display_path: Callable[[str], str] = str,
+    suite_name: str = "pgt-check",
+) -> str:
+    """The junit.xml document for judged records (``verdict``, ``reason`` per record).
+
+    ``display_path`` maps a record's image_path to what is shown (e.g. without absolute paths).
+    """
+    n = len(records)
+    n_fail = sum(1 for r in records if r.get("verdict") == "FAIL")
+    n_skip = sum(1 for r in records if r.get("verdict") == "UNVERIFIABLE")
+    total_time = sum(
+        float(r["time_s"])
+        for r in records
+        if isinstance(r.get("time_s"), (int, float)) and math.isfinite(r["time_s"])
+    )
+    counts = {
+        "tests": str(n),
+        "failures": str(n_fail),
+        "errors": "0",
+        "skipped": str(n_skip),
+        "time": _seconds(total_time),
+    }
+    root = ET.Element("testsuites", {"name": suite_name, **counts})
+    suite = ET.SubElement(root, "testsuite", {"name": suite_name, **counts})
+    props = ET.SubElement(suite, "properties")
+    gate = summary.get("gate", {}) if isinstance(summary.get("gate"), Mapping) else {}
+    for name, value in (
+        ("pgt-check.version", summary.get("version")),
+        ("threshold_px", summary.get("threshold_px")),
+        ("gate.passed", gate.get("passed")),
+        ("gate.explanation", gate.get("explanation")),
+        ("fingerprint", summary.get("fingerprint")),
+    ):
+        if value is not None:
+            ET.SubElement(props, "property", {"name": name, "value": xml_text(value)})
+    classname = f"{suite_name}.frames"
+    for rec in records:
+        path = display_path(str(rec.get("image_path") or ""))
+        case = ET.SubElement(
+            suite,
+            "testcase",
+            {
+                "name": xml_text(rec.get("frame_id")),
+                "classname": classname,
+                "time": _seconds(rec.get("time_s")),
+            },
+        )
+        verdict = rec.get("verdict")
+        if verdict == "FAIL":
+            el = ET.SubElement(
+                case, "failure", {"message": xml_text(rec.get("reason") or "FAIL"), "type": "FAIL"}
+            )
+            el.text = xml_text(_frame_text(rec, path))
+        elif verdict == "UNVERIFIABLE":
+            ET.SubElement(
+                case,
+                "skipped",
+                {"message": xml_text(f"UNVERIFIABLE: {rec.get('reason') or 'unknown'}")},
+            )
+        out = ET.SubElement(case, "system-out")
+        out.text = xml_text(_frame_text(rec, path))
+    so = ET.SubElement(suite, "system-out")
+    c = summary.get("counts", {})
+    so.text = xml_text(
+        f"{n} frames: {c.get('PASS', 0)} PASS, {c.get('FAIL', 0)} FAIL, "
+        f"{c.get('UNVERIFIABLE', 0)} UNVERIFIABLE; gate "
+        f"{'PASSED' if gate.get('passed') else 'FAILED'}: {gate.get('explanation', '')}"
+    )
+    ET.indent(root, space=" ")
+    return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
