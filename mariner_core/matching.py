@@ -321,6 +321,14 @@ class MEM(nn.Module):
         Returns:
             ((W1, W2, W3), match): warped features with the render features' shapes.
         """
+        for lvl, scale in ((0, 4), (1, 2)):
+            for name, feats in (("render", render_feats), ("reference", ref_feats)):
+                want = tuple(scale * v for v in feats[2].shape[-2:])
+                if tuple(feats[lvl].shape[-2:]) != want:
+                    raise ValueError(
+                        f"{name} level-{lvl + 1} features are {tuple(feats[lvl].shape[-2:])}, "
+                        f"expected {want} ({scale}x the L3 size)"
+                    )
         m = self.match(render_feats[2], ref_feats[2])
         warped = tuple(
             transfer(ref_feats[lvl], m.center, m.score, scale, self.block)
