@@ -55,7 +55,7 @@ def save_checkpoint(
         k: (v.detach().to("cpu", torch.float16) if fp16 and v.is_floating_point() else v.cpu())
         for k, v in model.state_dict().items()
     }
-    meta = {"format_version": FORMAT_VERSION, "torch": torch.__version__, "fp16": bool(fp16)}
+    meta = {"format_version": FORMAT_VERSION, "torch": str(torch.__version__), "fp16": bool(fp16)}
     meta.update(extra or {})
     tmp = path.with_suffix(path.suffix + ".tmp")
     torch.save({"config": model.cfg.to_dict(), "state_dict": sd, "meta": meta}, tmp)

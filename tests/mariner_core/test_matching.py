@@ -32,11 +32,17 @@ def brute_force(fr: torch.Tensor, fref: torch.Tensor, dilations=(1, 2, 3), facto
                     total = 0.0
                     for d in dilations:
                         q = torch.stack(
-                            [tile[:, 5 + d * i, 5 + d * j] for i in (-1, 0, 1) for j in (-1, 0, 1)], 1
+                            [tile[:, 5 + d * i, 5 + d * j] for i in (-1, 0, 1) for j in (-1, 0, 1)],
+                            1,
                         )
                         refp = F.pad(fref, (d, d, d, d))
                         k = torch.stack(
-                            [refp[:, u + d + d * i, v + d + d * j] for i in (-1, 0, 1) for j in (-1, 0, 1)], 1
+                            [
+                                refp[:, u + d + d * i, v + d + d * j]
+                                for i in (-1, 0, 1)
+                                for j in (-1, 0, 1)
+                            ],
+                            1,
                         )
                         total += _cos(q.flatten(), k.flatten())
                     if total > best:
@@ -93,7 +99,9 @@ def literal_transfer(ref_feat, index, score, topleft, window, s):
         idx = index[by * 8 : by * 8 + 8, bx * 8 : bx * 8 + 8].flatten()
         folded = F.fold(patches[:, idx][None], 8 * s, 3 * s, stride=s, padding=s) / count
         sc = score[by * 8 : by * 8 + 8, bx * 8 : bx * 8 + 8][None, None]
-        wgt = F.interpolate(sc, scale_factor=s, mode="bilinear", align_corners=False) if s > 1 else sc
+        wgt = (
+            F.interpolate(sc, scale_factor=s, mode="bilinear", align_corners=False) if s > 1 else sc
+        )
         out[:, by * 8 * s : (by + 1) * 8 * s, bx * 8 * s : (bx + 1) * 8 * s] = (folded * wgt)[0]
     return out
 
@@ -106,7 +114,9 @@ def test_transfer_equals_literal_unfold_fold():
     for s in (1, 2, 4):
         ref_s = torch.randn(1, 3, 20 * s, 18 * s, generator=g, dtype=torch.float64)
         fast = transfer(ref_s, m.center, m.score, s, BLOCK)
-        lit = literal_transfer(ref_s[0], m.index[0], m.score[0, 0], m.window_topleft[0], m.window, s)
+        lit = literal_transfer(
+            ref_s[0], m.index[0], m.score[0, 0], m.window_topleft[0], m.window, s
+        )
         torch.testing.assert_close(fast[0], lit)
 
 
