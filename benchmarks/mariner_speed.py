@@ -28,7 +28,7 @@ PAPER_MS = {1: 49.2, 2: 66.3, 3: 88.7, 4: 110.5}
 def run_size(w: int, h: int, iters: list[int], repeats: int, threads: int) -> dict:
     import torch
 
-    from mariner_core.model import Mariner
+    from mariner_core.model import Mariner, pad_reference, pad_render
 
     torch.set_num_threads(threads)
     torch.manual_seed(0)
@@ -45,7 +45,9 @@ def run_size(w: int, h: int, iters: list[int], repeats: int, threads: int) -> di
                 model(x, r, iterations=k)
                 ts.append(1e3 * (time.perf_counter() - t))
             out["ms"][k] = {"median": statistics.median(ts), "min": min(ts), "max": max(ts)}
-        # split of one iteration (padded input sizes are already multiples of 32 here)
+        # split of one iteration, on the padded inputs the forward uses
+        x, _ = pad_render(x, model.cfg.render_multiple)
+        r = pad_reference(r, model.cfg.reference_multiple)
         t0 = time.perf_counter()
         fi, fr = model.encoder(x), model.encoder(r)
         t1 = time.perf_counter()
