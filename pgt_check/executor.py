@@ -487,9 +487,8 @@ def _dask_client(config: RunConfig) -> tuple[Any, Any]:
             ) from err
     workers = config.workers or default_workers()
     settings = {
-        "distributed.scheduler.allowed-failures": config.retries,
-        # one task per single-threaded worker: a crash then implicates only its own frame
-        "distributed.scheduler.worker-saturation": 1.0,
+        # a dead worker fails its tasks at once; iter_results finds the culprit and retries
+        "distributed.scheduler.allowed-failures": 0,
         "distributed.worker.multiprocessing-method": "spawn",
     }
     with dask.config.set(settings):
@@ -518,7 +517,8 @@ def _iter_dask(
 
     client, cluster = _dask_client(config)
     token = uuid.uuid4().hex[:12]
-    futures: dict[Any, Frame] = {}
+    inflight: dict[Any, _Task] = {}
+    retry: collections.deque[_Task] = collections.deque()
     noted = [False]
     try:
         nthreads = sum(client.nthreads().values()) or 1
@@ -526,50 +526,55 @@ def _iter_dask(
         max_inflight = max(2, INFLIGHT_PER_WORKER * nthreads)
         source = iter(frames)
         exhausted = False
+        ac = as_completed()
+        logger.info("Dask: %d worker threads, up to %d frames in flight", nthreads, max_inflight)
 
-        def submit_next() -> Any:
-            nonlocal exhausted
-            if exhausted or stop.is_set():
-                return None
-            frame = next(source, None)
-            if frame is None:
-                exhausted = True
-                return None
+        def submit(task: _Task) -> None:
             fut = client.submit(
                 _dask_measure,
                 token,
                 checker_factory,
-                frame,
+                task.frame,
                 key=f"pgt-check-{token}-{stats.submitted}",
                 pure=False,
             )
-            futures[fut] = frame
+            inflight[fut] = task
             stats.submitted += 1
-            return fut
+            ac.add(fut)
 
-        first = [f for f in (submit_next() for _ in range(max_inflight)) if f is not None]
-        ac = as_completed(first)
+        def fill() -> None:
+            # same policy as the process pool: suspects of a crash run alone
+            nonlocal exhausted
+            while not stop.is_set():
+                if any(t.isolated for t in inflight.values()):
+                    return
+                if retry:
+                    if not inflight:
+                        task = retry.popleft()
+                        task.isolated = True
+                        submit(task)
+                    return
+                if len(inflight) >= max_inflight or exhausted:
+                    return
+                frame = next(source, None)
+                if frame is None:
+                    exhausted = True
+                    return
+                submit(_Task(frame))
+
+        fill()
         for fut in ac:
-            frame = futures.pop(fut)
-            rec: dict[str, Any] | None
+            task = inflight.pop(fut)
+            frame = task.frame
+            rec: dict[str, Any] | None = None
             if fut.status == "finished":
                 rec = fut.result()
-            elif fut.status == "cancelled" or stop.is_set():
-                rec = None
-            else:
+            elif fut.status != "cancelled" and not stop.is_set():
                 err = fut.exception()
                 if isinstance(err, CheckerSetupError):
                     raise err
                 if isinstance(err, KilledWorker):
-                    stats.worker_crashes += 1
-                    if config.fail_fast:
-                        raise RuntimeError(f"frame {frame.frame_id}: worker died: {err}")
-                    logger.error(
-                        "frame %s: its worker died repeatedly; recorded as worker_crashed",
-                        frame.frame_id,
-                    )
-                    stats.crashed_frames.append(frame.frame_id)
-                    rec = error_record(frame, "worker_crashed", f"{type(err).__name__}: {err}")
+                    rec = _dask_crash(task, err, retry, config, error_record, stats)
                 else:
                     if config.fail_fast:
                         raise err
@@ -579,14 +584,46 @@ def _iter_dask(
             if rec is not None:
                 stats.yielded += 1
                 yield rec
-            _note_stop(stop, noted, len(futures))
-            nxt = submit_next()
-            if nxt is not None:
-                ac.add(nxt)
+            _note_stop(stop, noted, len(inflight))
+            fill()
         stats.stopped = stop.is_set()
     finally:
-        if futures:
-            client.cancel(list(futures))
+        if inflight:
+            client.cancel(list(inflight))
         client.close()
         if cluster is not None:
             cluster.close()
+
+
+def _dask_crash(
+    task: _Task,
+    err: BaseException,
+    retry: collections.deque[_Task],
+    config: RunConfig,
+    error_record: ErrorRecord,
+    stats: ExecutorStats,
+) -> dict[str, Any] | None:
+    """A frame's task died with its worker (after the scheduler's own allowed-failures)."""
+    fid = task.frame.frame_id
+    stats.worker_crashes += 1
+    if not task.isolated:  # other frames were running: it may be innocent
+        logger.warning("frame %s: a worker died while it ran with others; re-running it alone", fid)
+        retry.append(task)
+        return None
+    task.crashes += 1
+    if task.crashes <= config.retries:
+        logger.warning("frame %s: its worker died; retrying", fid)
+        retry.appendleft(task)
+        return None
+    if config.fail_fast:
+        raise RuntimeError(f"frame {fid}: worker died: {err}")
+    logger.error(
+        "frame %s: its worker died %d times; recorded as worker_crashed", fid, task.crashes
+    )
+    stats.crashed_frames.append(fid)
+    return error_record(
+        task.frame,
+        "worker_crashed",
+        f"the worker process died while measuring this frame {task.crashes} times "
+        f"({type(err).__name__}: {err})",
+    )

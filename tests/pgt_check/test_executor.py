@@ -390,10 +390,7 @@ def test_dask_scheduler_address_and_crash(tmp_path):
     distributed = pytest.importorskip("distributed")
     import dask
 
-    settings = {
-        "distributed.scheduler.allowed-failures": 1,
-        "distributed.scheduler.worker-saturation": 1.0,
-    }
+    settings = {"distributed.scheduler.allowed-failures": 0}
     with (
         dask.config.set(settings),
         distributed.LocalCluster(
