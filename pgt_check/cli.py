@@ -60,6 +60,19 @@ def build_parser() -> argparse.ArgumentParser:
     g = p.add_argument_group("run")
     g.add_argument("--limit", type=int, default=None, help="check only the first N frames")
     g.add_argument("--fail-fast", action="store_true", help="re-raise internal errors")
+    g = p.add_argument_group("scale and resume")
+    g.add_argument("--executor", default=None, choices=["serial", "process", "dask"],
+                   help="serial (default), a local process pool, or a Dask cluster")
+    g.add_argument("--workers", type=int, default=None,
+                   help="worker processes for process / local Dask (default: all cores)")
+    g.add_argument("--scheduler", default=None,
+                   help="address of a running Dask scheduler, e.g. tcp://host:8786 "
+                   "(implies --executor dask)")
+    g.add_argument("--resume", action="store_true",
+                   help="keep frames already in --out measured with the same settings, "
+                   "measure the others")
+    g.add_argument("--overwrite", action="store_true",
+                   help="discard the records already in --out and start fresh")
     g.add_argument("-v", "--verbose", action="count", default=0)
     g.add_argument("-q", "--quiet", action="store_true")
     g.add_argument("--version", action="version", version=f"pgt-check {__version__}")
@@ -89,6 +102,9 @@ def _cli_overrides(args: argparse.Namespace) -> dict[str, Any]:
         ("verdict", "max_unverifiable_fraction"): args.max_unverifiable_fraction,
         ("out",): args.out,
         ("limit",): args.limit,
+        ("executor",): args.executor or ("dask" if args.scheduler else None),
+        ("workers",): args.workers,
+        ("scheduler",): args.scheduler,
     }
     out: dict[str, Any] = {}
     for path, value in table.items():
@@ -100,7 +116,18 @@ def _cli_overrides(args: argparse.Namespace) -> dict[str, Any]:
         node[path[-1]] = value
     if args.fail_fast:
         out["fail_fast"] = True
+    for flag in ("resume", "overwrite"):
+        if getattr(args, flag):
+            out[flag] = True
     return out
+
+
+def resume_command(argv: Sequence[str]) -> str:
+    """The command line that resumes the run started with ``argv``."""
+    import shlex
+
+    args = [a for a in argv if a not in ("--overwrite", "--resume")]
+    return shlex.join(["pgt-check", *args, "--resume"])
 
 
 def load_config(args: argparse.Namespace) -> RunConfig:
@@ -147,18 +174,21 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as exc:  # argparse exits 2 on usage errors, 0 on --help/--version
         return int(exc.code or 0)
     configure_logging(args.verbose, args.quiet)
+    from pgt_check.runner import RunInterrupted, run
+
     try:
         config = load_config(args)
-        from pgt_check.runner import run
-
         summary = run(config)
     except InputError as err:
         if args.verbose:
             logger.exception("input error")
         print(f"pgt-check: error: {err}", file=sys.stderr)
         return EXIT_INPUT
+    except RunInterrupted as err:
+        print(f"pgt-check: {err}; resume with: {resume_command(argv)}", file=sys.stderr)
+        return 130
     except KeyboardInterrupt:
-        print("pgt-check: interrupted", file=sys.stderr)
+        print(f"pgt-check: aborted; resume with: {resume_command(argv)}", file=sys.stderr)
         return 130
     _print_summary(summary, config.out)
     return EXIT_PASSED if summary["gate"]["passed"] else EXIT_FAILED

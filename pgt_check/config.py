@@ -72,6 +72,26 @@ class RunConfig:
     limit: int | None = None
     fail_fast: bool = False
     absolute_paths: bool = False
+    #: how frames are spread: in-process, a local process pool, or a Dask cluster
+    executor: Literal["serial", "process", "dask"] = "serial"
+    #: worker processes (process / local Dask cluster); None = all CPU cores
+    workers: int | None = None
+    #: address of an existing Dask scheduler (tcp://host:8786); None = start a LocalCluster
+    scheduler: str | None = None
+    #: keep frames already measured with the same settings in ``out``, recompute the others
+    resume: bool = False
+    #: discard the per-frame records already in ``out`` and start fresh
+    overwrite: bool = False
+    #: times a frame whose worker process died is run again before it is UNVERIFIABLE
+    retries: int = 1
+
+    def __post_init__(self) -> None:
+        if self.workers is not None and self.workers < 1:
+            raise ValueError(f"workers must be >= 1, got {self.workers}")
+        if self.retries < 0:
+            raise ValueError(f"retries must be >= 0, got {self.retries}")
+        if self.resume and self.overwrite:
+            raise ValueError("resume and overwrite exclude each other: pick one")
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> RunConfig:

@@ -11,6 +11,7 @@ import logging
 import math
 import time
 import traceback
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -281,43 +282,118 @@ def apply_verdicts(records: list[dict[str, Any]], config: RunConfig) -> list[dic
 def run(config: RunConfig) -> dict[str, Any]:
     """Check every frame of the configured trajectory and write the outputs to ``config.out``.
 
-    Returns the summary (also written as summary.json). Raises InputError for user errors.
+    Returns the summary (also written as summary.json). Raises InputError for user errors and
+    RunInterrupted after a Ctrl-C (the frames done so far are kept for ``--resume``).
     """
-    from pgt_check.report.outputs import write_outputs
+    import functools
 
     t0 = time.perf_counter()
     traj = load_trajectory(config)
     frames = list(traj.frames)
     if config.limit is not None:
         frames = frames[: config.limit]
-    out = Path(config.out)
-    out.mkdir(parents=True, exist_ok=True)
     logger.info("checking %d frames of %s (%s)", len(frames), traj.source, traj.format)
-    checker = FrameChecker(config)
-    records: list[dict[str, Any]] = []
-    try:
-        t_setup = time.perf_counter()
-        _ = checker.renderer
-        _ = checker.matcher
-        setup_s = time.perf_counter() - t_setup
-        for frame in _progress(frames, len(frames), "pgt-check"):
-            records.append(checker.measure(frame))
-        shading = checker.mesh.shading
-    finally:
-        checker.close()
-    records = apply_verdicts(records, config)
-    summary = write_outputs(
-        out,
-        records,
+    return check_frames(
+        frames,
         config,
-        extra={
-            "trajectory_format": traj.format,
-            "shading": shading,
-            "setup_s": setup_s,
-            "wall_time_s": time.perf_counter() - t0,
-        },
+        functools.partial(build_frame_checker, config),
+        extra={"trajectory_format": traj.format},
+        t0=t0,
     )
-    return summary
+
+
+class RunInterrupted(Exception):
+    """The run stopped on Ctrl-C; ``done`` of ``total`` frames are stored in ``out``."""
+
+    def __init__(self, done: int, total: int, out: str) -> None:
+        super().__init__(f"interrupted: {done}/{total} frames done")
+        self.done, self.total, self.out = done, total, out
+
+
+def build_frame_checker(config: RunConfig) -> FrameChecker:
+    """Worker-side factory: a FrameChecker with its mesh, renderer and matcher loaded."""
+    checker = FrameChecker(config)
+    _ = checker.renderer
+    _ = checker.matcher
+    return checker
+
+
+def error_record(frame: Frame, error: str, detail: str) -> dict[str, Any]:
+    """Measurement record of a frame that could not be measured (e.g. ``worker_crashed``)."""
+    rec = base_record(frame)
+    rec["error"], rec["error_detail"] = error, detail
+    return rec
+
+
+def check_frames(
+    frames: Sequence[Frame],
+    config: RunConfig,
+    checker_factory: Callable[[], Any],
+    *,
+    extra: dict[str, Any] | None = None,
+    t0: float | None = None,
+) -> dict[str, Any]:
+    """Measure ``frames`` (skipping those already in the store), then write the outputs.
+
+    Records stream from the executor into ``out/records.jsonl`` as frames finish; the outputs
+    are built from the store in ``frames`` order, so a resumed run writes the same frames.csv
+    as an uninterrupted one (timing columns aside).
+    """
+    from pgt_check.executor import ExecutorStats, iter_results, stop_on_sigint
+    from pgt_check.report.outputs import write_outputs
+    from pgt_check.store import RecordStore
+
+    t0 = time.perf_counter() if t0 is None else t0
+    out = Path(config.out)
+    settings = {k: v for k, v in config.to_dict().items() if k in MEASUREMENT_SECTIONS}
+    ids = [f.frame_id for f in frames]
+    stats = ExecutorStats()
+    with RecordStore.open(
+        out,
+        config.measurement_fingerprint(),
+        resume=config.resume,
+        overwrite=config.overwrite,
+        settings=settings,
+    ) as store:
+        done = store.done_ids().intersection(ids)
+        if done:
+            logger.info("%d of %d frames already measured with these settings: skipped",
+                        len(done), len(frames))
+        todo = (f for f in frames if f.frame_id not in done)
+        with stop_on_sigint() as stop:
+            results = iter_results(
+                todo, checker_factory, config, stop=stop, error_record=error_record, stats=stats
+            )
+            for rec in _progress(results, len(frames) - len(done), "pgt-check"):
+                store.append(rec)
+            interrupted = stop.is_set()
+        if interrupted:
+            n_done = len(store.done_ids().intersection(ids))
+            if n_done < len(ids):
+                logger.warning("interrupted: %d/%d frames done, stored in %s", n_done, len(ids),
+                               out)
+                raise RunInterrupted(n_done, len(ids), str(out))
+        records = store.records_in_order(ids)
+    records = apply_verdicts(records, config)
+    shadings = sorted({str(r["shading"]) for r in records if r.get("shading")})
+    summary_extra = {
+        "shading": shadings[0] if len(shadings) == 1 else (shadings or None),
+        "executor": {
+            "kind": config.executor,
+            "workers": stats.workers,
+            "frames_measured": stats.yielded,
+            "frames_reused": len(done),
+            "worker_crashes": stats.worker_crashes,
+        },
+        **(extra or {}),
+        "wall_time_s": time.perf_counter() - t0,
+    }
+    # write_outputs rewrites records.jsonl in frame order; the records keep their _fingerprint,
+    # so the rewritten file is a compacted store that a later --resume reads as usual
+    return write_outputs(out, records, config, extra=summary_extra)
+
+
+MEASUREMENT_SECTIONS = ("input", "render", "match", "homography")
 
 
 def finite_or_none(x: Any) -> Any:
