@@ -44,10 +44,25 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--shading", default=None, choices=["auto", "vertex", "texture", "shaded"],
                    help="'shaded' renders geometry only (for colourless meshes)")
     g = p.add_argument_group("match")
-    g.add_argument("--matcher", default=None, help="sift (default), orb, akaze")
+    g.add_argument("--matcher", default=None,
+                   help="sift (default), orb, akaze; with the [enhance] extra: xfeat, "
+                   "xfeat-lighterglue, aliked-lightglue, disk-lightglue, loftr")
     g.add_argument("--max-keypoints", type=int, default=None)
     g.add_argument("--resize-max", type=int, default=None,
                    help="longest side used for matching, px (0 = original size)")
+    g = p.add_argument_group("enhance (MaRINeR) and pose estimate")
+    g.add_argument("--enhance", default=None, choices=["never", "auto", "always"],
+                   help="enhance renders with a reference photo: never (default), always, or "
+                   "auto (only frames whose raw result is not decisive)")
+    g.add_argument("--enhance-method", default=None, choices=["mariner", "reproject"],
+                   help="mariner (learned, default) or reproject (reference photo projected "
+                   "through the mesh)")
+    g.add_argument("--weights", default=None, help="MaRINeR checkpoint (default: shipped)")
+    g.add_argument("--iterations", type=int, default=None, help="MaRINeR refinement iterations")
+    g.add_argument("--reference", default=None, choices=["nearest", "self", "none"],
+                   help="reference photo: nearest other frame (default); 'self' = the frame's "
+                   "own photo (evaluation upper bound only: it hides pose errors)")
+    g.add_argument("--no-pose-estimate", action="store_true", help="skip the PnP pose estimate")
     g = p.add_argument_group("verdict and gate")
     g.add_argument("--threshold-px", type=float, default=None,
                    help="PASS threshold on the corner error (default: 2%% of the image diagonal)")
@@ -60,6 +75,10 @@ def build_parser() -> argparse.ArgumentParser:
     g = p.add_argument_group("run")
     g.add_argument("--limit", type=int, default=None, help="check only the first N frames")
     g.add_argument("--fail-fast", action="store_true", help="re-raise internal errors")
+    g.add_argument("--report-details", type=int, default=None,
+                   help="frames with image panels in report.html (default 40)")
+    g.add_argument("--absolute-paths", action="store_true",
+                   help="show absolute paths in the report (default: relative or shortened)")
     g = p.add_argument_group("scale and resume")
     g.add_argument("--executor", default=None, choices=["serial", "process", "dask"],
                    help="serial (default), a local process pool, or a Dask cluster")
@@ -91,6 +110,14 @@ def _cli_overrides(args: argparse.Namespace) -> dict[str, Any]:
         ("render", "shading"): args.shading,
         ("match", "method"): args.matcher,
         ("match", "max_keypoints"): args.max_keypoints,
+        ("enhance", "mode"): args.enhance,
+        ("enhance", "method"): args.enhance_method,
+        ("enhance", "weights"): args.weights,
+        ("enhance", "iterations"): args.iterations,
+        ("enhance", "reference", "mode"): args.reference,
+        ("pose", "enabled"): False if args.no_pose_estimate else None,
+        ("report_details",): args.report_details,
+        ("absolute_paths",): True if args.absolute_paths else None,
         ("match", "resize_max"): (None if args.resize_max == 0 else args.resize_max)
         if args.resize_max is not None
         else ...,

@@ -17,8 +17,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
+from pgt_check.enhance.reference import ReferenceConfig
 from pgt_check.errors import ConfigError
 from pgt_check.geometry.homography import HomographyConfig
+
+#: config sections whose change invalidates stored per-frame measurements
+MEASUREMENT_SECTIONS = ("input", "render", "match", "homography", "enhance", "pose")
 
 
 @dataclass(frozen=True)
@@ -47,6 +51,37 @@ class MatchConfig:
 
 
 @dataclass(frozen=True)
+class EnhanceConfig:
+    """The enhanced path (render enhanced with a reference photo, matched again).
+
+    mode: "never" (raw only), "always", or "auto": enhance only frames whose raw result is not
+    decisive: the raw homography failed, it has fewer than ``auto_min_inliers`` inliers, or its
+    corner error lies within ``auto_margin`` x threshold of the threshold.
+    method: "mariner" (the learned MaRINeR core) or "reproject" (classical: the reference photo
+    projected through the mesh into the render's view).
+    """
+
+    mode: Literal["never", "auto", "always"] = "never"
+    method: Literal["mariner", "reproject"] = "mariner"
+    weights: str | None = None
+    iterations: int | None = None
+    short_side: int = 160
+    device: str = "cpu"
+    auto_min_inliers: int = 40
+    auto_margin: float = 0.5
+    reference: ReferenceConfig = field(default_factory=ReferenceConfig)
+
+
+@dataclass(frozen=True)
+class PoseConfig:
+    """The PnP pose-error estimate from the render depth (pycolmap)."""
+
+    enabled: bool = True
+    max_error_px: float = 4.0
+    min_inliers: int = 12
+
+
+@dataclass(frozen=True)
 class VerdictConfig:
     #: PASS threshold on the corner error in original photo pixels; None = rel_diag * diagonal
     threshold_px: float | None = None
@@ -67,7 +102,11 @@ class RunConfig:
     render: RenderConfig = field(default_factory=RenderConfig)
     match: MatchConfig = field(default_factory=MatchConfig)
     homography: HomographyConfig = field(default_factory=HomographyConfig)
+    enhance: EnhanceConfig = field(default_factory=EnhanceConfig)
+    pose: PoseConfig = field(default_factory=PoseConfig)
     verdict: VerdictConfig = field(default_factory=VerdictConfig)
+    #: frames that get image panels in the report (all FAIL/UNVERIFIABLE first, then the worst)
+    report_details: int = 40
     out: str = "pgt-check-out"
     limit: int | None = None
     fail_fast: bool = False
@@ -103,7 +142,7 @@ class RunConfig:
     def measurement_fingerprint(self) -> str:
         """Hash of everything that changes per-frame measurements (not verdict thresholds)."""
         d = self.to_dict()
-        keep = {k: d[k] for k in ("input", "render", "match", "homography")}
+        keep = {k: d[k] for k in MEASUREMENT_SECTIONS}
         blob = json.dumps(keep, sort_keys=True, default=str).encode()
         return hashlib.sha256(blob).hexdigest()[:16]
 

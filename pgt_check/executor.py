@@ -255,13 +255,21 @@ def _new_pool(checker_factory: CheckerFactory, workers: int) -> cf.ProcessPoolEx
     )
 
 
-def _exit_codes(pool: cf.ProcessPoolExecutor) -> list[int]:
-    """Exit codes of the pool's dead workers (best effort: reads a private attribute).
+def _worker_processes(pool: cf.ProcessPoolExecutor) -> list[Any]:
+    """The pool's worker processes right now (best effort: reads a private attribute)."""
+    return list((getattr(pool, "_processes", None) or {}).values())
 
-    The pool SIGTERMs its other workers once one has died; those are left out.
-    """
-    procs = getattr(pool, "_processes", None) or {}
-    codes = {p.exitcode for p in list(procs.values()) if p.exitcode not in (None, 0)}
+
+def _exit_codes(procs: Iterable[Any]) -> list[int]:
+    """Exit codes of dead worker processes (collected while they ran: a broken pool clears its
+    own table before we can read it). The pool SIGTERMs its other workers once one has died;
+    those are left out."""
+    codes = set()
+    for p in procs:
+        if p.exitcode is None:
+            p.join(timeout=1.0)
+        if p.exitcode not in (None, 0):
+            codes.add(p.exitcode)
     return sorted(codes - {-signal.SIGTERM} or codes)
 
 
@@ -308,6 +316,7 @@ def _iter_process(
     inflight: dict[cf.Future, _Task] = {}
     noted = [False]
     pool = _new_pool(checker_factory, workers)
+    procs: set[Any] = set()
     clean_exit = False
     logger.info(
         "process pool: %d workers (spawn), up to %d frames in flight", workers, max_inflight
@@ -320,6 +329,7 @@ def _iter_process(
             retry.appendleft(task)
             return False
         inflight[fut] = task
+        procs.update(_worker_processes(pool))
         stats.submitted += 1
         return True
 
@@ -370,8 +380,9 @@ def _iter_process(
                 if rec is not None:
                     stats.yielded += 1
                     yield rec
-            codes = _exit_codes(pool)
+            codes = _exit_codes(procs)
             _kill_pool(pool)
+            procs.clear()
             stats.worker_crashes += 1
             how = _describe_exit(codes)
             if stop.is_set():

@@ -11,14 +11,14 @@ import logging
 import math
 import time
 import traceback
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from pgt_check.config import RunConfig
+from pgt_check.config import MEASUREMENT_SECTIONS, RunConfig
 from pgt_check.errors import InputError
 from pgt_check.types import Camera, Frame, Trajectory
 
@@ -80,17 +80,44 @@ class FrameImages:
     inliers: np.ndarray | None = None
 
 
+@dataclass(frozen=True, eq=False)
+class PathResult:
+    """Matching + homography of one image (raw render or enhanced render) against the photo."""
+
+    n_matches: int
+    n_inliers: int
+    inlier_ratio: float
+    reason: str  # homography failure reason, "" on success
+    photo_from_render: np.ndarray | None  # (3, 3) in original photo pixels
+    corner_error_px: float | None
+    kpts_render: np.ndarray
+    kpts_photo: np.ndarray
+    inliers: np.ndarray
+    n_kpts_render: int
+    n_kpts_photo: int
+    t_match_s: float
+    t_homography_s: float
+
+    @property
+    def success(self) -> bool:
+        return self.photo_from_render is not None
+
+
 @dataclass
 class FrameChecker:
-    """Holds the per-process resources (mesh, renderer, matcher) and measures frames.
+    """Holds the per-process resources (mesh, renderer, matcher, enhancer) and measures frames.
 
-    Build it inside the process that uses it: GL contexts and models are not shared.
+    ``references`` maps a frame id to the frame whose photo serves as the enhancement reference
+    (see ``pgt_check.enhance.reference``). Build the checker inside the process that uses it:
+    GL contexts and models are not shared.
     """
 
     config: RunConfig
+    references: Mapping[str, tuple[Frame, ...]] = field(default_factory=dict)
     _renderer: Any = field(default=None, init=False, repr=False)
     _matcher: Any = field(default=None, init=False, repr=False)
     _mesh: Any = field(default=None, init=False, repr=False)
+    _enhancer: Any = field(default=None, init=False, repr=False)
 
     @property
     def mesh(self):
@@ -117,6 +144,19 @@ class FrameChecker:
                 self.config.match.method, max_keypoints=self.config.match.max_keypoints
             )
         return self._matcher
+
+    @property
+    def enhancer(self):
+        """The MaRINeR adapter (only for method "mariner"; torch is imported on first use)."""
+        if self._enhancer is None:
+            from pgt_check.enhance.mariner import MarinerEnhancer
+
+            e = self.config.enhance
+            self._enhancer = MarinerEnhancer(
+                weights=e.weights, device=e.device, short_side=e.short_side,
+                iterations=e.iterations,
+            )
+        return self._enhancer
 
     def close(self) -> None:
         if self._renderer is not None:
@@ -145,25 +185,83 @@ class FrameChecker:
         rec["time_s"] = time.perf_counter() - t_start
         return rec
 
-    def _measure_into(self, frame: Frame, rec: dict[str, Any], keep: FrameImages | None) -> None:
-        from pgt_check.geometry.homography import (
-            corner_error,
-            corner_shift_and_zoom,
-            estimate_homography,
-            scale_homography,
-        )
+    def _load_photo(self, frame: Frame) -> tuple[np.ndarray, Camera]:
         from pgt_check.io import load_image
+
+        return prepare_photo(load_image(frame.image_file), frame.camera)
+
+    def _match_path(
+        self, image: np.ndarray, photo_w: np.ndarray, mask: np.ndarray, size: tuple[int, int],
+        scale: tuple[float, float], camera: Camera,
+    ) -> PathResult:
+        from pgt_check.geometry.homography import corner_error, estimate_homography, scale_homography
+
+        t = time.perf_counter()
+        matches = self.matcher.match(image, photo_w, mask0=mask)
+        t_match = time.perf_counter() - t
+        t = time.perf_counter()
+        res = estimate_homography(matches.kpts0, matches.kpts1, size[0], size[1],
+                                  self.config.homography)
+        t_h = time.perf_counter() - t
+        h = err = None
+        if res.success:
+            h = scale_homography(res.photo_from_render, *scale)
+            err = corner_error(h, camera.width, camera.height)
+        n = len(matches)
+        return PathResult(
+            n, res.n_inliers, res.n_inliers / n if n else 0.0,
+            "" if res.success else res.reason.value, h, err, matches.kpts0, matches.kpts1,
+            res.inliers, matches.n_kpts0, matches.n_kpts1, t_match, t_h,
+        )
+
+    def _enhance_decision(self, raw: PathResult, threshold: float) -> tuple[bool, str]:
+        e = self.config.enhance
+        if e.mode == "never":
+            return False, "mode_never"
+        if e.mode == "always":
+            return True, "mode_always"
+        if not raw.success:
+            return True, f"raw_{raw.reason}"
+        if raw.n_inliers < e.auto_min_inliers:
+            return True, "raw_few_inliers"
+        if abs(raw.corner_error_px - threshold) <= e.auto_margin * threshold:
+            return True, "raw_near_threshold"
+        return False, "raw_decisive"
+
+    def _enhanced_image(
+        self, frame: Frame, render, cam_w: Camera, ref: Frame
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """The enhanced render at working size and the mask to detect render keypoints in."""
+        ref_photo, ref_cam = self._load_photo(ref)
+        sx = cam_w.width / frame.camera.width
+        ref_size = (max(1, round(ref_cam.width * sx)), max(1, round(ref_cam.height * sx)))
+        ref_cam_w = ref_cam.scaled(ref_size[0] / ref_cam.width, ref_size[1] / ref_cam.height)
+        ref_photo_w = _resize(ref_photo, ref_size)
+        if self.config.enhance.method == "reproject":
+            from pgt_check.enhance.reproject import reproject_reference
+
+            ref_render = self.renderer.render(ref_cam_w, ref.world_from_cam)
+            img, filled = reproject_reference(
+                render.rgb, render.depth, cam_w, frame.world_from_cam, ref_photo_w,
+                ref_render.depth, ref_cam_w, ref.world_from_cam,
+            )
+            return img, render.coverage
+        img = self.enhancer.enhance(render.rgb, ref_photo_w)
+        return img, render.coverage
+
+    def _measure_into(self, frame: Frame, rec: dict[str, Any], keep: FrameImages | None) -> None:
+        from pgt_check.geometry.homography import corner_shift_and_zoom
+        from pgt_check.verdict import resolve_threshold_px
 
         t = time.perf_counter()
         if frame.image_file is None or not Path(frame.image_file).is_file():
             rec["error"] = "image_missing"
             return
-        photo = load_image(frame.image_file)
-        photo, camera = prepare_photo(photo, frame.camera)
+        photo, camera = self._load_photo(frame)
         rec["width"], rec["height"] = camera.width, camera.height
         size = working_scale(camera.width, camera.height, self.config.match.resize_max)
-        sx, sy = size[0] / camera.width, size[1] / camera.height
-        cam_w = camera.scaled(sx, sy)
+        scale = (size[0] / camera.width, size[1] / camera.height)
+        cam_w = camera.scaled(*scale)
         photo_w = _resize(photo, size)
         rec["match_width"], rec["match_height"] = size
         rec["t_load_s"] = time.perf_counter() - t
@@ -179,30 +277,81 @@ class FrameChecker:
             rec["error"] = "low_coverage"
             return
 
-        t = time.perf_counter()
-        matches = self.matcher.match(render.rgb, photo_w, mask0=render.coverage)
-        rec["t_match_s"] = time.perf_counter() - t
-        rec["n_kpts_render"], rec["n_kpts_photo"] = matches.n_kpts0, matches.n_kpts1
-        rec["n_matches"] = len(matches)
-
-        t = time.perf_counter()
-        result = estimate_homography(
-            matches.kpts0, matches.kpts1, size[0], size[1], self.config.homography
-        )
-        rec["t_homography_s"] = time.perf_counter() - t
+        raw = self._match_path(render.rgb, photo_w, render.coverage, size, scale, camera)
+        _store_path(rec, raw, "raw")
+        rec["t_match_s"], rec["t_homography_s"] = raw.t_match_s, raw.t_homography_s
+        threshold = resolve_threshold_px(self.config.verdict, camera.width, camera.height)
+        do_enhance, why = self._enhance_decision(raw, threshold)
+        chosen, enhanced_img = raw, None
+        if do_enhance:
+            refs = [
+                r for r in self.references.get(frame.frame_id, ())
+                if r.image_file is not None and Path(r.image_file).is_file()
+            ]
+            if not refs:
+                do_enhance, why = False, "no_reference"
+            best: PathResult | None = None
+            t_enh = 0.0
+            for ref in refs:
+                t = time.perf_counter()
+                img, mask = self._enhanced_image(frame, render, cam_w, ref)
+                t_enh += time.perf_counter() - t
+                enh = self._match_path(img, photo_w, mask, size, scale, camera)
+                rec["t_match_s"] += enh.t_match_s
+                rec["t_homography_s"] += enh.t_homography_s
+                # several references: keep the enhanced result with the most inliers
+                if best is None or enh.n_inliers > best.n_inliers:
+                    best, enhanced_img = enh, img
+                    rec["reference_id"] = ref.frame_id
+            if best is not None:
+                rec["t_enhance_s"] = t_enh
+                _store_path(rec, best, "enhanced")
+                # raw or enhanced: the path with more geometric support decides
+                if best.success and (not raw.success or best.n_inliers >= raw.n_inliers):
+                    chosen = best
+        rec["enhanced"], rec["enhanced_why"] = do_enhance, why
+        rec["verdict_path"] = "enhanced" if chosen is not raw else "raw"
         if keep is not None:
-            keep.kpts_render, keep.kpts_photo = matches.kpts0, matches.kpts1
-            keep.inliers = result.inliers
-        rec["n_inliers"] = result.n_inliers
-        rec["inlier_ratio"] = result.n_inliers / len(matches) if len(matches) else 0.0
-        if not result.success:
-            rec["homography_reason"] = result.reason.value
+            keep.enhanced = enhanced_img
+            keep.kpts_render, keep.kpts_photo = chosen.kpts_render, chosen.kpts_photo
+            keep.inliers = chosen.inliers
+        rec["n_kpts_render"], rec["n_kpts_photo"] = chosen.n_kpts_render, chosen.n_kpts_photo
+        rec["n_matches"], rec["n_inliers"] = chosen.n_matches, chosen.n_inliers
+        rec["inlier_ratio"] = chosen.inlier_ratio
+        if not chosen.success:
+            rec["homography_reason"] = chosen.reason
             return
-        h = scale_homography(result.photo_from_render, sx, sy)
+        h = chosen.photo_from_render
         rec["photo_from_render"] = h.tolist()
-        rec["corner_error_px"] = corner_error(h, camera.width, camera.height)
+        rec["corner_error_px"] = chosen.corner_error_px
         dx, dy, zoom = corner_shift_and_zoom(h, camera.width, camera.height)
         rec["shift_dx_px"], rec["shift_dy_px"], rec["zoom"] = dx, dy, zoom
+        if self.config.pose.enabled:
+            self._pose_estimate(rec, chosen, render.depth, cam_w, frame)
+
+    def _pose_estimate(self, rec, path: PathResult, depth, cam_w: Camera, frame: Frame) -> None:
+        from pgt_check.geometry.pnp import estimate_pose_correction
+
+        t = time.perf_counter()
+        p = self.config.pose
+        corr = estimate_pose_correction(
+            path.kpts_render, path.kpts_photo, depth, cam_w, frame.world_from_cam,
+            max_error_px=p.max_error_px, min_inliers=p.min_inliers,
+        )
+        rec["t_pose_s"] = time.perf_counter() - t
+        rec["pose_inliers"] = corr.n_inliers
+        if corr.success:
+            rec["pose_dt"], rec["pose_drot_deg"] = corr.dt, corr.drot_deg
+        else:
+            rec["pose_reason"] = corr.reason
+
+
+def _store_path(rec: dict[str, Any], p: PathResult, suffix: str) -> None:
+    rec[f"corner_error_px_{suffix}"] = p.corner_error_px
+    rec[f"n_matches_{suffix}"] = p.n_matches
+    rec[f"n_inliers_{suffix}"] = p.n_inliers
+    rec[f"inlier_ratio_{suffix}"] = p.inlier_ratio
+    rec[f"homography_reason_{suffix}"] = p.reason
 
 
 def base_record(frame: Frame) -> dict[str, Any]:
@@ -234,7 +383,27 @@ def base_record(frame: Frame) -> dict[str, Any]:
         "t_render_s": None,
         "t_match_s": None,
         "t_homography_s": None,
+        "t_enhance_s": None,
+        "t_pose_s": None,
         "time_s": None,
+        "corner_error_px_raw": None,
+        "n_matches_raw": None,
+        "n_inliers_raw": None,
+        "inlier_ratio_raw": None,
+        "homography_reason_raw": "",
+        "corner_error_px_enhanced": None,
+        "n_matches_enhanced": None,
+        "n_inliers_enhanced": None,
+        "inlier_ratio_enhanced": None,
+        "homography_reason_enhanced": "",
+        "enhanced": False,
+        "enhanced_why": "",
+        "reference_id": None,
+        "verdict_path": None,
+        "pose_dt": None,
+        "pose_drot_deg": None,
+        "pose_inliers": None,
+        "pose_reason": "",
         "center": frame.center.tolist(),
     }
 
@@ -293,13 +462,32 @@ def run(config: RunConfig) -> dict[str, Any]:
     if config.limit is not None:
         frames = frames[: config.limit]
     logger.info("checking %d frames of %s (%s)", len(frames), traj.source, traj.format)
+    references = pick_references(traj, frames, config)
     return check_frames(
         frames,
         config,
-        functools.partial(build_frame_checker, config),
+        functools.partial(build_frame_checker, config, references),
         extra={"trajectory_format": traj.format},
         t0=t0,
     )
+
+
+def pick_references(
+    traj: Trajectory, frames: Sequence[Frame], config: RunConfig
+) -> dict[str, tuple[Frame, ...]]:
+    """Reference frames per checked frame, best first (any frame of the trajectory may serve)."""
+    if config.enhance.mode == "never":
+        return {}
+    from pgt_check.enhance.reference import select_references
+
+    choices = select_references(traj.frames, config.enhance.reference)
+    by_id = traj.by_id()
+    refs = {f.frame_id: tuple(by_id[i] for i in choices[f.frame_id].frame_ids) for f in frames}
+    missing = sum(not r for r in refs.values())
+    if missing:
+        logger.warning("%d of %d frames have no usable reference and are checked raw only",
+                       missing, len(frames))
+    return refs
 
 
 class RunInterrupted(Exception):
@@ -310,9 +498,11 @@ class RunInterrupted(Exception):
         self.done, self.total, self.out = done, total, out
 
 
-def build_frame_checker(config: RunConfig) -> FrameChecker:
+def build_frame_checker(
+    config: RunConfig, references: Mapping[str, tuple[Frame, ...]] | None = None
+) -> FrameChecker:
     """Worker-side factory: a FrameChecker with its mesh, renderer and matcher loaded."""
-    checker = FrameChecker(config)
+    checker = FrameChecker(config, dict(references or {}))
     _ = checker.renderer
     _ = checker.matcher
     return checker
@@ -375,6 +565,7 @@ def check_frames(
                 raise RunInterrupted(n_done, len(ids), str(out))
         records = store.records_in_order(ids)
     records = apply_verdicts(records, config)
+    assets = write_report_assets(frames, records, config, checker_factory)
     shadings = sorted({str(r["shading"]) for r in records if r.get("shading")})
     summary_extra = {
         "shading": shadings[0] if len(shadings) == 1 else (shadings or None),
@@ -390,10 +581,40 @@ def check_frames(
     }
     # write_outputs rewrites records.jsonl in frame order; the records keep their _fingerprint,
     # so the rewritten file is a compacted store that a later --resume reads as usual
-    return write_outputs(out, records, config, extra=summary_extra)
+    return write_outputs(out, records, config, extra=summary_extra, assets=assets)
 
 
-MEASUREMENT_SECTIONS = ("input", "render", "match", "homography")
+def write_report_assets(
+    frames: Sequence[Frame],
+    records: list[dict[str, Any]],
+    config: RunConfig,
+    checker_factory: Callable[[], Any],
+) -> dict[str, dict[str, str]] | None:
+    """Thumbnails for the report's detail panels: the selected frames are measured again here
+    (in this process, keeping their images); other frames never keep images."""
+    from pgt_check.report.assets import select_detail_frames, write_frame_assets
+
+    if config.report_details <= 0:
+        return None
+    chosen = select_detail_frames(records, max_details=config.report_details)
+    if not chosen:
+        return None
+    by_id = {f.frame_id: f for f in frames}
+    rec_by_id = {r["frame_id"]: r for r in records}
+    checker = checker_factory()
+    assets: dict[str, dict[str, str]] = {}
+    try:
+        for fid in chosen:
+            images = FrameImages()
+            checker.measure(by_id[fid], keep=images)
+            if images.photo is None:
+                continue
+            assets[fid] = write_frame_assets(Path(config.out), rec_by_id[fid], images)
+    finally:
+        checker.close()
+    return assets
+
+
 
 
 def finite_or_none(x: Any) -> Any:

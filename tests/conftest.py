@@ -32,13 +32,13 @@ def sample_scene() -> Path:
 def check_frames():
     """Measure and judge every frame of an in-memory trajectory (the runner's stages 1 + 2)."""
     from pgt_check.config import RunConfig
-    from pgt_check.runner import FrameChecker, apply_verdicts
+    from pgt_check.runner import FrameChecker, apply_verdicts, pick_references
 
     def _check(traj, mesh: Path, **config) -> list[dict]:
         cfg = RunConfig.from_dict(
             {"input": {"trajectory": traj.source, "mesh": str(mesh)}, **config}
         )
-        checker = FrameChecker(cfg)
+        checker = FrameChecker(cfg, pick_references(traj, traj.frames, cfg))
         try:
             recs = [checker.measure(f) for f in traj.frames]
         finally:

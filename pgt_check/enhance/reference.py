@@ -31,14 +31,24 @@ class ReferenceConfig:
     max_translation: float | None = None
     max_rotation_deg: float = 45.0
     min_frame_gap: int = 1
+    #: references tried per frame; the enhanced result with the most homography inliers is
+    #: kept (a reference whose own pose is wrong paints texture on the wrong surfaces, which
+    #: costs inliers, so a second reference guards against one bad neighbour)
+    count: int = 2
 
 
 @dataclass(frozen=True)
 class ReferenceChoice:
-    frame_id: str | None
+    """The chosen references of one frame, best first (empty with a reason if none)."""
+
+    frame_ids: tuple[str, ...]
     reason: str  # "" when a reference was found, else why not
-    distance_t: float | None = None
+    distance_t: float | None = None  # of the best reference
     distance_rot_deg: float | None = None
+
+    @property
+    def frame_id(self) -> str | None:
+        return self.frame_ids[0] if self.frame_ids else None
 
 
 def _angles_deg(rotations: np.ndarray, r: np.ndarray) -> np.ndarray:
@@ -59,9 +69,9 @@ def select_references(
     n = len(frames)
     out: dict[str, ReferenceChoice] = {}
     if config.mode == "none":
-        return {f.frame_id: ReferenceChoice(None, "reference_disabled") for f in frames}
+        return {f.frame_id: ReferenceChoice((), "reference_disabled") for f in frames}
     if config.mode == "self":
-        return {f.frame_id: ReferenceChoice(f.frame_id, "", 0.0, 0.0) for f in frames}
+        return {f.frame_id: ReferenceChoice((f.frame_id,), "", 0.0, 0.0) for f in frames}
     if n == 0:
         return out
     centres = np.array([f.world_from_cam[:3, 3] for f in frames])
@@ -85,8 +95,12 @@ def select_references(
         if config.max_translation is not None:
             ok &= dt <= config.max_translation
         if not ok.any():
-            out[f.frame_id] = ReferenceChoice(None, "no_reference_within_limits")
+            out[f.frame_id] = ReferenceChoice((), "no_reference_within_limits")
             continue
-        j = int(np.flatnonzero(ok)[np.argmin(cost[ok])])
-        out[f.frame_id] = ReferenceChoice(frames[j].frame_id, "", float(dt[j]), float(dr[j]))
+        cand = np.flatnonzero(ok)
+        best = cand[np.argsort(cost[cand], kind="stable")[: max(1, config.count)]]
+        j = int(best[0])
+        out[f.frame_id] = ReferenceChoice(
+            tuple(frames[int(k)].frame_id for k in best), "", float(dt[j]), float(dr[j])
+        )
     return out

@@ -43,14 +43,32 @@ FRAME_COLUMNS = (
     "match_width",
     "match_height",
     "shading",
+    "corner_error_px_raw",
+    "n_matches_raw",
+    "n_inliers_raw",
+    "inlier_ratio_raw",
+    "corner_error_px_enhanced",
+    "n_matches_enhanced",
+    "n_inliers_enhanced",
+    "inlier_ratio_enhanced",
+    "enhanced",
+    "enhanced_why",
+    "verdict_path",
+    "reference_id",
+    "pose_dt",
+    "pose_drot_deg",
+    "pose_inliers",
     "t_load_s",
     "t_render_s",
     "t_match_s",
     "t_homography_s",
+    "t_enhance_s",
+    "t_pose_s",
     "time_s",
 )
 
-STAGES = ("t_load_s", "t_render_s", "t_match_s", "t_homography_s", "time_s")
+STAGES = ("t_load_s", "t_render_s", "t_match_s", "t_homography_s", "t_enhance_s", "t_pose_s",
+          "time_s")
 
 
 def atomic_write_text(path: Path, text: str) -> None:

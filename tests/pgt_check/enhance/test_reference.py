@@ -34,6 +34,13 @@ def test_rotation_counts_in_distance_and_limit():
     assert select_references(frames, cfg2)["1"].reason == "no_reference_within_limits"
 
 
+def test_count_returns_best_first():
+    frames = [_frame(0, 0.0), _frame(1, 0.3), _frame(2, 0.1), _frame(3, 2.0)]
+    refs = select_references(frames, ReferenceConfig(count=2))
+    assert refs["0"].frame_ids == ("2", "1")
+    assert select_references(frames, ReferenceConfig(count=1))["0"].frame_ids == ("2",)
+
+
 def test_frames_without_image_are_not_references():
     frames = [_frame(0, 0.0), _frame(1, 0.01, image=False), _frame(2, 0.5)]
     assert select_references(frames)["0"].frame_id == "2"
