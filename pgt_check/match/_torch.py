@@ -94,7 +94,7 @@ def load_strict(
 
 
 def resolve_device(device: str) -> str:
-    """"cpu", or "cuda" when asked for and available (otherwise CPU, with a warning)."""
+    """ "cpu", or "cuda" when asked for and available (otherwise CPU, with a warning)."""
     if device not in ("cpu", "cuda") and not device.startswith("cuda:"):
         raise ValueError(f"device must be 'cpu' or 'cuda[:N]', got {device!r}")
     if device == "cpu":

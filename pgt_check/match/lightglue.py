@@ -128,7 +128,9 @@ class LightGlueMatcher:
         self.name = f"{self.features}-lightglue"
         _torch.require_torch_kornia()
         spec = FEATURES[self.features]
-        self._detector_path = _torch.weights_file(WEIGHTS_PACKAGE, "pretrained_weights", spec["detector"])
+        self._detector_path = _torch.weights_file(
+            WEIGHTS_PACKAGE, "pretrained_weights", spec["detector"]
+        )
         self._glue_path = _torch.weights_file(WEIGHTS_PACKAGE, "pretrained_weights", spec["glue"])
         self.device = _torch.resolve_device(self.device)
 
@@ -167,7 +169,11 @@ class LightGlueMatcher:
         t = _torch.image_to_tensor(image, self.device)
         if self.features == "disk":
             f = detector(
-                t, n=self.max_keypoints, window_size=5, score_threshold=0.0, pad_if_not_divisible=True
+                t,
+                n=self.max_keypoints,
+                window_size=5,
+                score_threshold=0.0,
+                pad_if_not_divisible=True,
             )[0]
         else:
             f = detector(t)[0]
