@@ -1,4 +1,4 @@
-"""Matcher speed and match counts on real 7-Scenes redkitchen photo pairs (frame i vs i + 10).
+"""Matcher speed and match counts on real 7-Scenes redkitchen photo pairs (frame n vs n + 10).
 
 Per matcher: median (min-max) seconds per pair at the working size, median matches, and the
 median share of matches consistent with a fundamental matrix (RANSAC, 1.5 px). One warm-up
@@ -45,7 +45,12 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--matchers", default=DEFAULT)
     ap.add_argument("--pairs", type=int, default=10)
-    ap.add_argument("--step", type=int, default=10, help="frame index gap within a pair")
+    ap.add_argument(
+        "--step",
+        type=int,
+        default=1,
+        help="gap within a pair, in files (the folder holds every 10th frame)",
+    )
     ap.add_argument("--size", default="640x480")
     ap.add_argument("--threads", type=int, default=None, help="torch threads (default: torch's)")
     args = ap.parse_args(argv)
@@ -53,7 +58,7 @@ def main(argv: list[str] | None = None) -> int:
     size = tuple(int(v) for v in args.size.split("x"))
     folder = shared_data() / "7scenes_redkitchen" / "images"
     names = sorted(p.name for p in folder.glob("frame-*.color.jpg"))
-    # pair k: frame 2*step*k vs frame 2*step*k + step (disjoint pairs spread over the sequence)
+    # pair k: file 2*step*k vs file 2*step*k + step (disjoint pairs)
     idx = [(2 * args.step * k, 2 * args.step * k + args.step) for k in range(args.pairs + 1)]
     pairs = [(folder / names[a], folder / names[b]) for a, b in idx if b < len(names)]
     if len(pairs) < args.pairs + 1:
@@ -115,7 +120,8 @@ def main(argv: list[str] | None = None) -> int:
 - **The machine was shared** with other jobs (a network training in the background), so the
   absolute times are pessimistic and noisy; compare matchers within this table only.
 - Command: `{meta["command"]}`
-- {len(pairs) - 1} pairs at {args.size} (frame i vs i + {args.step}; first pair = untimed
+- {len(pairs) - 1} pairs at {args.size} (file i vs file i + {args.step} of the folder, i.e. frame
+  n vs n + {10 * args.step}; first pair = untimed
   warm-up): {", ".join(f"{a.stem.split('.')[0]}/{b.stem.split('.')[0]}" for a, b in pairs[1:])}.
 - Photo vs photo (no render): timings cover matching only (detection of both images + matching),
   not rendering. `max_keypoints` 2048 for the learned matchers, defaults otherwise. F-inlier share:
