@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import os
 import statistics
 import sys
 import time
@@ -106,6 +107,7 @@ def main(argv: list[str] | None = None) -> int:
         "torch": torch.__version__,
         "command": command_line(),
         "size": args.size,
+        "load_average_at_end": os.getloadavg(),
         "pairs": [[a.name, b.name] for a, b in pairs[1:]],
     }
     REPORTS.mkdir(exist_ok=True)
@@ -118,7 +120,8 @@ def main(argv: list[str] | None = None) -> int:
 
 - Machine: {meta["machine"]}; torch {meta["torch"]}, {threads} torch threads, CPU.
 - **The machine was shared** with other jobs (a network training in the background), so the
-  absolute times are pessimistic and noisy; compare matchers within this table only.
+  absolute times are pessimistic and noisy; compare matchers within this table only. Load
+  average (1/5/15 min) at the end of the run: {meta["load_average_at_end"]}.
 - Command: `{meta["command"]}`
 - {len(pairs) - 1} pairs at {args.size} (file i vs file i + {args.step} of the folder, i.e. frame
   n vs n + {10 * args.step}; first pair = untimed
