@@ -48,6 +48,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="sift (default), orb, akaze; with the [enhance] extra: xfeat, "
                    "xfeat-lighterglue, aliked-lightglue, disk-lightglue, loftr")
     g.add_argument("--max-keypoints", type=int, default=None)
+    g.add_argument("--loftr-weights", default=None,
+                   help="LoFTR checkpoint for --matcher loftr (none is bundled)")
     g.add_argument("--resize-max", type=int, default=None,
                    help="longest side used for matching, px (0 = original size)")
     g = p.add_argument_group("enhance (MaRINeR) and pose estimate")
@@ -110,6 +112,7 @@ def _cli_overrides(args: argparse.Namespace) -> dict[str, Any]:
         ("render", "shading"): args.shading,
         ("match", "method"): args.matcher,
         ("match", "max_keypoints"): args.max_keypoints,
+        ("match", "loftr_weights"): args.loftr_weights,
         ("enhance", "mode"): args.enhance,
         ("enhance", "method"): args.enhance_method,
         ("enhance", "weights"): args.weights,

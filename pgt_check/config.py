@@ -48,6 +48,8 @@ class MatchConfig:
     max_keypoints: int = 4096
     #: longest image side used for matching (render is made at that size); None = original
     resize_max: int | None = 640
+    #: LoFTR checkpoint (no LoFTR weights are bundled); only for method "loftr"
+    loftr_weights: str | None = None
 
 
 @dataclass(frozen=True)

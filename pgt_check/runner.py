@@ -140,9 +140,11 @@ class FrameChecker:
         if self._matcher is None:
             from pgt_check.match import make_matcher
 
-            self._matcher = make_matcher(
-                self.config.match.method, max_keypoints=self.config.match.max_keypoints
-            )
+            m = self.config.match
+            options: dict[str, Any] = {"max_keypoints": m.max_keypoints}
+            if m.method == "loftr":
+                options["weights"] = m.loftr_weights
+            self._matcher = make_matcher(m.method, **options)
         return self._matcher
 
     @property

@@ -173,7 +173,11 @@ def plot_raw_vs_enhanced(records, summary, out_dir: Path) -> str:
         ax.set_xlabel(f"raw {label}")
         ax.set_ylabel(f"enhanced {label}")
         ax.set_title(f"{label}: raw vs enhanced ({int(ok.sum())} frames)", fontsize=10)
-    axes[0].legend(fontsize=8)
+    if axes[0].get_legend_handles_labels()[0]:
+        axes[0].legend(fontsize=8)
+    else:  # no frame has both a raw and an enhanced value (e.g. raw matching failed everywhere)
+        axes[0].text(0.5, 0.5, "no frame measured on both paths", ha="center",
+                     transform=axes[0].transAxes)
     return _save(fig, out_dir, "raw_vs_enhanced")
 
 
