@@ -31,6 +31,9 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mesh", required=True, help="mesh (PLY/OBJ/GLB) in the poses' world frame")
     p.add_argument("--out", default=None, help="output directory (default: pgt-check-out)")
     p.add_argument("--config", default=None, help="JSON or TOML config file (CLI options win)")
+    p.add_argument("--preset", default=None, choices=["fast", "balanced", "accurate"],
+                   help="named settings from the error-vs-runtime study (config file and CLI "
+                   "options override them)")
     g = p.add_argument_group("input")
     g.add_argument(
         "--format", default=None, choices=["auto", "lamar", "colmap", "tum", "pgt", "nerfstudio"]
@@ -161,7 +164,11 @@ def resume_command(argv: Sequence[str]) -> str:
 
 
 def load_config(args: argparse.Namespace) -> RunConfig:
-    base = load_config_file(args.config) if args.config else {}
+    from pgt_check.config import PRESETS
+
+    base = PRESETS[args.preset] if args.preset else {}
+    if args.config:
+        base = merge(base, load_config_file(args.config))
     return RunConfig.from_dict(merge(base, _cli_overrides(args)))
 
 

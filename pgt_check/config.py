@@ -149,6 +149,25 @@ class RunConfig:
         return hashlib.sha256(blob).hexdigest()[:16]
 
 
+#: Named presets (merged under the CLI options and any --config file). The points were chosen
+#: from the error-vs-runtime Pareto front in reports/error_vs_runtime.md.
+PRESETS: dict[str, dict[str, Any]] = {
+    "fast": {
+        "match": {"method": "sift", "resize_max": 480},
+        "enhance": {"mode": "never"},
+        "pose": {"enabled": False},
+    },
+    "balanced": {
+        "match": {"method": "sift", "resize_max": 640},
+        "enhance": {"mode": "auto", "method": "reproject"},
+    },
+    "accurate": {
+        "match": {"method": "xfeat", "resize_max": 640},
+        "enhance": {"mode": "always", "method": "reproject"},
+    },
+}
+
+
 def _check_value(cls_name: str, name: str, tp: Any, value: Any) -> Any:
     origin = typing.get_origin(tp)
     if origin is Literal:
