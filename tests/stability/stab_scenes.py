@@ -110,7 +110,9 @@ def box_room_mesh(
         if not textured:
             parts.append(_quad(np.array(w), None))
         else:
-            parts.append(_quad(np.array(w), noise_texture(seed + i) if texture is None else texture))
+            parts.append(
+                _quad(np.array(w), noise_texture(seed + i) if texture is None else texture)
+            )
     return mesh_from_trimesh(trimesh.Scene(parts))
 
 
@@ -152,8 +154,9 @@ def write_photo(path: Path, rgb: np.ndarray, grayscale: bool = False) -> Path:
     return path
 
 
-def degrade(rgb: np.ndarray, gain: float = 1.0, gamma: float = 1.0, noise: float = 0.0,
-            seed: int = 0) -> np.ndarray:
+def degrade(
+    rgb: np.ndarray, gain: float = 1.0, gamma: float = 1.0, noise: float = 0.0, seed: int = 0
+) -> np.ndarray:
     """Exposure (gain), gamma and Gaussian noise applied to a render, clipped to [0, 1]."""
     rng = np.random.default_rng(seed)
     img = np.clip(rgb * gain, 0.0, 1.0) ** gamma

@@ -27,8 +27,7 @@ from pgt_check.geometry.homography import (
     scale_homography,
 )
 
-SETTINGS = settings(max_examples=60, deadline=None,
-                    suppress_health_check=[HealthCheck.too_slow])
+SETTINGS = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 sizes = st.integers(min_value=1, max_value=8000)
 shifts = st.floats(min_value=-500.0, max_value=500.0, allow_nan=False)
 
@@ -68,8 +67,14 @@ def test_centre_scale_gives_half_diagonal_times_change(w, h, s):
 
 
 @SETTINGS
-@given(w=st.integers(8, 4000), h=st.integers(8, 4000), dx=shifts, dy=shifts,
-       sx=st.floats(0.05, 1.0), sy=st.floats(0.05, 1.0))
+@given(
+    w=st.integers(8, 4000),
+    h=st.integers(8, 4000),
+    dx=shifts,
+    dy=shifts,
+    sx=st.floats(0.05, 1.0),
+    sy=st.floats(0.05, 1.0),
+)
 def test_scale_homography_preserves_translation_and_identity(w, h, dx, dy, sx, sy):
     """A working-size translation (dx, dy) is (dx/sx, dy/sy) in original pixels; I stays I."""
     np.testing.assert_allclose(scale_homography(np.eye(3), sx, sy), np.eye(3), atol=1e-12)
@@ -79,8 +84,11 @@ def test_scale_homography_preserves_translation_and_identity(w, h, dx, dy, sx, s
 
 
 @SETTINGS
-@given(h=arrays(np.float64, (3, 3), elements=st.floats(width=64) | st.floats(-2.0, 2.0)),
-       w=st.integers(1, 5000), ht=st.integers(1, 5000))
+@given(
+    h=arrays(np.float64, (3, 3), elements=st.floats(width=64) | st.floats(-2.0, 2.0)),
+    w=st.integers(1, 5000),
+    ht=st.integers(1, 5000),
+)
 def test_guards_never_raise_and_pass_only_finite(h, w, ht):
     """Arbitrary 3x3 input: the guard answers (no exception); whatever it accepts has finite
     corner error."""
@@ -94,8 +102,10 @@ def test_guards_never_raise_and_pass_only_finite(h, w, ht):
 @pytest.mark.parametrize(
     "h, reason",
     [
-        (np.diag([-1.0, 1.0, 1.0]) @ np.array([[1, 0, -639.0], [0, 1, 0], [0, 0, 1]]),
-         Reason.ORIENTATION_FLIP),  # mirrored left-right onto the same image box
+        (
+            np.diag([-1.0, 1.0, 1.0]) @ np.array([[1, 0, -639.0], [0, 1, 0], [0, 0, 1]]),
+            Reason.ORIENTATION_FLIP,
+        ),  # mirrored left-right onto the same image box
         (np.array([[1, 0, 0], [0, -1, 479.0], [0, 0, 1]]), Reason.ORIENTATION_FLIP),
         (np.array([[1, 0, 0], [0, 1, 0], [0, 0, 0.0]]), Reason.ILL_CONDITIONED),  # singular
         (np.array([[1, 1, 0], [1, 1 + 1e-12, 0], [0, 0, 1.0]]), Reason.ILL_CONDITIONED),
@@ -104,8 +114,16 @@ def test_guards_never_raise_and_pass_only_finite(h, w, ht):
         (np.diag([10.0, 10.0, 1.0]), Reason.ILL_CONDITIONED),  # area x100
         (np.zeros((3, 3)), Reason.ILL_CONDITIONED),
     ],
-    ids=["mirror-x", "mirror-y", "singular", "near-singular", "through-infinity", "nan",
-         "huge-zoom", "zero"],
+    ids=[
+        "mirror-x",
+        "mirror-y",
+        "singular",
+        "near-singular",
+        "through-infinity",
+        "nan",
+        "huge-zoom",
+        "zero",
+    ],
 )
 def test_bad_homographies_are_rejected(h, reason):
     """Reflected, singular, near-singular, horizon-crossing, non-finite -> the stated reason."""
@@ -123,8 +141,13 @@ def _apply(h: np.ndarray, p: np.ndarray) -> np.ndarray:
 
 
 @SETTINGS
-@given(dx=st.floats(-20, 20), dy=st.floats(-20, 20), s=st.floats(0.8, 1.25),
-       a=st.floats(-0.1, 0.1), seed=st.integers(0, 1000))
+@given(
+    dx=st.floats(-20, 20),
+    dy=st.floats(-20, 20),
+    s=st.floats(0.8, 1.25),
+    a=st.floats(-0.1, 0.1),
+    seed=st.integers(0, 1000),
+)
 def test_known_homography_in_gives_its_corner_error(dx, dy, s, a, seed):
     """Exact matches under a known near-identity H: the estimate's corner error is H's."""
     c, si = math.cos(a), math.sin(a)
@@ -156,21 +179,39 @@ def _line(n=60, noise=0.0, seed=0):
     [
         (_line(), _line() + 3, Reason.DEGENERATE_MATCHES),  # exactly collinear
         (_line(noise=0.05), _line(noise=0.05) + 3, Reason.DEGENERATE_MATCHES),  # nearly
-        (np.tile([[100.0, 80.0]], (40, 1)), np.tile([[102.0, 81.0]], (40, 1)),
-         Reason.DEGENERATE_MATCHES),  # one point duplicated
-        (np.repeat(_grid(3), 15, axis=0), np.repeat(_grid(3), 15, axis=0),
-         Reason.DEGENERATE_MATCHES),  # three distinct points, duplicated
-        (100 + np.random.default_rng(1).normal(0, 0.2, (50, 2)),
-         102 + np.random.default_rng(2).normal(0, 0.2, (50, 2)),
-         Reason.DEGENERATE_MATCHES),  # one tight cluster
+        (
+            np.tile([[100.0, 80.0]], (40, 1)),
+            np.tile([[102.0, 81.0]], (40, 1)),
+            Reason.DEGENERATE_MATCHES,
+        ),  # one point duplicated
+        (
+            np.repeat(_grid(3), 15, axis=0),
+            np.repeat(_grid(3), 15, axis=0),
+            Reason.DEGENERATE_MATCHES,
+        ),  # three distinct points, duplicated
+        (
+            100 + np.random.default_rng(1).normal(0, 0.2, (50, 2)),
+            102 + np.random.default_rng(2).normal(0, 0.2, (50, 2)),
+            Reason.DEGENERATE_MATCHES,
+        ),  # one tight cluster
         (_grid(8), _grid(8), Reason.TOO_FEW_MATCHES),
         (np.full((40, 2), np.nan), np.full((40, 2), np.nan), Reason.TOO_FEW_MATCHES),
         (np.zeros((0, 2)), np.zeros((0, 2)), Reason.TOO_FEW_MATCHES),
         (_grid(), _grid(seed=99), None),  # random: no consistent H (any failure reason)
         (_grid(), np.c_[319 - _grid()[:, 0], _grid()[:, 1]], Reason.ORIENTATION_FLIP),  # mirror
     ],
-    ids=["collinear", "near-collinear", "one-point", "three-points", "cluster", "too-few",
-         "all-nan", "empty", "random", "mirrored"],
+    ids=[
+        "collinear",
+        "near-collinear",
+        "one-point",
+        "three-points",
+        "cluster",
+        "too-few",
+        "all-nan",
+        "empty",
+        "random",
+        "mirrored",
+    ],
 )
 def test_degenerate_match_sets_fail_with_a_reason(render, photo, reason):
     """Degenerate or inconsistent matches -> success False with a specific reason."""
@@ -186,8 +227,11 @@ def test_degenerate_match_sets_fail_with_a_reason(render, photo, reason):
 
 @SETTINGS
 @given(
-    pts=arrays(np.float64, st.tuples(st.integers(0, 40), st.just(4)),
-               elements=st.floats(-1e4, 1e4) | st.sampled_from([np.nan, np.inf, 1e300])),
+    pts=arrays(
+        np.float64,
+        st.tuples(st.integers(0, 40), st.just(4)),
+        elements=st.floats(-1e4, 1e4) | st.sampled_from([np.nan, np.inf, 1e300]),
+    ),
 )
 def test_estimate_never_raises(pts):
     """Any (N, 2) pair of point sets, including NaN/inf/huge values -> a result, no exception;
@@ -205,6 +249,8 @@ def test_guard_config_is_size_independent():
     the same relative warp alike."""
     for w, h in [(32, 24), (6000, 4000)]:
         assert check_homography(_centre_scale(1.1, w, h), w, h) is None
-        assert check_homography(_centre_scale(5.0, w, h), w, h,
-                                HomographyConfig(max_area_ratio=16)) == Reason.ILL_CONDITIONED
+        assert (
+            check_homography(_centre_scale(5.0, w, h), w, h, HomographyConfig(max_area_ratio=16))
+            == Reason.ILL_CONDITIONED
+        )
     assert image_corners(1, 1).tolist() == [[-0.5, -0.5], [0.5, -0.5], [0.5, 0.5], [-0.5, 0.5]]

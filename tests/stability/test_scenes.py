@@ -61,10 +61,6 @@ def test_georeferenced_matches_origin(scene_factory, offset):
     rounding of colours (no jitter) and verdicts / corner errors are the same."""
     offset = np.asarray(offset, dtype=np.float64)
     parts = box_room_mesh(textured=True, seed=3)
-    shifted = mesh_from_trimesh(
-        trimesh.Trimesh(parts.vertices + offset, parts.faces, process=False)
-    )
-    # same mesh with texture: rebuild through replace to keep uv/textures
     from dataclasses import replace
 
     shifted = replace(parts, vertices=parts.vertices + offset, offset=parts.offset + offset)
@@ -77,12 +73,14 @@ def test_georeferenced_matches_origin(scene_factory, offset):
         assert (r0.coverage != r1.coverage).sum() == 0
         assert float(np.abs(r0.rgb - r1.rgb).max()) < 1e-5
         assert float(np.abs(r0.depth - r1.depth).max()) < 1e-5
-    frames0 = [base.frame(CAM, ROOM_POSE, frame_id="g0"),
-               base.frame(CAM, ROOM_POSE, rotated(ROOM_POSE, 5.0), frame_id="g1")]
+    frames0 = [
+        base.frame(CAM, ROOM_POSE, frame_id="g0"),
+        base.frame(CAM, ROOM_POSE, rotated(ROOM_POSE, 5.0), frame_id="g1"),
+    ]
     frames1 = [f.with_pose(shift @ f.world_from_cam) for f in frames0]
     recs0, recs1 = base.check(frames0), geo.check(frames1)
     assert verdicts(recs0) == verdicts(recs1) == ["PASS", "FAIL"]
-    for a, b in zip(recs0, recs1):
+    for a, b in zip(recs0, recs1, strict=True):
         assert b["corner_error_px"] == pytest.approx(a["corner_error_px"], abs=1e-3)
 
 
@@ -155,13 +153,19 @@ def test_near_and_far_geometry(scene_factory, scale):
 
 
 def test_near_object_with_far_background(scene_factory):
-    """A 5 mm textured card 1 cm in front of the camera and a 2e4 m wide wall 1e4 m away
-    (depth range 1e-2..1e4): must not crash or NaN; the card is clipped by znear (>= 1e-4 of
-    zfar), so the render lacks it while the photo (rendered from the card-less scene)..."""
-    far = plane_mesh(noise_texture(30), half=1e4, z=1e4)
-    card = plane_mesh(noise_texture(31), half=2.5e-3, z=1e-2)
+    """A 1 cm textured card 2 cm in front of the camera and a 2e4 m wide wall 1e4 m away
+    (depth ratio 5e5). Known limitation (docs in tests/stability/README.md): the renderer keeps
+    znear >= 1e-4 * zfar for depth-test resolution, so the card (2 cm < 1 m) is clipped from the
+    render, while the "photo" (wall render + card-only render composited) shows it; lowering
+    near_ratio to 1e-6 instead loses the far wall (float32 projection / depth precision). Expected: no crash, no
+    NaN; the correct pose PASSes on the wall around the card (or is UNVERIFIABLE), a 5 deg error
+    is never PASS."""
     from dataclasses import replace
 
+    from pgt_check.render import make_renderer
+
+    far = plane_mesh(noise_texture(30), half=1e4, z=1e4)
+    card = plane_mesh(noise_texture(31), half=5e-3, z=2e-2)
     both = replace(
         far,
         vertices=np.vstack([far.vertices, card.vertices]),
@@ -170,14 +174,27 @@ def test_near_object_with_far_background(scene_factory):
         textures=far.textures + card.textures,
         face_texture=np.concatenate([far.face_texture, card.face_texture + 1]),
         colors=np.vstack([far.colors, card.colors]),
-        offset=np.zeros(3),
     )
     pose = make_rigid(np.eye(3), [1e-3, 0.0, 0.0])  # looking down +z at both
     s = scene_factory(both)
     r = s.render(CAM, pose)
-    assert r.coverage.all() and np.isfinite(r.depth).all()
-    recs = s.check([s.frame(CAM, pose), s.frame(CAM, pose, rotated(pose, 5.0))])
-    assert recs[0]["verdict"] == "PASS"
+    assert r.coverage.all() and float(r.depth.min()) > 1.0  # the card is clipped
+    card_only = make_renderer(card)  # the card alone gets tight clip planes
+    try:
+        c = card_only.render(CAM, pose)
+    finally:
+        card_only.close()
+    assert 0.03 < c.coverage.mean() < 0.5  # the photo shows the card ...
+    assert float(c.depth[c.coverage].min()) == pytest.approx(2e-2, rel=1e-3)
+    composite = np.where(c.coverage[:, :, None], c.rgb, r.rgb)  # ... in front of the wall
+    photo = type(r)(composite, r.depth, r.coverage, r.shading)
+    recs = s.check(
+        [
+            s.frame(CAM, pose, photo=lambda _: photo.rgb),
+            s.frame(CAM, pose, rotated(pose, 5.0), photo=lambda _: photo.rgb),
+        ]
+    )
+    assert recs[0]["verdict"] in ("PASS", "UNVERIFIABLE")
     assert recs[1]["verdict"] in ("FAIL", "UNVERIFIABLE")
 
 
@@ -277,10 +294,12 @@ def test_exposure_and_grayscale(scene_factory, room_mesh, photo, grayscale):
     gain/gamma invariant), a 5 deg error FAILs. The negative photo may not match at all:
     then UNVERIFIABLE, never PASS for the wrong pose."""
     s = scene_factory(room_mesh)
-    recs = s.check([
-        s.frame(CAM, ROOM_POSE, photo=photo, grayscale=grayscale),
-        s.frame(CAM, ROOM_POSE, rotated(ROOM_POSE, 5.0), photo=photo, grayscale=grayscale),
-    ])
+    recs = s.check(
+        [
+            s.frame(CAM, ROOM_POSE, photo=photo, grayscale=grayscale),
+            s.frame(CAM, ROOM_POSE, rotated(ROOM_POSE, 5.0), photo=photo, grayscale=grayscale),
+        ]
+    )
     if photo(np.full((1, 1, 3), 0.9, np.float32))[0, 0, 0] < 0.2:  # negative
         assert recs[0]["verdict"] in ("PASS", "UNVERIFIABLE")
         assert recs[1]["verdict"] in ("FAIL", "UNVERIFIABLE")
