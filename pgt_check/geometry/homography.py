@@ -108,6 +108,9 @@ def check_homography(
     check_shape("homography", h, (3, 3))
     if not np.all(np.isfinite(h)):
         return Reason.NON_FINITE
+    peak = float(np.abs(h).max())
+    if peak > 0.0:
+        h = h / peak  # scale-free: avoids overflow / denormals for huge or tiny entries
     # Condition number in normalised coordinates (image -> [-1, 1]^2) so it is size-independent.
     s = 2.0 / max(width, height)
     t = np.array([[s, 0, -1.0], [0, s, -1.0], [0, 0, 1]])
@@ -168,7 +171,11 @@ def estimate_homography(
     kpts_photo = np.asarray(kpts_photo, dtype=np.float64).reshape(-1, 2)
     check_shape("kpts_photo", kpts_photo, (len(kpts_render), 2))
     n = len(kpts_render)
-    finite = np.all(np.isfinite(kpts_render), axis=1) & np.all(np.isfinite(kpts_photo), axis=1)
+    # finite as the float32 that OpenCV gets (1e300 is finite in float64, inf in float32)
+    with np.errstate(over="ignore"):
+        finite = np.all(np.isfinite(kpts_render.astype(np.float32)), axis=1) & np.all(
+            np.isfinite(kpts_photo.astype(np.float32)), axis=1
+        )
     if n < max(4, config.min_matches) or finite.sum() < max(4, config.min_matches):
         return _failure(Reason.TOO_FEW_MATCHES, n)
     if _degenerate_points(kpts_render[finite]) or _degenerate_points(kpts_photo[finite]):
