@@ -93,6 +93,9 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--frames7", type=int, default=12)
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--only", default=None, help="run only grid points containing this text")
+    ap.add_argument("--append", action="store_true",
+                    help="merge with reports/error_vs_runtime.json (replacing equal points)")
     args = ap.parse_args()
     data = shared_data()
     has_w = (Path(__file__).resolve().parents[1] / "mariner_core/weights/mariner.pt").is_file()
@@ -102,6 +105,8 @@ def main() -> None:
         bad, injected = perturb_trajectory(traj, 1.0, (1.0, 4.0), trans, seed=5)
         inj = {p.frame_id: p for p in injected}
         for label, point in grid(has_w, args.quick):
+            if args.only and args.only not in label:
+                continue
             good, pert = run_point(traj, bad, mesh, base, point)
             allr = good + pert
             times = [r["time_s"] for r in allr if r.get("time_s") is not None]
@@ -121,6 +126,10 @@ def main() -> None:
                    "stages": stages}
             results.append(res)
             print(json.dumps(res), flush=True)
+    if args.append and (REPORTS / "error_vs_runtime.json").is_file():
+        old = json.loads((REPORTS / "error_vs_runtime.json").read_text())
+        new_keys = {(r["dataset"], r["point"]) for r in results}
+        results = [r for r in old if (r["dataset"], r["point"]) not in new_keys] + results
     # Pareto front per dataset: no other point is both faster and more accurate
     for d in {r["dataset"] for r in results}:
         pts = [r for r in results if r["dataset"] == d]

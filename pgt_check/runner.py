@@ -349,7 +349,14 @@ class FrameChecker:
 
 
 def _store_path(rec: dict[str, Any], p: PathResult, suffix: str) -> None:
+    from pgt_check.geometry.homography import corner_shift_and_zoom
+
     rec[f"corner_error_px_{suffix}"] = p.corner_error_px
+    if p.success and suffix == "raw":
+        # the systematic-offset statistic uses the raw path: an enhanced render borrows its
+        # appearance from a neighbouring photo, which shares (and so cancels) calibration errors
+        dx, dy, zoom = corner_shift_and_zoom(p.photo_from_render, rec["width"], rec["height"])
+        rec["shift_dx_px_raw"], rec["shift_dy_px_raw"], rec["zoom_raw"] = dx, dy, zoom
     rec[f"n_matches_{suffix}"] = p.n_matches
     rec[f"n_inliers_{suffix}"] = p.n_inliers
     rec[f"inlier_ratio_{suffix}"] = p.inlier_ratio
@@ -389,6 +396,9 @@ def base_record(frame: Frame) -> dict[str, Any]:
         "t_pose_s": None,
         "time_s": None,
         "corner_error_px_raw": None,
+        "shift_dx_px_raw": None,
+        "shift_dy_px_raw": None,
+        "zoom_raw": None,
         "n_matches_raw": None,
         "n_inliers_raw": None,
         "inlier_ratio_raw": None,

@@ -83,3 +83,17 @@ def test_run_statistics_counts_and_auc():
     assert s["corner_error_px"]["n_measured"] == 2
     assert s["auc"]["auc@1px"] == pytest.approx((1 / 3) * 0.5 + (1 / 3) * 0.5 * 0.5 / 1 * 1, rel=0.5)
     assert 0 < s["auc"]["auc@1px"] < 1 / 3 + 1e-9
+
+
+def test_systematic_offset_uses_the_raw_path_when_measured():
+    """Enhanced renders borrow appearance from a neighbour with the same calibration, so their
+    shift is ~0 even when every raw render is off by the same 9 px."""
+    recs = [
+        {"verdict": "PASS", "reason": "", "corner_error_px": 1.0, "shift_dx_px": 0.5,
+         "shift_dy_px": 0.0, "zoom": 1.0, "shift_dx_px_raw": -9.0, "shift_dy_px_raw": -2.0,
+         "zoom_raw": 1.0}
+        for _ in range(10)
+    ]
+    s = run_statistics(recs, 20.0)["systematic_offset"]
+    assert s["path"] == "raw" and s["systematic"]
+    assert s["median_dx_px"] == pytest.approx(-9.0)
