@@ -1,7 +1,7 @@
 """Report on the real 7-Scenes redkitchen frames (real ids, paths and photos).
 
-The measurements are synthetic until the full pipeline (readers, renderer) is wired in; the
-integrator will switch this to a real ``pgt-check`` run of the dataset.
+Synthetic measurements on real frame ids, paths and photos: exercises the report on the
+dataset's names and images with controlled verdicts. Real runs are in test_real_runs.py.
 """
 
 from __future__ import annotations
