@@ -86,7 +86,9 @@ def load_frame_cache(root: str | Path, variants: tuple[str, ...] | None = None) 
         raise ValueError(f"{root}: frames need at least 'photo' and 'render'")
     t = np.array([float(r["t"]) for r in records])
     logger.info("loaded %d frames %s from %s", len(t), sorted(images), root)
-    return FrameCache(t=t, images=images, frame_ids=[str(r["frame_id"]) for r in records], root=root)
+    return FrameCache(
+        t=t, images=images, frame_ids=[str(r["frame_id"]) for r in records], root=root
+    )
 
 
 def split_frames(

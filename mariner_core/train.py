@@ -170,7 +170,9 @@ def validate(
         out.append(float(psnr_y(y, tgt)[0]))
         raw.append(float(psnr_y(x.cpu(), tgt)[0]))
     model.train(was_training)
-    return float(np.mean(out)) if out else float("nan"), float(np.mean(raw)) if raw else float("nan")
+    return float(np.mean(out)) if out else float("nan"), float(np.mean(raw)) if raw else float(
+        "nan"
+    )
 
 
 def _rng_state(rng: np.random.Generator) -> dict[str, Any]:
@@ -323,7 +325,7 @@ def train(
             outputs = model(render, ref, iterations=cfg.train_iterations)
             l1 = sum(float((y.detach() - target).abs().mean()) for y in outputs)
             loss = refinement_loss(outputs, target, perceptual, cfg.lambda_rec, cfg.lambda_per)
-            rec = float(loss)
+            rec = float(loss.detach())
             g_adv = d_l = float("nan")
             gan_on = use_gan and prog >= float(cfg.gan_start)
             if gan_on:
@@ -346,7 +348,7 @@ def train(
                 d_l = float(d_loss)
             step += 1
             samples += cfg.batch_size
-            for k, v in (("loss", float(loss)), ("l1", l1), ("rec", rec)):
+            for k, v in (("loss", float(loss.detach())), ("l1", l1), ("rec", rec)):
                 acc.setdefault(k, []).append(v)
             if gan_on:
                 acc.setdefault("g_adv", []).append(g_adv)

@@ -159,9 +159,7 @@ def build_frame_cache(
             np.savez(tmp, **data)
             tmp.replace(path)
             if (n + 1) % 50 == 0:
-                logger.info(
-                    "%d/%d frames (%.1f s)", n + 1, len(frames), time.perf_counter() - t0
-                )
+                logger.info("%d/%d frames (%.1f s)", n + 1, len(frames), time.perf_counter() - t0)
     finally:
         for r in renderers.values():
             r.close()
