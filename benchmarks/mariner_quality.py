@@ -115,20 +115,21 @@ def evaluate_set(
     prefix: str,
     cache: FrameCache,
     variant: str,
-    offsets: list[int],
-    max_k: int,
-    gt_ref: bool,
+    plan: list[tuple[int, int]],
+    gt_k: int,
     n: int,
     examples: dict,
 ) -> None:
+    """``plan``: (reference offset, max iterations K) pairs; ``gt_k``: K of the Ref = target rows
+    (0: none). One K-iteration run scores every k <= K (the model returns all iterates)."""
     photos = to_tensor(cache.images["photo"][:n])
     render_u8 = cache.images[variant][:n]
     renders = to_tensor(render_u8)
     scorer.add(f"{prefix} | raw render", renders, photos)
-    for off in offsets:
-        pairs = fixed_offset_pairs(n, off)
+    for off, max_k in plan:
+        pairs = fixed_offset_pairs(len(cache), off)[:n]
         ref_idx = [j for _, j in pairs]
-        refs = photos[ref_idx]
+        refs = to_tensor(cache.images["photo"][ref_idx])
         scorer.add(f"{prefix} | reference copied (offset {off})", refs, photos)
         ct = np.stack([colour_transfer(render_u8[i], cache.images["photo"][j]) for i, j in pairs])
         scorer.add(f"{prefix} | colour transfer (offset {off})", to_tensor(ct), photos)
@@ -140,8 +141,8 @@ def evaluate_set(
         for k, y in enumerate(ys, start=1):
             scorer.add(f"{prefix} | MaRINeR K={k} (offset {off})", y, photos)
         examples.setdefault(prefix, {})[off] = (renders, refs, ys, photos)
-    if gt_ref:
-        ys = run_model(model, renders, photos, max_k)
+    if gt_k:
+        ys = run_model(model, renders, photos, gt_k)
         for k, y in enumerate(ys, start=1):
             scorer.add(f"{prefix} | MaRINeR K={k} (Ref = target, upper bound)", y, photos)
 
@@ -153,10 +154,10 @@ def save_grid(examples: dict, path: Path, picks: dict[str, list[int]], k_show: i
     for prefix, idxs in picks.items():
         if prefix not in examples:
             continue
-        off = sorted(examples[prefix])[len(examples[prefix]) // 2]
+        off = 2 if 2 in examples[prefix] else sorted(examples[prefix])[0]
         renders, refs, ys, photos = examples[prefix][off]
         y = ys[min(k_show, len(ys)) - 1]
-        for i in idxs:
+        for i in [i for i in idxs if i < len(renders)] or [0]:
             row = [renders[i], refs[i], y[i], photos[i]]
             row = [(t.permute(1, 2, 0).numpy() * 255).round().astype(np.uint8) for t in row]
             h = row[0].shape[0]
@@ -198,6 +199,10 @@ def main() -> int:
     parser.add_argument("--cache", default=str(Path.home() / ".cache/pgt_check/mariner_train"))
     parser.add_argument("--frames", type=int, default=100, help="7-Scenes frames (first N)")
     parser.add_argument("--max-k", type=int, default=3)
+    parser.add_argument("--castle-frames", type=int, default=0, help="0: all")
+    parser.add_argument("--k-other", type=int, default=1, help="K for offsets 10 and 40")
+    parser.add_argument("--gt-k", type=int, default=2, help="K for the Ref = target rows")
+    parser.add_argument("--gt-k-colourless", type=int, default=1)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--out", default=str(REPORTS / "mariner_quality"))
     args = parser.parse_args()
@@ -213,8 +218,18 @@ def main() -> int:
     scorer = Scorer()
     ex: dict = {}
     n = min(args.frames, len(kitchen))
+    k, ko = args.max_k, args.k_other
+    nc = min(args.castle_frames or len(castle), len(castle))
     evaluate_set(
-        model, scorer, "7-Scenes coloured", kitchen, "render", [1, 2, 4], args.max_k, True, n, ex
+        model,
+        scorer,
+        "7-Scenes coloured",
+        kitchen,
+        "render",
+        [(1, ko), (2, k), (4, ko)],
+        args.gt_k,
+        n,
+        ex,
     )
     evaluate_set(
         model,
@@ -222,13 +237,12 @@ def main() -> int:
         "7-Scenes colourless",
         kitchen,
         "render_colourless",
-        [2],
-        args.max_k,
-        True,
+        [(2, ko)],
+        args.gt_k_colourless,
         n,
         ex,
     )
-    evaluate_set(model, scorer, "castle", castle, "render", [1], args.max_k, True, len(castle), ex)
+    evaluate_set(model, scorer, "castle", castle, "render", [(1, k)], args.gt_k, nc, ex)
     table = scorer.table()
     elapsed = time.perf_counter() - t_start
     out = Path(args.out)
@@ -238,7 +252,7 @@ def main() -> int:
         ex,
         out.parent / (out.name + "_examples.png"),
         {"7-Scenes coloured": [5, 40, 75], "7-Scenes colourless": [20, 60], "castle": [2, 7]},
-        k_show=min(2, args.max_k),
+        k_show=1,
     )
     cfg = model.cfg
     lines = [
@@ -264,7 +278,7 @@ def main() -> int:
             "7-Scenes colourless",
             f"## 7-Scenes redkitchen, colourless (shaded) renders ({n} frames)",
         ),
-        ("castle", f"## Sceaux castle, colourless mesh (cross-scene, {len(castle)} frames)"),
+        ("castle", f"## Sceaux castle, colourless mesh (cross-scene, {nc} frames)"),
     ):
         lines += [title, "", *fmt_table(table, prefix), ""]
     lines += [
