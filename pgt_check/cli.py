@@ -57,11 +57,11 @@ def build_parser() -> argparse.ArgumentParser:
                    help="longest side used for matching, px (0 = original size)")
     g = p.add_argument_group("enhance (MaRINeR) and pose estimate")
     g.add_argument("--enhance", default=None, choices=["never", "auto", "always"],
-                   help="enhance renders with a reference photo: never (default), always, or "
-                   "auto (only frames whose raw result is not decisive)")
+                   help="enhance renders with a reference photo: auto (default: only frames "
+                   "whose raw result is not decisive), always, or never (raw only)")
     g.add_argument("--enhance-method", default=None, choices=["mariner", "reproject"],
-                   help="mariner (learned, default) or reproject (reference photo projected "
-                   "through the mesh)")
+                   help="reproject (default: the reference photo projected through the mesh) "
+                   "or mariner (the learned MaRINeR enhancer, needs the [enhance] extra)")
     g.add_argument("--weights", default=None, help="MaRINeR checkpoint (default: shipped)")
     g.add_argument("--iterations", type=int, default=None, help="MaRINeR refinement iterations")
     g.add_argument("--reference", default=None, choices=["nearest", "self", "none"],

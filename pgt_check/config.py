@@ -63,8 +63,10 @@ class EnhanceConfig:
     projected through the mesh into the render's view).
     """
 
-    mode: Literal["never", "auto", "always"] = "never"
-    method: Literal["mariner", "reproject"] = "mariner"
+    mode: Literal["never", "auto", "always"] = "auto"
+    #: default "reproject": on the shared data it beats the shipped (CPU-trained) MaRINeR
+    #: weights, see reports/raw_vs_enhanced.md and reports/mariner_quality.md
+    method: Literal["mariner", "reproject"] = "reproject"
     weights: str | None = None
     iterations: int | None = None
     short_side: int = 160
