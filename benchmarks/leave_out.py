@@ -87,7 +87,7 @@ def main() -> None:
                   "frames enhanced", "detection AUC"], rows),
         "",
         "The raw run never imports torch or kornia (also asserted by "
-        "`tests/pgt_check/test_cli.py::test_raw_sift_run_does_not_import_torch`). On this "
+        "`tests/pgt_check/test_cli.py::test_sift_run_without_mariner_does_not_import_torch`). On this "
         "textured mesh the raw result is decisive for almost every frame, so `--enhance auto` "
         "enhances only the few frames that are not, at the detection quality of `always`.",
         "",

@@ -62,14 +62,17 @@ def test_sample_run_gate_and_outputs(tmp_path, capsys, sample_scene):
     assert json.loads((out / "summary.json").read_text())["n_frames"] == n
 
 
-def test_raw_sift_run_does_not_import_torch(tmp_path, sample_scene):
+@pytest.mark.parametrize("enhance", [["--enhance", "never"], ["--enhance", "always"]])
+def test_sift_run_without_mariner_does_not_import_torch(tmp_path, sample_scene, enhance):
+    """Raw-only and reprojection-enhanced runs with an OpenCV matcher never import torch."""
     import subprocess
 
     code = (
         "import sys\n"
         "from pgt_check.cli import main\n"
         f"rc = main([{str(sample_scene / 'trajectories.txt')!r}, '--mesh', "
-        f"{str(sample_scene / 'mesh.glb')!r}, '--out', {str(tmp_path / 'o')!r}, '-q', '--limit', '2'])\n"
+        f"{str(sample_scene / 'mesh.glb')!r}, '--out', {str(tmp_path / 'o')!r}, '-q', "
+        f"'--limit', '3', '--report-details', '0', *{enhance!r}])\n"
         "assert rc in (0, 1), rc\n"
         "print('torch' in sys.modules, 'kornia' in sys.modules)\n"
     )

@@ -30,7 +30,9 @@ def test_auto_policy(path, expected):
 
 
 def test_never_and_always():
-    assert FrameChecker(RunConfig())._enhance_decision(_path(), 16.0) == (False, "mode_never")
+    never = FrameChecker(RunConfig.from_dict({"enhance": {"mode": "never"}}))
+    assert never._enhance_decision(_path(), 16.0) == (False, "mode_never")
+    assert RunConfig().enhance.mode == "auto"  # the default
     always = FrameChecker(RunConfig.from_dict({"enhance": {"mode": "always"}}))
     assert always._enhance_decision(_path(), 16.0) == (True, "mode_always")
 
