@@ -39,8 +39,8 @@ print(json.dumps({"rc": rc, "import_cli_s": t_import, "run_s": wall,
 """
 
 MODES = [
-    ("raw SIFT (--enhance never)", []),
-    ("auto + reproject", ["--enhance", "auto", "--enhance-method", "reproject"]),
+    ("raw SIFT (--enhance never)", ["--enhance", "never"]),
+    ("auto + reproject (default)", ["--enhance", "auto", "--enhance-method", "reproject"]),
     ("always + reproject", ["--enhance", "always", "--enhance-method", "reproject"]),
     ("always + MaRINeR", ["--enhance", "always", "--enhance-method", "mariner"]),
     ("auto + MaRINeR", ["--enhance", "auto", "--enhance-method", "mariner"]),
