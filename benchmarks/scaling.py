@@ -55,7 +55,7 @@ class SyntheticChecker:
     iterations: int = 100
     size: int = 96
 
-    def measure(self, frame) -> dict:
+    def measure(self, frame, keep=None) -> dict:
         import numpy as np
 
         rng = np.random.default_rng(zlib.crc32(frame.frame_id.encode()))

@@ -179,7 +179,7 @@ def configure_logging(verbose: int, quiet: bool) -> None:
     root = logging.getLogger("pgt_check")
     root.handlers[:] = [handler]
     root.setLevel(level)
-    root.propagate = False
+    root.propagate = True  # library users and test log capture see the records too
 
 
 def _print_summary(summary: dict[str, Any], out: str) -> None:

@@ -90,6 +90,7 @@ def estimate_pose_correction(
     )
     opts = pycolmap.AbsolutePoseEstimationOptions()
     opts.ransac.max_error = max_error_px
+    opts.ransac.random_seed = 0  # deterministic: the same frame gives the same estimate anywhere
     try:
         res = pycolmap.estimate_and_refine_absolute_pose(kpts_photo[valid] + 0.5, local, cam, opts)
     except Exception as err:  # pycolmap raises plain RuntimeError/ValueError on degenerate input

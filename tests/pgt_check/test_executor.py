@@ -32,11 +32,12 @@ import pytest
 
 from pgt_check.config import RunConfig
 from pgt_check.executor import CheckerSetupError, ExecutorStats, iter_results
+from pgt_check.report.outputs import STAGES
 from pgt_check.types import Camera, Frame, Trajectory
 
 HERE = Path(__file__).resolve().parent
 REPO = HERE.parents[1]
-TIMING = {"t_load_s", "t_render_s", "t_match_s", "t_homography_s", "time_s"}
+TIMING = set(STAGES)  # every timing column of frames.csv
 CAMERA = Camera.pinhole(64, 48, 50.0, 50.0, 31.5, 23.5)
 
 
@@ -67,7 +68,7 @@ class FakeChecker:
         self.n_built = 1
         self.closed = False
 
-    def measure(self, frame: Frame) -> dict[str, Any]:
+    def measure(self, frame: Frame, keep: Any = None) -> dict[str, Any]:
         from pgt_check.runner import base_record
 
         fid = frame.frame_id
