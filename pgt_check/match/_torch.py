@@ -166,3 +166,16 @@ def mutual_nearest_neighbours(desc0: Any, desc1: Any, min_similarity: float = -1
     idx0 = torch.arange(sim.shape[0], device=sim.device)
     keep = (nn10[nn01] == idx0) & (best01 > min_similarity)
     return idx0[keep], nn01[keep], best01[keep]
+
+
+class PicklesWithoutModels:
+    """Mixin for matchers that hold torch models: pickling (to a worker process) drops the
+    attributes named in ``_model_attrs``; the worker rebuilds them lazily on first use."""
+
+    _model_attrs: tuple[str, ...] = ("_models",)
+
+    def __getstate__(self) -> dict[str, Any]:
+        state = dict(self.__dict__)
+        for name in self._model_attrs:
+            state[name] = None
+        return state

@@ -103,7 +103,7 @@ def run_lightglue(
 
 
 @dataclass
-class LightGlueMatcher:
+class LightGlueMatcher(_torch.PicklesWithoutModels):
     """DISK or ALIKED keypoints matched by LightGlue (kornia modules, bundled weights).
 
     features: "disk" | "aliked"; max_keypoints: per image; device: "cpu" | "cuda";
@@ -133,11 +133,6 @@ class LightGlueMatcher:
         )
         self._glue_path = _torch.weights_file(WEIGHTS_PACKAGE, "pretrained_weights", spec["glue"])
         self.device = _torch.resolve_device(self.device)
-
-    def __getstate__(self) -> dict[str, Any]:
-        state = dict(self.__dict__)
-        state["_models"] = None  # rebuilt lazily in a worker process
-        return state
 
     def _load(self) -> tuple[Any, Any]:
         if self._models is None:

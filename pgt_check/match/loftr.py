@@ -39,7 +39,7 @@ def loftr_state_dict(raw: dict[str, Any]) -> dict[str, Any]:
 
 
 @dataclass
-class LoFTRMatcher:
+class LoFTRMatcher(_torch.PicklesWithoutModels):
     """Detector-free LoFTR matching (kornia ``LoFTR``) with weights from ``weights``.
 
     weights: path to the checkpoint (required); temp_bug_fix: the positional-encoding variant
@@ -51,6 +51,7 @@ class LoFTRMatcher:
     outside it. ``n_kpts0`` / ``n_kpts1`` are the number of coarse matches before the mask.
     """
 
+    _model_attrs = ("_model",)  # dropped when pickled (see PicklesWithoutModels)
     weights: str | Path | None = None
     temp_bug_fix: bool = False
     max_keypoints: int = 2048
@@ -69,11 +70,6 @@ class LoFTRMatcher:
             raise ConfigError(f"LoFTR weights not found: {self.weights}")
         _torch.require_torch_kornia()
         self.device = _torch.resolve_device(self.device)
-
-    def __getstate__(self) -> dict[str, Any]:
-        state = dict(self.__dict__)
-        state["_model"] = None  # rebuilt lazily in a worker process
-        return state
 
     def _load(self) -> Any:
         if self._model is None:

@@ -61,7 +61,7 @@ def pad_to_multiple(image: np.ndarray, multiple: int) -> np.ndarray:
 
 
 @dataclass
-class XFeatMatcher:
+class XFeatMatcher(_torch.PicklesWithoutModels):
     """XFeat keypoints + descriptors, matched by mutual nearest neighbours or by LighterGlue.
 
     lighterglue: match with LighterGlue instead of MNN; max_keypoints: per image;
@@ -94,11 +94,6 @@ class XFeatMatcher:
             else None
         )
         self.device = _torch.resolve_device(self.device)
-
-    def __getstate__(self) -> dict[str, Any]:
-        state = dict(self.__dict__)
-        state["_models"] = None  # rebuilt lazily in a worker process
-        return state
 
     def _load(self) -> tuple[Any, Any]:
         if self._models is None:
