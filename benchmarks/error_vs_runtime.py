@@ -144,7 +144,7 @@ def main() -> None:
 
     dsets = sorted({r["dataset"] for r in results})
     fig, axes = plt.subplots(1, len(dsets), figsize=(6.5 * len(dsets), 5))
-    for ax, d in zip(np.atleast_1d(axes), dsets):
+    for ax, d in zip(np.atleast_1d(axes), dsets, strict=False):
         pts = sorted([r for r in results if r["dataset"] == d], key=lambda r: r["median_s"])
         for r in pts:
             ax.scatter(r["median_s"], r["auc"], c="tab:red" if r["pareto"] else "tab:gray", s=25)

@@ -138,7 +138,7 @@ def main() -> None:
                 for key, fn in (("raw", lambda r: _err(r, "corner_error_px_raw")),
                                 ("enhanced", lambda r: _err(r, "corner_error_px_enhanced")),
                                 ("always", lambda r: _err(r, "corner_error_px")),
-                                ("auto", lambda r: auto_error(r, cfg))):
+                                ("auto", lambda r, cfg=cfg: auto_error(r, cfg))):
                     aucs[key] = roc_auc(np.array([fn(r) for r in recs]), labels)
                 n_auto = sum(1 for r in recs if auto_error(r, cfg) != _err(r, "corner_error_px_raw")
                              or r.get("corner_error_px_raw") is None)

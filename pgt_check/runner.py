@@ -196,7 +196,11 @@ class FrameChecker:
         self, image: np.ndarray, photo_w: np.ndarray, mask: np.ndarray, size: tuple[int, int],
         scale: tuple[float, float], camera: Camera,
     ) -> PathResult:
-        from pgt_check.geometry.homography import corner_error, estimate_homography, scale_homography
+        from pgt_check.geometry.homography import (
+            corner_error,
+            estimate_homography,
+            scale_homography,
+        )
 
         t = time.perf_counter()
         matches = self.matcher.match(image, photo_w, mask0=mask)

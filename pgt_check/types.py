@@ -30,7 +30,7 @@ CAMERA_MODELS: dict[str, tuple[str, ...]] = {
 def check_shape(name: str, array: np.ndarray, shape: tuple[int | None, ...]) -> None:
     """Raise ``ValueError`` unless ``array.shape`` matches ``shape`` (None = any size)."""
     if array.ndim != len(shape) or any(
-        want is not None and have != want for have, want in zip(array.shape, shape)
+        want is not None and have != want for have, want in zip(array.shape, shape, strict=False)
     ):
         pretty = "x".join("N" if s is None else str(s) for s in shape)
         raise ValueError(f"{name}: expected shape ({pretty}), got {tuple(array.shape)}")
@@ -78,7 +78,7 @@ class Camera:
 
     @property
     def _named(self) -> dict[str, float]:
-        return dict(zip(CAMERA_MODELS[self.model], self.params))
+        return dict(zip(CAMERA_MODELS[self.model], self.params, strict=False))
 
     @property
     def focal(self) -> tuple[float, float]:

@@ -35,6 +35,7 @@ class MarinerEnhancer:
         if self._enhancer is None:
             try:
                 import torch
+
                 from mariner_core.enhancer import Enhancer
             except ImportError as err:
                 raise MissingExtraError(err.name or "torch", "enhance") from err

@@ -51,7 +51,7 @@ def test_7scenes_raw_sift(shared_data, check_frames):
     labels = _labels(bad, injected)
     auc = roc_auc(_scores(bad), labels)
     assert auc >= 0.8, auc  # measured 0.84 (UNVERIFIABLE good frames count as flagged)
-    assert all(r["verdict"] != "PASS" for r, lab in zip(bad, labels) if lab)
+    assert all(r["verdict"] != "PASS" for r, lab in zip(bad, labels, strict=False) if lab)
 
 
 def test_castle_colourless_mesh_with_reprojection(shared_data, check_frames):
@@ -76,6 +76,6 @@ def test_castle_colourless_mesh_with_reprojection(shared_data, check_frames):
     bad = check_frames(bad_traj, mesh, **enhance)
     labels = _labels(bad, injected)
     assert roc_auc(_scores(bad), labels) >= 0.9  # measured 0.96
-    assert all(r["verdict"] == "FAIL" for r, lab in zip(bad, labels) if lab)
+    assert all(r["verdict"] == "FAIL" for r, lab in zip(bad, labels, strict=False) if lab)
     # the enhanced error tracks the injected displacement: it does not collapse to identity
-    assert min(r["corner_error_px_enhanced"] for r, lab in zip(bad, labels) if lab) > 35.4
+    assert min(r["corner_error_px_enhanced"] for r, lab in zip(bad, labels, strict=False) if lab) > 35.4

@@ -30,6 +30,6 @@ def test_perturb_trajectory_fraction_and_labels():
     new, injected = perturb_trajectory(traj, 0.25, (1, 4), (0.05, 0.2), seed=3)
     assert len(injected) == 5
     ids = {p.frame_id for p in injected}
-    for a, b in zip(traj, new):
+    for a, b in zip(traj, new, strict=False):
         dt, dr = pose_difference(a.world_from_cam, b.world_from_cam)
         assert (dt > 0) == (a.frame_id in ids)

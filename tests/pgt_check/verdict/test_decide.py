@@ -61,7 +61,7 @@ def test_random_shifts_are_not_systematic():
 
     rng = np.random.default_rng(0)
     ang = rng.uniform(0, 2 * np.pi, 40)
-    shifts = list(zip(8 * np.cos(ang), 8 * np.sin(ang)))
+    shifts = list(zip(8 * np.cos(ang), 8 * np.sin(ang), strict=False))
     out = systematic_offset(shifts, [1.0] * 40, threshold_px=16.0)
     assert not out["systematic"]
 
