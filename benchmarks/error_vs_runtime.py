@@ -42,7 +42,7 @@ def grid(has_weights: bool, quick: bool) -> list[tuple[str, dict]]:
     matchers = ["sift", "orb", "akaze", "xfeat"] + ([] if quick else ["aliked-lightglue",
                                                                        "disk-lightglue"])
     for m in matchers:
-        pts.append((f"{m} / never / 640", {"match": {"method": m}}))
+        pts.append((f"{m} / never / 640", {"match": {"method": m}, "enhance": {"mode": "never"}}))
     for m in ("sift", "xfeat"):
         for mode in ("auto", "always"):
             pts.append((f"{m} / {mode} reproject / 640",
@@ -58,7 +58,8 @@ def grid(has_weights: bool, quick: bool) -> list[tuple[str, dict]]:
                         {"enhance": {"mode": "always", "method": "mariner", "iterations": 2,
                                      "short_side": ss}}))
     for res in (320, 480, 960):
-        pts.append((f"sift / never / {res}", {"match": {"resize_max": res}}))
+        pts.append((f"sift / never / {res}",
+                    {"match": {"resize_max": res}, "enhance": {"mode": "never"}}))
         pts.append((f"sift / auto reproject / {res}",
                     {"match": {"resize_max": res}, "enhance": {"mode": "auto", "method": "reproject"}}))
     return pts

@@ -29,7 +29,7 @@ def bench(name: str, traj_path: Path, mesh: Path, n: int, matcher: str) -> list[
     traj = read_trajectory(traj_path)
     frames = list(traj.frames)[:n]
     cfg = RunConfig.from_dict({"input": {"trajectory": str(traj_path), "mesh": str(mesh)},
-                               "match": {"method": matcher}})
+                               "match": {"method": matcher}, "enhance": {"mode": "never"}})
     checker = FrameChecker(cfg)
     t = time.perf_counter()
     _ = checker.renderer
