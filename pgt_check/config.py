@@ -155,12 +155,12 @@ class RunConfig:
 #: from the error-vs-runtime Pareto front in reports/error_vs_runtime.md.
 PRESETS: dict[str, dict[str, Any]] = {
     "fast": {
-        "match": {"method": "sift", "resize_max": 480},
+        "match": {"method": "sift", "resize_max": 320},
         "enhance": {"mode": "never"},
         "pose": {"enabled": False},
     },
     "balanced": {
-        "match": {"method": "sift", "resize_max": 640},
+        "match": {"method": "sift", "resize_max": 480},
         "enhance": {"mode": "auto", "method": "reproject"},
     },
     "accurate": {

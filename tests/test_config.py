@@ -46,3 +46,16 @@ def test_load_config_file(tmp_path):
     bad.write_text("{")
     with pytest.raises(ConfigError, match="cannot parse"):
         load_config_file(bad)
+
+
+def test_presets_are_valid_configs_and_cli_options_override_them():
+    from pgt_check.cli import build_parser, load_config
+    from pgt_check.config import PRESETS
+
+    for name in PRESETS:
+        args = build_parser().parse_args(["t.txt", "--mesh", "m.ply", "--preset", name])
+        assert isinstance(load_config(args), RunConfig)
+    args = build_parser().parse_args(["t.txt", "--mesh", "m.ply", "--preset", "fast",
+                                      "--matcher", "orb"])
+    c = load_config(args)
+    assert c.match.method == "orb" and c.match.resize_max == 320 and c.enhance.mode == "never"
