@@ -160,12 +160,12 @@ PRESETS: dict[str, dict[str, Any]] = {
         "pose": {"enabled": False},
     },
     "balanced": {
-        "match": {"method": "sift", "resize_max": 480},
+        "match": {"method": "sift", "resize_max": 320},
         "enhance": {"mode": "auto", "method": "reproject"},
     },
     "accurate": {
         "match": {"method": "xfeat", "resize_max": 640},
-        "enhance": {"mode": "always", "method": "reproject"},
+        "enhance": {"mode": "auto", "method": "reproject"},
     },
 }
 

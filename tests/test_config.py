@@ -59,3 +59,5 @@ def test_presets_are_valid_configs_and_cli_options_override_them():
                                       "--matcher", "orb"])
     c = load_config(args)
     assert c.match.method == "orb" and c.match.resize_max == 320 and c.enhance.mode == "never"
+    balanced = load_config(build_parser().parse_args(["t.txt", "--mesh", "m", "--preset", "balanced"]))
+    assert balanced.enhance.mode == "auto" and balanced.enhance.method == "reproject"
