@@ -34,11 +34,9 @@ def working_scale(width: int, height: int, resize_max: int | None) -> tuple[int,
 
 
 def _resize(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    import cv2
+    from pgt_check.io.images import resize_image
 
-    if (image.shape[1], image.shape[0]) == size:
-        return image
-    return cv2.resize(image, size, interpolation=cv2.INTER_AREA)
+    return resize_image(image, size)
 
 
 def prepare_photo(image: np.ndarray, camera: Camera) -> tuple[np.ndarray, Camera]:

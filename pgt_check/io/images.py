@@ -68,3 +68,15 @@ def image_size(path: str | Path) -> tuple[int, int]:
     except (UnidentifiedImageError, OSError) as err:
         raise InputError(f"{path}: cannot read image header ({err})") from err
     return int(width), int(height)
+
+
+def resize_image(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    """Resize an (H, W[, C]) image to ``size`` = (width, height) with area interpolation.
+
+    Returns the input itself when it already has that size.
+    """
+    import cv2
+
+    if (image.shape[1], image.shape[0]) == tuple(size):
+        return image
+    return cv2.resize(image, tuple(size), interpolation=cv2.INTER_AREA)

@@ -97,12 +97,10 @@ def _thumb_scale(width: int, height: int, max_side: int = THUMB_MAX) -> float:
     return min(1.0, max_side / max(width, height, 1))
 
 
-def _resize(img: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    import cv2
+def _resize(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
+    from pgt_check.io.images import resize_image
 
-    if (img.shape[1], img.shape[0]) == size:
-        return img
-    return cv2.resize(img, size, interpolation=cv2.INTER_AREA)
+    return resize_image(image, size)
 
 
 def _thumb(img: np.ndarray, max_side: int = THUMB_MAX) -> np.ndarray:
