@@ -297,6 +297,41 @@ def _describe_exit(codes: list[int]) -> str:
     return ", ".join(parts) if parts else "unknown exit status"
 
 
+def _fill(
+    stop: threading.Event,
+    inflight: dict[Any, _Task],
+    retry: collections.deque[_Task],
+    source: Iterator[Frame],
+    exhausted: bool,
+    max_inflight: int,
+    submit: Callable[[_Task], bool],
+) -> bool:
+    """Submit work under the policy both pools share; returns whether ``source`` is exhausted.
+
+    A frame suspected of crashing its worker (in ``retry``) runs alone: nothing else is
+    submitted while it is in flight, and it waits until the pool is empty. Otherwise new frames
+    are submitted until ``max_inflight`` are in flight. ``submit`` returns False when the pool
+    refused the task (it then re-queued it itself).
+    """
+    while not stop.is_set():
+        if any(t.isolated for t in inflight.values()):
+            break
+        if retry:
+            if not inflight:
+                task = retry.popleft()
+                task.isolated = True
+                submit(task)
+            break
+        if len(inflight) >= max_inflight or exhausted:
+            break
+        frame = next(source, None)
+        if frame is None:
+            return True
+        if not submit(_Task(frame)):
+            break
+    return exhausted
+
+
 def _iter_process(
     frames: Iterable[Frame],
     checker_factory: CheckerFactory,
@@ -335,25 +370,7 @@ def _iter_process(
 
     try:
         while True:
-            # fill: suspects of a crash run alone; otherwise keep max_inflight frames going
-            while not stop.is_set():
-                if any(t.isolated for t in inflight.values()):
-                    break
-                if retry:
-                    if inflight:
-                        break
-                    task = retry.popleft()
-                    task.isolated = True
-                    submit(task)
-                    break
-                if len(inflight) >= max_inflight or exhausted:
-                    break
-                frame = next(source, None)
-                if frame is None:
-                    exhausted = True
-                    break
-                if not submit(_Task(frame)):
-                    break
+            exhausted = _fill(stop, inflight, retry, source, exhausted, max_inflight, submit)
             _note_stop(stop, noted, len(inflight))
             if not inflight:
                 if stop.is_set() or (exhausted and not retry):
@@ -540,7 +557,7 @@ def _iter_dask(
         ac = as_completed()
         logger.info("Dask: %d worker threads, up to %d frames in flight", nthreads, max_inflight)
 
-        def submit(task: _Task) -> None:
+        def submit(task: _Task) -> bool:
             fut = client.submit(
                 _dask_measure,
                 token,
@@ -552,26 +569,11 @@ def _iter_dask(
             inflight[fut] = task
             stats.submitted += 1
             ac.add(fut)
+            return True
 
         def fill() -> None:
-            # same policy as the process pool: suspects of a crash run alone
             nonlocal exhausted
-            while not stop.is_set():
-                if any(t.isolated for t in inflight.values()):
-                    return
-                if retry:
-                    if not inflight:
-                        task = retry.popleft()
-                        task.isolated = True
-                        submit(task)
-                    return
-                if len(inflight) >= max_inflight or exhausted:
-                    return
-                frame = next(source, None)
-                if frame is None:
-                    exhausted = True
-                    return
-                submit(_Task(frame))
+            exhausted = _fill(stop, inflight, retry, source, exhausted, max_inflight, submit)
 
         fill()
         for fut in ac:
