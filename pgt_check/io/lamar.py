@@ -156,14 +156,19 @@ def read_rigs(path: Path, sensor_ids: set[str]) -> dict[tuple[str, str], np.ndar
                 line,
                 f"expected unique (rig, sensor) pairs; got {rig_id}, {sensor_id} again (first on line {lines[key]})",
             )
-        values = [
-            parse_float(path, line, v, n)
-            for v, n in zip(fields[2:], POSE_LAYOUT.split(", "), strict=True)
-        ]
-        rigs[key] = quats.rigid(line, values[:4], values[4:])
+        rigs[key] = _parse_pose(path, line, fields[2:], quats)
         lines[key] = line
     quats.report()
     return rigs
+
+
+def _parse_pose(path: Path, line: int, fields: list[str], quats) -> np.ndarray:
+    """The 7 pose columns ``qw, qx, qy, qz, tx, ty, tz`` of one row -> (4, 4) rigid transform."""
+    values = [
+        parse_float(path, line, v, n)
+        for v, n in zip(fields, POSE_LAYOUT.split(", "), strict=True)
+    ]
+    return quats.rigid(line, values[:4], values[4:])
 
 
 def read_poses(path: Path, device_ids: set[str]) -> dict[tuple[float, str], np.ndarray]:
@@ -190,11 +195,7 @@ def read_poses(path: Path, device_ids: set[str]) -> dict[tuple[float, str], np.n
                 line,
                 f"expected one pose per (timestamp, device); got {fields[0]}, {device_id} again (first on line {lines[key]})",
             )
-        values = [
-            parse_float(path, line, v, n)
-            for v, n in zip(fields[2:], POSE_LAYOUT.split(", "), strict=True)
-        ]
-        poses[key] = quats.rigid(line, values[:4], values[4:])
+        poses[key] = _parse_pose(path, line, fields[2:], quats)
         lines[key] = line
     quats.report()
     return poses
