@@ -179,3 +179,13 @@ class PicklesWithoutModels:
         for name in self._model_attrs:
             state[name] = None
         return state
+
+
+def filter_by_mask(kpts: Any, desc: Any, mask: np.ndarray | None) -> tuple[Any, Any]:
+    """Keep the (N, 2) torch keypoints (and their descriptors) that fall inside ``mask``."""
+    if mask is None or not kpts.shape[0]:
+        return kpts, desc
+    import torch
+
+    keep = torch.from_numpy(keypoints_in_mask(kpts.double().cpu().numpy(), mask)).to(kpts.device)
+    return kpts[keep], desc[keep]

@@ -184,10 +184,7 @@ class LightGlueMatcher(_torch.PicklesWithoutModels):
         with torch.inference_mode():
             k0, d0 = self._detect(detector, im0)
             k1, d1 = self._detect(detector, im1)
-            if m0 is not None and k0.shape[0]:
-                keep = _torch.keypoints_in_mask(k0.double().cpu().numpy(), m0)
-                keep_t = torch.from_numpy(keep).to(k0.device)
-                k0, d0 = k0[keep_t], d0[keep_t]
+            k0, d0 = _torch.filter_by_mask(k0, d0, m0)
             # like the OpenCV matchers: image0 keypoints are counted inside the mask
             n0, n1 = int(k0.shape[0]), int(k1.shape[0])
             if k0.shape[0] == 0 or k1.shape[0] == 0:

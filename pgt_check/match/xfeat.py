@@ -133,9 +133,7 @@ class XFeatMatcher(_torch.PicklesWithoutModels):
         with torch.inference_mode():
             k0, d0 = self._detect(xfeat, im0)
             k1, d1 = self._detect(xfeat, im1)
-            if m0 is not None and k0.shape[0]:
-                keep = torch.from_numpy(_torch.keypoints_in_mask(k0.double().cpu().numpy(), m0))
-                k0, d0 = k0[keep.to(k0.device)], d0[keep.to(k0.device)]
+            k0, d0 = _torch.filter_by_mask(k0, d0, m0)
             n0, n1 = int(k0.shape[0]), int(k1.shape[0])
             if n0 == 0 or n1 == 0:
                 return Matches(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), n0, n1)
