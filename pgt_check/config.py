@@ -11,18 +11,49 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import math
 import types
 import typing
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from pgt_check.enhance.reference import ReferenceConfig
 from pgt_check.errors import ConfigError
-from pgt_check.geometry.homography import HomographyConfig
 
 #: config sections whose change invalidates stored per-frame measurements
 MEASUREMENT_SECTIONS = ("input", "render", "match", "homography", "enhance", "pose")
+
+
+@dataclass(frozen=True)
+class HomographyConfig:
+    """Robust estimation settings (pixels are those of the images that were matched)."""
+
+    ransac_threshold_px: float = 3.0
+    confidence: float = 0.9999
+    max_iters: int = 10000
+    min_matches: int = 12
+    min_inliers: int = 12
+    max_condition: float = 1e7
+    #: the warped image may not shrink or grow by more than this factor in area
+    max_area_ratio: float = 16.0
+
+
+@dataclass(frozen=True)
+class ReferenceConfig:
+    mode: Literal["nearest", "self", "none"] = "nearest"
+    #: scene units that count as much as ``rotation_scale_deg`` degrees; None = 10 % of the
+    #: trajectory's extent (scale-free default)
+    translation_scale: float | None = None
+    rotation_scale_deg: float = 10.0
+    time_scale_s: float | None = None
+    #: hard limits; None = no limit on translation (rotation is always limited)
+    max_translation: float | None = None
+    max_rotation_deg: float = 45.0
+    min_frame_gap: int = 1
+    #: references tried per frame; the enhanced result with the most homography inliers is
+    #: kept (a reference whose own pose is wrong paints texture on the wrong surfaces, which
+    #: costs inliers, so a second reference guards against one bad neighbour)
+    count: int = 2
 
 
 @dataclass(frozen=True)
@@ -99,6 +130,12 @@ class VerdictConfig:
     #: and while UNVERIFIABLE frames / all frames <= this (1.0 = never gate on them)
     max_unverifiable_fraction: float = 1.0
 
+    def threshold_for(self, width: int, height: int) -> float:
+        """The PASS threshold in original photo pixels for an image of this size."""
+        if self.threshold_px is not None:
+            return float(self.threshold_px)
+        return float(self.threshold_rel_diag * math.hypot(width, height))
+
 
 @dataclass(frozen=True)
 class RunConfig:
@@ -143,11 +180,26 @@ class RunConfig:
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
-    def measurement_fingerprint(self) -> str:
-        """Hash of everything that changes per-frame measurements (not verdict thresholds)."""
+    def measurement_settings(self) -> dict[str, Any]:
+        """Every setting that changes a per-frame measurement.
+
+        The measurement sections, plus the verdict settings the measurement stage reads:
+        ``min_coverage`` (frames below it are not matched) and, with ``enhance.mode = auto``,
+        the threshold (the auto-enhance decision depends on it).
+        """
         d = self.to_dict()
-        keep = {k: d[k] for k in MEASUREMENT_SECTIONS}
-        blob = json.dumps(keep, sort_keys=True, default=str).encode()
+        keep: dict[str, Any] = {k: d[k] for k in MEASUREMENT_SECTIONS}
+        used = {"min_coverage": self.verdict.min_coverage}
+        if self.enhance.mode == "auto":
+            used["threshold_px"] = self.verdict.threshold_px
+            used["threshold_rel_diag"] = self.verdict.threshold_rel_diag
+        keep["verdict"] = used
+        return keep
+
+    def measurement_fingerprint(self, **extra: Any) -> str:
+        """Hash of ``measurement_settings`` (and ``extra``, e.g. the record layout version)."""
+        blob = json.dumps({**self.measurement_settings(), **extra}, sort_keys=True,
+                          default=str).encode()
         return hashlib.sha256(blob).hexdigest()[:16]
 
 

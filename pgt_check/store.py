@@ -156,6 +156,7 @@ class RecordStore:
         resume: bool = False,
         overwrite: bool = False,
         settings: Mapping[str, Any] | None = None,
+        frame_ids: Iterable[str] | None = None,
         **kwargs: Any,
     ) -> RecordStore:
         """Open the store of ``out_dir`` for a run with ``fingerprint``.
@@ -169,7 +170,10 @@ class RecordStore:
         store.out_dir.mkdir(parents=True, exist_ok=True)
         store._open_file()
         try:
-            store._apply_policy(resume=resume, overwrite=overwrite, settings=settings)
+            store._apply_policy(
+                resume=resume, overwrite=overwrite, settings=settings,
+                frame_ids=None if frame_ids is None else list(frame_ids),
+            )
         except BaseException:
             store.close()
             raise
@@ -203,7 +207,8 @@ class RecordStore:
             return {}
 
     def _apply_policy(
-        self, *, resume: bool, overwrite: bool, settings: Mapping[str, Any] | None
+        self, *, resume: bool, overwrite: bool, settings: Mapping[str, Any] | None,
+        frame_ids: list[str] | None = None,
     ) -> None:
         assert self._file is not None
         has_records = self.path.stat().st_size > 0
@@ -235,15 +240,19 @@ class RecordStore:
                     info.get("version"),
                     __version__,
                 )
-        self._write_run_info(settings)
+        self._write_run_info(settings, frame_ids)
 
-    def _write_run_info(self, settings: Mapping[str, Any] | None) -> None:
+    def _write_run_info(
+        self, settings: Mapping[str, Any] | None, frame_ids: list[str] | None = None
+    ) -> None:
         info = {
             "tool": "pgt-check",
             "version": __version__,
             "fingerprint": self.fingerprint,
             "records": RECORDS_FILE,
             "settings": dict(settings) if settings is not None else None,
+            # the run's frames in trajectory order (records are appended as frames finish)
+            "frame_ids": frame_ids,
         }
         tmp = self.run_path.with_name(self.run_path.name + ".tmp")
         tmp.write_text(json.dumps(info, indent=2, default=str) + "\n", encoding="utf-8")

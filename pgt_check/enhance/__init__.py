@@ -1,1 +1,42 @@
-"""enhance step."""
+"""Enhancement step: a render given the appearance of a reference photo (MaRINeR, reprojection).
+
+Methods are chosen by name from ``ENHANCERS``; a method's module (and torch for MaRINeR) is
+imported only when it is built.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING
+
+from pgt_check.enhance.base import EnhancedImage, Enhancer, Evidence, ReferenceView, View
+
+if TYPE_CHECKING:
+    from pgt_check.config import EnhanceConfig
+
+#: method name -> "module:class"; each class is built with ``from_config(EnhanceConfig)``
+ENHANCERS: dict[str, str] = {
+    "reproject": "pgt_check.enhance.reproject:ReprojectEnhancer",
+    "mariner": "pgt_check.enhance.mariner:MarinerEnhancer",
+}
+
+
+def make_enhancer(config: EnhanceConfig) -> Enhancer:
+    """Build the enhancement method named by ``config.method``."""
+    if config.method not in ENHANCERS:
+        raise ValueError(
+            f"unknown enhancement method {config.method!r} (available: {', '.join(ENHANCERS)})"
+        )
+    module_name, attr = ENHANCERS[config.method].split(":")
+    return getattr(importlib.import_module(module_name), attr).from_config(config)
+
+
+__all__ = [
+    "ENHANCERS",
+    "EnhancedImage",
+    "Enhancer",
+    "Evidence",
+    "ReferenceView",
+    "View",
+    "make_enhancer",
+]

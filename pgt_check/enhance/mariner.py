@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from pgt_check.enhance.base import EnhancedImage, Evidence, ReferenceView, View
 from pgt_check.errors import InputError, MissingExtraError
 
 logger = logging.getLogger(__name__)
@@ -48,19 +49,29 @@ class MarinerEnhancer:
                 raise InputError(f"MaRINeR weights not found: {err}") from err
         return self._enhancer
 
-    @property
-    def name(self) -> str:
-        return "mariner"
+    name = "mariner"
+    #: the reference's appearance is placed by matching image content to the render, so the
+    #: result keeps the render's own geometry (this frame's pose only)
+    evidence = Evidence.ABSOLUTE
 
-    def enhance(self, render: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    @classmethod
+    def from_config(cls, config: Any) -> MarinerEnhancer:
+        """From an ``EnhanceConfig`` (weights, device, short_side, iterations)."""
+        return cls(weights=config.weights, device=config.device, short_side=config.short_side,
+                   iterations=config.iterations)
+
+    def enhance_image(self, render: np.ndarray, reference: np.ndarray) -> np.ndarray:
         """render: (h, w, 3) float32 RGB [0, 1]; reference: (hr, wr, 3). Returns (h, w, 3)."""
-        import cv2
+        from pgt_check.io.images import resize_image
 
         enh = self._load()
         res = enh.enhance_working(render, reference, short_side=self.short_side,
                                   iterations=self.iterations)
         img = np.asarray(res.image, dtype=np.float32)
         h, w = render.shape[:2]
-        if img.shape[:2] != (h, w):
-            img = cv2.resize(img, (w, h), interpolation=cv2.INTER_CUBIC)
+        img = resize_image(img, (w, h), interpolation="cubic")
         return np.clip(img, 0.0, 1.0)
+
+    def enhance(self, view: View, reference: ReferenceView, renderer: Any) -> EnhancedImage:
+        image = self.enhance_image(view.render.rgb, reference.photo)
+        return EnhancedImage(image, np.ones(image.shape[:2], bool))

@@ -12,29 +12,11 @@ The frame's own photo is used only with ``mode="self"`` (an upper bound for eval
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Literal
 
 import numpy as np
 
+from pgt_check.config import ReferenceConfig
 from pgt_check.types import Frame
-
-
-@dataclass(frozen=True)
-class ReferenceConfig:
-    mode: Literal["nearest", "self", "none"] = "nearest"
-    #: scene units that count as much as ``rotation_scale_deg`` degrees; None = 10 % of the
-    #: trajectory's extent (scale-free default)
-    translation_scale: float | None = None
-    rotation_scale_deg: float = 10.0
-    time_scale_s: float | None = None
-    #: hard limits; None = no limit on translation (rotation is always limited)
-    max_translation: float | None = None
-    max_rotation_deg: float = 45.0
-    min_frame_gap: int = 1
-    #: references tried per frame; the enhanced result with the most homography inliers is
-    #: kept (a reference whose own pose is wrong paints texture on the wrong surfaces, which
-    #: costs inliers, so a second reference guards against one bad neighbour)
-    count: int = 2
 
 
 @dataclass(frozen=True)

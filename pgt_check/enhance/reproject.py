@@ -10,9 +10,13 @@ reference photo's, which closes the domain gap of colourless or blurry meshes.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
+from pgt_check.enhance.base import EnhancedImage, Evidence, ReferenceView, View
 from pgt_check.geometry.transforms import invert_rigid
+from pgt_check.render.base import Renderer
 from pgt_check.types import Camera, check_shape
 
 
@@ -75,3 +79,23 @@ def reproject_reference(
     filled[v[visible], u[visible]] = True
     out = np.where(filled[..., None], sampled, render_rgb).astype(np.float32)
     return np.clip(out, 0.0, 1.0), filled
+
+
+class ReprojectEnhancer:
+    """The reprojection method behind the enhancer interface (relative evidence: the reference
+    photo is placed by the reference's own pose)."""
+
+    name = "reproject"
+    evidence = Evidence.RELATIVE
+
+    @classmethod
+    def from_config(cls, config: Any) -> ReprojectEnhancer:
+        return cls()
+
+    def enhance(self, view: View, reference: ReferenceView, renderer: Renderer) -> EnhancedImage:
+        ref_render = renderer.render(reference.camera, reference.world_from_cam)
+        image, filled = reproject_reference(
+            view.render.rgb, view.render.depth, view.camera, view.world_from_cam,
+            reference.photo, ref_render.depth, reference.camera, reference.world_from_cam,
+        )
+        return EnhancedImage(image, filled)

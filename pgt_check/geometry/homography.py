@@ -13,6 +13,7 @@ from enum import Enum
 
 import numpy as np
 
+from pgt_check.config import HomographyConfig
 from pgt_check.types import check_shape
 
 logger = logging.getLogger(__name__)
@@ -28,20 +29,6 @@ class Reason(str, Enum):
     ILL_CONDITIONED = "ill_conditioned_homography"
     ORIENTATION_FLIP = "orientation_flip"
     DEGENERATE_MATCHES = "degenerate_matches"
-
-
-@dataclass(frozen=True)
-class HomographyConfig:
-    """Robust estimation settings (pixels are those of the images that were matched)."""
-
-    ransac_threshold_px: float = 3.0
-    confidence: float = 0.9999
-    max_iters: int = 10000
-    min_matches: int = 12
-    min_inliers: int = 12
-    max_condition: float = 1e7
-    #: the warped image may not shrink or grow by more than this factor in area
-    max_area_ratio: float = 16.0
 
 
 @dataclass(frozen=True, eq=False)

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import logging
 from dataclasses import dataclass
+from enum import Enum
 
 import numpy as np
 
@@ -17,10 +18,18 @@ from pgt_check.types import Camera, check_shape
 logger = logging.getLogger(__name__)
 
 
+class PoseReason(str, Enum):
+    """Why the PnP estimate failed (machine-readable, closed set)."""
+
+    TOO_FEW_3D_POINTS = "too_few_3d_points"
+    PNP_FAILED = "pnp_failed"
+    TOO_FEW_PNP_INLIERS = "too_few_pnp_inliers"
+
+
 @dataclass(frozen=True, eq=False)
 class PoseCorrection:
     success: bool
-    reason: str  # "" on success
+    reason: PoseReason | None  # None on success
     dt: float | None = None
     drot_deg: float | None = None
     n_inliers: int = 0
@@ -78,7 +87,7 @@ def estimate_pose_correction(
     check_shape("kpts_photo", kpts_photo, (len(kpts_render), 2))
     valid, pts = lift_keypoints(kpts_render, depth, camera, world_from_cam)
     if valid.sum() < max(4, min_inliers):
-        return PoseCorrection(False, "too_few_3d_points", n_inliers=0)
+        return PoseCorrection(False, PoseReason.TOO_FEW_3D_POINTS, n_inliers=0)
     origin = np.asarray(world_from_cam, np.float64)[:3, 3]
     local = pts[valid] - origin
     # COLMAP pixel convention: add 0.5 to OpenCV pixel coordinates and principal point
@@ -97,14 +106,14 @@ def estimate_pose_correction(
         logger.debug("PnP failed: %s", err)
         res = None
     if res is None:
-        return PoseCorrection(False, "pnp_failed")
+        return PoseCorrection(False, PoseReason.PNP_FAILED)
     n_inl = int(np.sum(res["inlier_mask"]))
     if n_inl < min_inliers:
-        return PoseCorrection(False, "too_few_pnp_inliers", n_inliers=n_inl)
+        return PoseCorrection(False, PoseReason.TOO_FEW_PNP_INLIERS, n_inliers=n_inl)
     cfw = res["cam_from_world"]
     mat = cfw.matrix() if callable(getattr(cfw, "matrix", None)) else np.asarray(cfw.matrix)
     cam_from_local = np.vstack([np.asarray(mat, np.float64), [0, 0, 0, 1]])
     local_from_cam = invert_rigid(cam_from_local)
     world_from_cam_est = make_rigid(local_from_cam[:3, :3], local_from_cam[:3, 3] + origin)
     dt, dr = pose_difference(np.asarray(world_from_cam, np.float64), world_from_cam_est)
-    return PoseCorrection(True, "", dt, dr, n_inl, world_from_cam_est)
+    return PoseCorrection(True, None, dt, dr, n_inl, world_from_cam_est)

@@ -70,13 +70,19 @@ def image_size(path: str | Path) -> tuple[int, int]:
     return int(width), int(height)
 
 
-def resize_image(image: np.ndarray, size: tuple[int, int]) -> np.ndarray:
-    """Resize an (H, W[, C]) image to ``size`` = (width, height) with area interpolation.
+def resize_image(
+    image: np.ndarray, size: tuple[int, int], interpolation: str = "area"
+) -> np.ndarray:
+    """Resize an (H, W[, C]) image to ``size`` = (width, height).
 
+    interpolation: "area" (default; right for shrinking), "linear" or "cubic" (for enlarging).
     Returns the input itself when it already has that size.
     """
     import cv2
 
+    flags = {"area": cv2.INTER_AREA, "linear": cv2.INTER_LINEAR, "cubic": cv2.INTER_CUBIC}
+    if interpolation not in flags:
+        raise ValueError(f"interpolation must be one of {sorted(flags)}, got {interpolation!r}")
     if (image.shape[1], image.shape[0]) == tuple(size):
         return image
-    return cv2.resize(image, tuple(size), interpolation=cv2.INTER_AREA)
+    return cv2.resize(image, tuple(size), interpolation=flags[interpolation])

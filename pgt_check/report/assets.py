@@ -21,7 +21,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from pgt_check.runner import FrameImages
+    from pgt_check.measure.checker import FrameImages
 
 logger = logging.getLogger(__name__)
 
@@ -250,7 +250,7 @@ def index_path(out_dir: str | Path) -> Path:
 
 def write_assets_index(out_dir: str | Path, assets: Mapping[str, Mapping[str, str]]) -> None:
     """Store ``{frame_id: {kind: relative path}}`` as ``assets/index.json``."""
-    from pgt_check.report.outputs import atomic_write_text
+    from pgt_check.report.files import atomic_write_text
 
     path = index_path(out_dir)
     path.parent.mkdir(parents=True, exist_ok=True)

@@ -14,23 +14,66 @@ from pathlib import Path
 
 from pgt_check.config import RunConfig, merge
 from pgt_check.errors import InputError
+from pgt_check.measure.record import FrameMeasurement, OldRecordError
+from pgt_check.store import FINGERPRINT_KEY
 
 
-def load_run(out_dir: Path) -> tuple[list[dict], dict]:
-    """Read records.jsonl and config.json of a finished run."""
-    rec_path, cfg_path = out_dir / "records.jsonl", out_dir / "config.json"
-    for p in (rec_path, cfg_path):
+def load_run(out_dir: Path) -> tuple[list[FrameMeasurement], dict]:
+    """The stored measurements (trajectory order) and config.json of a finished run.
+
+    Reads the current records of ``records.jsonl`` (the fingerprint and frame order come from
+    ``run.json``); records of another pgt-check record layout are an InputError.
+    """
+    from pgt_check.store import RUN_FILE, iter_records
+
+    rec_path, cfg_path, run_path = (
+        out_dir / "records.jsonl",
+        out_dir / "config.json",
+        out_dir / RUN_FILE,
+    )
+    for p in (rec_path, cfg_path, run_path):
         if not p.is_file():
             raise InputError(f"{p} not found: is {out_dir} a pgt-check output directory?")
-    records = []
-    for i, line in enumerate(rec_path.read_text().splitlines(), start=1):
-        if not line.strip():
-            continue
-        try:
-            records.append(json.loads(line))
-        except json.JSONDecodeError as err:
-            raise InputError(f"{rec_path}:{i}: not a JSON record ({err})") from err
-    return records, json.loads(cfg_path.read_text())
+    try:
+        info = json.loads(run_path.read_text())
+        cfg = json.loads(cfg_path.read_text())
+    except ValueError as err:
+        raise InputError(f"{out_dir}: run.json or config.json is not valid JSON ({err})") from err
+    latest = {
+        str(r["frame_id"]): r
+        for r in iter_records(rec_path)
+        if r.get(FINGERPRINT_KEY) == info.get("fingerprint")
+    }
+    order = info.get("frame_ids") or list(latest)
+    missing = [fid for fid in order if fid not in latest]
+    if missing:
+        raise InputError(
+            f"{out_dir}: {len(missing)} of {len(order)} frames have no record (e.g. "
+            f"{missing[0]!r}): the run did not finish; resume it first"
+        )
+    try:
+        return [FrameMeasurement.from_json(latest[fid]) for fid in order], cfg
+    except OldRecordError as err:
+        raise InputError(f"{rec_path}: {err}") from err
+
+
+def _warn_stale_auto_decisions(records: list[FrameMeasurement], config: RunConfig) -> None:
+    """``--enhance auto`` decided per frame with the threshold of the measuring run; say so when
+    re-judging with another one (re-measure with ``pgt-check ... --resume`` to update them)."""
+    stale = [
+        m
+        for m in records
+        if m.auto_threshold_px is not None
+        and abs(m.auto_threshold_px - config.verdict.threshold_for(m.width, m.height)) > 1e-9
+    ]
+    if stale:
+        print(
+            f"pgt-check report: note: {len(stale)} frames were measured with --enhance auto "
+            f"under a threshold of {stale[0].auto_threshold_px:.1f} px; which of them were "
+            "enhanced was decided with that threshold (rerun pgt-check with the new threshold "
+            "and --resume to re-measure them)",
+            file=sys.stderr,
+        )
 
 
 def report_main(argv: Sequence[str]) -> int:
@@ -51,7 +94,7 @@ def report_main(argv: Sequence[str]) -> int:
     except SystemExit as exc:
         return int(exc.code or 0)
     from pgt_check.report.outputs import write_outputs
-    from pgt_check.runner import apply_verdicts
+    from pgt_check.verdict import apply_verdicts
 
     try:
         out = Path(args.out_dir)
@@ -64,6 +107,7 @@ def report_main(argv: Sequence[str]) -> int:
         if args.absolute_paths:
             override["absolute_paths"] = True
         config = RunConfig.from_dict(merge(cfg, override))
+        _warn_stale_auto_decisions(records, config)
         old = (
             json.loads((out / "summary.json").read_text())
             if (out / "summary.json").is_file()

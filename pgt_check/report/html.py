@@ -320,8 +320,8 @@ def build_report(
     ``pgt-check report`` does). Only assets whose files exist are referenced. Absolute paths of
     this machine are shortened unless ``absolute_paths``. Returns the path of report.html.
     """
+    from pgt_check.report.files import atomic_write_text
     from pgt_check.report.junit import junit_xml_text
-    from pgt_check.report.outputs import atomic_write_text
     from pgt_check.report.plots import write_plots
 
     out_dir = Path(out_dir)

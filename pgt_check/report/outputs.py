@@ -1,4 +1,4 @@
-"""Run outputs: records.jsonl, frames.csv, summary.json, config.json (written atomically), and
+"""Run outputs: frames.csv, summary.json, config.json (written atomically), and
 the human/CI report (report.html, junit.xml; see ``pgt_check.report.html.build_report``)."""
 
 from __future__ import annotations
@@ -8,7 +8,6 @@ import io
 import json
 import logging
 import math
-import os
 import platform
 import statistics
 from importlib import metadata
@@ -17,68 +16,25 @@ from typing import Any
 
 from pgt_check import __version__
 from pgt_check.config import RunConfig
+from pgt_check.measure.record import MEASUREMENT_COLUMNS, TIMING_COLUMNS
+from pgt_check.report.files import atomic_write_text
 
 logger = logging.getLogger(__name__)
 
+def _frame_columns() -> tuple[str, ...]:
+    """frames.csv columns: id, timestamp, path, the verdict, then the measurement's CSV columns
+    (``pgt_check.measure.record.MEASUREMENT_COLUMNS``); the threshold sits beside the error."""
+    measured = [c.name for c in MEASUREMENT_COLUMNS if c.csv]
+    head, rest = measured[:3], measured[3:]
+    i = rest.index("corner_error_px") + 1
+    return (*head, "verdict", "reason", *rest[:i], "threshold_px", *rest[i:])
+
+
 #: frames.csv columns, in order. ``corner_error_px`` is the one the verdict used.
-FRAME_COLUMNS = (
-    "frame_id",
-    "timestamp",
-    "image_path",
-    "verdict",
-    "reason",
-    "corner_error_px",
-    "threshold_px",
-    "n_matches",
-    "n_inliers",
-    "inlier_ratio",
-    "coverage",
-    "shift_dx_px",
-    "shift_dy_px",
-    "zoom",
-    "n_kpts_render",
-    "n_kpts_photo",
-    "width",
-    "height",
-    "match_width",
-    "match_height",
-    "shading",
-    "corner_error_px_raw",
-    "shift_dx_px_raw",
-    "shift_dy_px_raw",
-    "zoom_raw",
-    "n_matches_raw",
-    "n_inliers_raw",
-    "inlier_ratio_raw",
-    "corner_error_px_enhanced",
-    "n_matches_enhanced",
-    "n_inliers_enhanced",
-    "inlier_ratio_enhanced",
-    "enhanced",
-    "enhanced_why",
-    "verdict_path",
-    "reference_id",
-    "pose_dt",
-    "pose_drot_deg",
-    "pose_inliers",
-    "t_load_s",
-    "t_render_s",
-    "t_match_s",
-    "t_homography_s",
-    "t_enhance_s",
-    "t_pose_s",
-    "time_s",
-)
+FRAME_COLUMNS = _frame_columns()
 
-STAGES = ("t_load_s", "t_render_s", "t_match_s", "t_homography_s", "t_enhance_s", "t_pose_s",
-          "time_s")
-
-
-def atomic_write_text(path: Path, text: str) -> None:
-    """Write to a temporary name beside ``path`` and rename, so readers never see half a file."""
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
+#: timing columns (left out when comparing runs)
+STAGES = TIMING_COLUMNS
 
 
 def _clean(value: Any) -> Any:
@@ -128,7 +84,7 @@ def versions() -> dict[str, str]:
 
 def timing_summary(records: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
     out = {}
-    for key in STAGES:
+    for key in TIMING_COLUMNS:
         vals = sorted(r[key] for r in records if isinstance(r.get(key), (int, float)))
         if not vals:
             continue
@@ -181,13 +137,14 @@ def write_outputs(
     report: bool = True,
     assets: dict[str, dict[str, str]] | None = None,
 ) -> dict[str, Any]:
-    """Write records.jsonl, frames.csv, config.json and summary.json into ``out``; return the
-    summary. With ``report`` (default) also report.html, its plots and junit.xml; ``assets``
-    (``{frame_id: {kind: relative path}}`` from ``write_frame_assets``) become the detail images,
-    None keeps whatever ``assets/index.json`` already lists."""
+    """Write frames.csv, config.json and summary.json into ``out`` from the verdict rows
+    (``pgt_check.verdict.apply_verdicts``); return the summary. records.jsonl is the
+    measurement store and is never rewritten here. With ``report`` (default) also report.html,
+    its plots and junit.xml; ``assets`` (``{frame_id: {kind: relative path}}`` from
+    ``write_frame_assets``) become the detail images, None keeps whatever
+    ``assets/index.json`` already lists."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "records.jsonl", "".join(json.dumps(_clean(r)) + "\n" for r in records))
     atomic_write_text(out / "frames.csv", frames_csv_text(records))
     atomic_write_text(out / "config.json", json.dumps(config.to_dict(), indent=2) + "\n")
     summary = build_summary(records, config, extra)

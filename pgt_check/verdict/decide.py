@@ -12,6 +12,7 @@ import numpy as np
 
 from pgt_check.config import VerdictConfig
 from pgt_check.geometry.homography import auc_at_thresholds
+from pgt_check.measure.record import FrameMeasurement, MeasureReason
 
 
 class Verdict(str, Enum):
@@ -22,34 +23,32 @@ class Verdict(str, Enum):
 
 def resolve_threshold_px(config: VerdictConfig, width: int, height: int) -> float:
     """The PASS threshold in original photo pixels for an image of this size."""
-    if config.threshold_px is not None:
-        return float(config.threshold_px)
-    return float(config.threshold_rel_diag * math.hypot(width, height))
+    return config.threshold_for(width, height)
 
 
-def decide(m: Mapping[str, Any], config: VerdictConfig) -> tuple[Verdict, str]:
-    """Verdict and reason for one frame's measurement record.
+def decide(m: FrameMeasurement, config: VerdictConfig) -> tuple[Verdict, str]:
+    """Verdict and reason for one frame's measurement.
 
-    ``m`` needs: ``error`` (a reason string set by the measurement stage, or "") ,
-    ``coverage``, ``n_inliers``, ``inlier_ratio``, ``homography_reason``, ``corner_error_px``,
-    ``width``, ``height``. Order of checks: measurement error (missing image, internal error),
-    render coverage, homography failure, inlier count/ratio, then the threshold.
+    Order of checks: measurement error (missing image, internal error), render coverage,
+    homography failure of the deciding path, inlier count/ratio, then the threshold.
     """
-    if m.get("error"):
-        return Verdict.UNVERIFIABLE, str(m["error"])
-    coverage = m.get("coverage")
-    if coverage is not None and coverage < config.min_coverage:
-        return Verdict.UNVERIFIABLE, "low_coverage"
-    if m.get("homography_reason"):
-        return Verdict.UNVERIFIABLE, str(m["homography_reason"])
-    if (m.get("n_inliers") or 0) < config.min_inliers:
+    if m.error is not MeasureReason.NONE:
+        return Verdict.UNVERIFIABLE, m.error.value
+    if m.coverage is not None and m.coverage < config.min_coverage:
+        return Verdict.UNVERIFIABLE, MeasureReason.LOW_COVERAGE.value
+    path = m.chosen
+    if path is None:
+        return Verdict.UNVERIFIABLE, "not_measured"
+    if path.reason:
+        return Verdict.UNVERIFIABLE, path.reason
+    if path.n_inliers < config.min_inliers:
         return Verdict.UNVERIFIABLE, "too_few_inliers"
-    if (m.get("inlier_ratio") or 0.0) < config.min_inlier_ratio:
+    if path.inlier_ratio < config.min_inlier_ratio:
         return Verdict.UNVERIFIABLE, "low_inlier_ratio"
-    err = m.get("corner_error_px")
+    err = path.corner_error_px
     if err is None or not math.isfinite(err):
         return Verdict.UNVERIFIABLE, "non_finite_homography"
-    threshold = resolve_threshold_px(config, int(m["width"]), int(m["height"]))
+    threshold = config.threshold_for(m.width, m.height)
     if err <= threshold:
         return Verdict.PASS, ""
     return Verdict.FAIL, f"corner_error {err:.1f} px > {threshold:.1f} px"
