@@ -20,7 +20,8 @@ from _common import REPORTS, command_line, machine, md_table, shared_data  # noq
 
 from pgt_check.config import RunConfig  # noqa: E402
 from pgt_check.io import read_trajectory  # noqa: E402
-from pgt_check.runner import FrameChecker, apply_verdicts  # noqa: E402
+from pgt_check.measure import FrameChecker  # noqa: E402
+from pgt_check.verdict import apply_verdicts  # noqa: E402
 
 STAGES = ("t_load_s", "t_render_s", "t_match_s", "t_homography_s", "time_s")
 

@@ -31,7 +31,7 @@ from _common import REPORTS, command_line, machine, md_table, shared_data  # noq
 from pgt_check.config import RunConfig  # noqa: E402
 from pgt_check.evaluation import perturb_trajectory, roc_auc  # noqa: E402
 from pgt_check.io import read_trajectory  # noqa: E402
-from pgt_check.runner import FrameChecker, pick_references  # noqa: E402
+from pgt_check.measure import FrameChecker, pick_references  # noqa: E402
 from pgt_check.types import Trajectory  # noqa: E402
 from pgt_check.verdict import resolve_threshold_px  # noqa: E402
 

@@ -32,7 +32,8 @@ def sample_scene() -> Path:
 def check_frames():
     """Measure and judge every frame of an in-memory trajectory (the runner's stages 1 + 2)."""
     from pgt_check.config import RunConfig
-    from pgt_check.runner import FrameChecker, apply_verdicts, pick_references
+    from pgt_check.measure import FrameChecker, pick_references
+    from pgt_check.verdict import apply_verdicts
 
     def _check(traj, mesh: Path, **config) -> list[dict]:
         cfg = RunConfig.from_dict(

@@ -31,7 +31,7 @@ from report_testdata import (  # noqa: E402
 from pgt_check.config import RunConfig  # noqa: E402
 from pgt_check.report.assets import select_detail_frames, write_frame_assets  # noqa: E402
 from pgt_check.report.outputs import write_outputs  # noqa: E402
-from pgt_check.runner import FrameImages  # noqa: E402
+from pgt_check.measure import FrameImages  # noqa: E402
 
 pytestmark = pytest.mark.browser
 

@@ -23,7 +23,7 @@ import subprocess
 import sys
 import time
 import zlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -31,7 +31,9 @@ import numpy as np
 import pytest
 
 from pgt_check.config import RunConfig
+from pgt_check.enhance.base import Evidence
 from pgt_check.executor import CheckerSetupError, ExecutorStats, iter_results
+from pgt_check.measure import FrameMeasurement
 from pgt_check.report.outputs import STAGES
 from pgt_check.types import Camera, Frame, Trajectory
 
@@ -68,8 +70,8 @@ class FakeChecker:
         self.n_built = 1
         self.closed = False
 
-    def measure(self, frame: Frame, keep: Any = None) -> dict[str, Any]:
-        from pgt_check.runner import base_record
+    def measure(self, frame: Frame, keep: Any = None) -> FrameMeasurement:
+        from pgt_check.measure import MeasureReason, PathMeasurement, Timings, failed_measurement
 
         fid = frame.frame_id
         if fid in self.crash_ids:
@@ -89,28 +91,34 @@ class FakeChecker:
         rng = np.random.default_rng(zlib.crc32(fid.encode()))
         img = rng.random((self.work, self.work, 3), dtype=np.float32)
         score = float(np.abs(np.fft.rfft2(img[..., 0])).mean())
-        rec = base_record(frame)
-        rec.update(
-            coverage=0.9,
-            shading="vertex",
-            n_matches=80,
-            n_inliers=60,
-            inlier_ratio=0.75,
+        path = PathMeasurement(
+            kind="raw", method="render", evidence=Evidence.ABSOLUTE, n_kpts_render=100,
+            n_kpts_photo=100, n_matches=80, n_inliers=60, inlier_ratio=0.75, reason="",
+            photo_from_render=((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)),
             corner_error_px=round((zlib.crc32(fid.encode()) % 40) / 10.0, 3),
-            shift_dx_px=round(float(frame.world_from_cam[0, 3]), 6),
+            shift_dx_px=round(float(frame.world_from_cam[0, 3]), 6), shift_dy_px=0.0,
             zoom=round(score, 6),
-            pid=os.getpid(),
-            time_s=time.perf_counter() - t,
         )
-        return rec
+        m = failed_measurement(frame, MeasureReason.NONE)
+        # the worker's pid travels in error_detail (not in frames.csv) so tests count workers
+        return replace(
+            m, coverage=0.9, shading="vertex", error_detail=f"pid={os.getpid()}", raw=path,
+            verdict_path="raw",
+            timings=Timings(total=time.perf_counter() - t),
+        )
 
     def close(self) -> None:
         self.closed = True
 
 
 def by_id(records) -> dict[str, dict]:
+    rows = [r.row() if isinstance(r, FrameMeasurement) else r for r in records]
     return {
-        r["frame_id"]: {k: v for k, v in r.items() if k not in TIMING | {"pid"}} for r in records
+        r["frame_id"]: {
+            k: v for k, v in r.items()
+            if k not in TIMING and not (k == "error_detail" and v.startswith("pid="))
+        }
+        for r in rows
     }
 
 
@@ -205,7 +213,7 @@ def test_process_matches_serial():
     proc, stats = run_records(RunConfig(executor="process", workers=2), 30, delay_s=0.01)
     assert by_id(proc) == by_id(serial)
     assert len(proc) == 30 and stats.worker_crashes == 0
-    assert len({r["pid"] for r in proc}) == 2  # both workers were used, each built once
+    assert len({r.error_detail for r in proc}) == 2  # both workers were used, each built once
 
 
 def test_process_crash_is_retried_then_recorded(tmp_path):
@@ -269,11 +277,16 @@ def test_check_frames_store_and_rerun(tmp_path, monkeypatch):
     assert cli_main(cli_argv(out, "--max-keypoints", "100", "--resume"), monkeypatch) in (0, 1)
     summary = json.loads((out / "summary.json").read_text())
     assert summary["executor"]["frames_measured"] == 40
-    # a changed verdict threshold never re-measures
+    # a verdict-only setting never re-measures
     assert cli_main(
-        cli_argv(out, "--max-keypoints", "100", "--threshold-px", "2"), monkeypatch
+        cli_argv(out, "--max-keypoints", "100", "--min-inliers", "30"), monkeypatch
     ) in (0, 1)
     assert json.loads((out / "summary.json").read_text())["executor"]["frames_measured"] == 0
+    # the threshold drives --enhance auto (the default): it is a measurement setting there
+    with pytest.raises(InputError, match="verdict.threshold_px"):
+        cfg = RunConfig.from_dict({"out": str(out), "match": {"max_keypoints": 100},
+                                   "verdict": {"threshold_px": 2.0}})
+        check_frames(list(make_frames(3)), cfg, FakeChecker)
 
 
 def test_sigint_stops_cleanly_and_resume_completes(tmp_path, monkeypatch):
@@ -325,11 +338,14 @@ def test_sigkill_and_resume_give_the_same_frames_csv(tmp_path, monkeypatch):
     assert csv_without_timing(out / "frames.csv") == csv_without_timing(ref / "frames.csv")
     summary = json.loads((out / "summary.json").read_text())
     assert summary["executor"]["frames_reused"] == done_before
-    # records.jsonl was compacted into frame order and is still a valid store
+    # records.jsonl is append-only (completion order, never rewritten) and holds every frame
+    # exactly once; run.json keeps the trajectory order for `pgt-check report`
     ids = [
         json.loads(line)["frame_id"] for line in (out / "records.jsonl").read_text().splitlines()
     ]
-    assert ids == [f"f{i:06d}" for i in range(40)]
+    assert sorted(ids) == [f"f{i:06d}" for i in range(40)]
+    run_info = json.loads((out / "run.json").read_text())
+    assert run_info["frame_ids"] == [f"f{i:06d}" for i in range(40)]
 
 
 MEMORY_CHILD = """
@@ -343,7 +359,7 @@ n, out = int(sys.argv[1]), sys.argv[2]
 cfg = RunConfig(executor="process", workers=2)
 with RecordStore.open(out, "fp") as store:
     for rec in iter_results(t.make_frames(n), functools.partial(t.FakeChecker, work=128), cfg):
-        store.append(rec)
+        store.append(rec.to_json())
     assert len(store.done_ids()) == n
 print(json.dumps({"self_kb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
                   "children_kb": resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss}))

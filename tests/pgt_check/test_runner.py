@@ -3,7 +3,8 @@ import pytest
 
 from pgt_check.config import RunConfig
 from pgt_check.io import read_trajectory
-from pgt_check.runner import FrameChecker, PathResult, pick_references, prepare_photo
+from pgt_check.io.photo import prepare_photo
+from pgt_check.measure import EnhanceWhy, FrameChecker, PathResult, pick_references
 from pgt_check.types import Camera
 
 
@@ -16,12 +17,13 @@ def _path(success=True, inliers=100, err=2.0, reason=""):
 @pytest.mark.parametrize(
     "path,expected",
     [
-        (_path(), (False, "raw_decisive")),
-        (_path(err=40.0), (False, "raw_decisive")),
-        (_path(success=False, reason="too_few_inliers"), (True, "raw_too_few_inliers")),
-        (_path(inliers=10), (True, "raw_few_inliers")),
-        (_path(err=12.0), (True, "raw_near_threshold")),
-        (_path(err=23.0), (True, "raw_near_threshold")),
+        (_path(), (EnhanceWhy.RAW_DECISIVE, "")),
+        (_path(err=40.0), (EnhanceWhy.RAW_DECISIVE, "")),
+        (_path(success=False, reason="too_few_inliers"),
+         (EnhanceWhy.RAW_FAILED, "too_few_inliers")),
+        (_path(inliers=10), (EnhanceWhy.RAW_FEW_INLIERS, "")),
+        (_path(err=12.0), (EnhanceWhy.RAW_NEAR_THRESHOLD, "")),
+        (_path(err=23.0), (EnhanceWhy.RAW_NEAR_THRESHOLD, "")),
     ],
 )
 def test_auto_policy(path, expected):
@@ -31,10 +33,10 @@ def test_auto_policy(path, expected):
 
 def test_never_and_always():
     never = FrameChecker(RunConfig.from_dict({"enhance": {"mode": "never"}}))
-    assert never._enhance_decision(_path(), 16.0) == (False, "mode_never")
+    assert never._enhance_decision(_path(), 16.0) == (EnhanceWhy.MODE_NEVER, "")
     assert RunConfig().enhance.mode == "auto"  # the default
     always = FrameChecker(RunConfig.from_dict({"enhance": {"mode": "always"}}))
-    assert always._enhance_decision(_path(), 16.0) == (True, "mode_always")
+    assert always._enhance_decision(_path(), 16.0) == (EnhanceWhy.MODE_ALWAYS, "")
 
 
 def test_prepare_photo_scales_camera_for_resized_images():
@@ -56,7 +58,7 @@ def _measure_sample(sample_scene, **enhance):
     )
     checker = FrameChecker(cfg, pick_references(traj, traj.frames, cfg))
     try:
-        return {f.frame_id: checker.measure(f) for f in traj.frames}
+        return {f.frame_id: checker.measure(f).row() for f in traj.frames}
     finally:
         checker.close()
 
@@ -109,7 +111,7 @@ def test_mariner_path_wiring_with_random_weights(sample_scene, tmp_path):
                      "reference": {"count": 1}}}
     )
     checker = FrameChecker(cfg, pick_references(traj, traj.frames, cfg))
-    rec = checker.measure(traj.frames[0])
+    rec = checker.measure(traj.frames[0]).row()
     checker.close()
     assert rec["error"] == "", rec["error_detail"]
     assert rec["enhanced"] and rec["t_enhance_s"] > 0

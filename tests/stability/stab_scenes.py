@@ -18,7 +18,8 @@ import numpy as np
 from pgt_check.config import RunConfig
 from pgt_check.geometry.transforms import make_rigid
 from pgt_check.render import MeshData, make_renderer, mesh_from_trimesh
-from pgt_check.runner import FrameChecker, apply_verdicts
+from pgt_check.measure import FrameChecker
+from pgt_check.verdict import apply_verdicts
 from pgt_check.types import Camera, Frame
 
 #: small working camera used by most cases (fast on two busy cores)

@@ -7,6 +7,7 @@ import json
 import os
 import re
 import xml.etree.ElementTree as ET
+from dataclasses import replace
 from html.parser import HTMLParser
 from pathlib import Path
 from typing import Any
@@ -14,6 +15,14 @@ from typing import Any
 import numpy as np
 
 from pgt_check.config import RunConfig
+from pgt_check.enhance.base import Evidence
+from pgt_check.measure import (
+    EnhanceWhy,
+    FrameMeasurement,
+    MeasureReason,
+    PathMeasurement,
+    Timings,
+)
 from pgt_check.report.outputs import FRAME_COLUMNS
 
 XSD = Path(__file__).parent / "fixtures" / "junit.xsd"
@@ -24,7 +33,7 @@ SCRIPT_BREAKER = "</script><script>alert(2)</script><!--"
 def synthetic_measurements(
     n: int = 60, seed: int = 0, enhanced: bool = False, hostile: bool = True
 ) -> list[dict[str, Any]]:
-    """Stage-1 records (keys of runner.base_record) with a mix of good, bad and failed frames."""
+    """Flat stage-1 records (the layout of frames.csv; ``from_flat`` types them) with a mix of good, bad and failed frames."""
     rng = np.random.default_rng(seed)
     out = []
     for i in range(n):
@@ -111,10 +120,58 @@ def synthetic_measurements(
     return out
 
 
-def judged(records: list[dict[str, Any]], config: RunConfig | None = None) -> list[dict[str, Any]]:
-    from pgt_check.runner import apply_verdicts
+def _path(rec: dict[str, Any], kind: str, suffix: str) -> PathMeasurement:
+    """One path of a flat synthetic record (keys with ``suffix``; the unsuffixed keys hold the
+    deciding path)."""
+    err = rec.get(f"corner_error_px{suffix}")
+    failed = rec.get("homography_reason") and not suffix or err is None
+    return PathMeasurement(
+        kind=kind, method="render" if kind == "raw" else "reproject",
+        evidence=Evidence.ABSOLUTE if kind == "raw" else Evidence.RELATIVE,
+        n_kpts_render=rec.get("n_kpts_render") or 0, n_kpts_photo=rec.get("n_kpts_photo") or 0,
+        n_matches=rec.get(f"n_matches{suffix}") or rec.get("n_matches") or 0,
+        n_inliers=rec.get(f"n_inliers{suffix}") or 0,
+        inlier_ratio=rec.get(f"inlier_ratio{suffix}") or 0.0,
+        reason=(rec.get("homography_reason") or "too_few_matches") if failed else "",
+        photo_from_render=None if failed else tuple(map(tuple, np.eye(3))),
+        corner_error_px=None if failed else err,
+        shift_dx_px=None if failed else rec.get("shift_dx_px"),
+        shift_dy_px=None if failed else rec.get("shift_dy_px"),
+        zoom=None if failed else rec.get("zoom"),
+        reference_id=rec.get("reference_id") if kind == "enhanced" else None,
+    )
 
-    return apply_verdicts(records, config or RunConfig())
+
+def from_flat(rec: dict[str, Any]) -> FrameMeasurement:
+    """A FrameMeasurement from a flat synthetic record (the layout of frames.csv)."""
+    base = FrameMeasurement(
+        frame_id=rec["frame_id"], timestamp=rec["timestamp"], image_path=rec["image_path"],
+        width=rec["width"], height=rec["height"], center=tuple(rec["center"]),
+        error=MeasureReason(rec.get("error") or ""), error_detail=rec.get("error_detail") or "",
+        coverage=rec.get("coverage"), shading=rec.get("shading"),
+        match_width=rec.get("match_width"), match_height=rec.get("match_height"),
+        timings=Timings(load=rec.get("t_load_s"), render=rec.get("t_render_s"),
+                        match=rec.get("t_match_s"), homography=rec.get("t_homography_s"),
+                        total=rec.get("time_s")),
+    )
+    if base.error is not MeasureReason.NONE:
+        return base
+    if "corner_error_px_raw" not in rec:  # raw path only
+        return replace(base, raw=_path(rec, "raw", ""), verdict_path="raw")
+    raw = replace(_path(rec, "raw", "_raw"), n_inliers=rec.get("n_inliers_raw") or 0)
+    enh = _path(rec, "enhanced", "_enhanced") if rec.get("enhanced") else None
+    return replace(
+        base, raw=raw, enhanced=enh, enhance_ran=bool(rec.get("enhanced")),
+        enhance_why=EnhanceWhy.RAW_FEW_INLIERS if rec.get("enhanced") else EnhanceWhy.RAW_DECISIVE,
+        verdict_path="enhanced" if enh is not None else "raw",
+    )
+
+
+def judged(records: list[dict[str, Any]], config: RunConfig | None = None) -> list[dict[str, Any]]:
+    from pgt_check.verdict import apply_verdicts
+
+    ms = [r if isinstance(r, FrameMeasurement) else from_flat(r) for r in records]
+    return apply_verdicts(ms, config or RunConfig())
 
 
 class PageParser(HTMLParser):

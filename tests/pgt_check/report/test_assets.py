@@ -18,7 +18,7 @@ from pgt_check.report.assets import (
     write_assets_index,
     write_frame_assets,
 )
-from pgt_check.runner import FrameImages
+from pgt_check.measure import FrameImages
 
 
 def rec(fid: str, verdict: str, err: float | None) -> dict:

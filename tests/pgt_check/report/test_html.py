@@ -26,7 +26,7 @@ from pgt_check.report.html import (
     table_value,
 )
 from pgt_check.report.outputs import build_summary, write_outputs
-from pgt_check.runner import FrameImages
+from pgt_check.measure import FrameImages
 
 
 def _images(seed: int) -> FrameImages:

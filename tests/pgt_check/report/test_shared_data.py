@@ -17,7 +17,7 @@ from pgt_check.config import RunConfig
 from pgt_check.report.assets import THUMB_MAX, select_detail_frames, write_frame_assets
 from pgt_check.report.junit import junit_xml_text
 from pgt_check.report.outputs import write_outputs
-from pgt_check.runner import FrameImages
+from pgt_check.measure import FrameImages
 
 pytestmark = pytest.mark.shared_data
 

@@ -1,17 +1,30 @@
 import math
 
+import numpy as np
 import pytest
 
 from pgt_check.config import VerdictConfig
+from pgt_check.enhance.base import Evidence
+from pgt_check.measure import FrameMeasurement, MeasureReason, PathMeasurement
 from pgt_check.verdict import Verdict, decide, gate, resolve_threshold_px, systematic_offset
 from pgt_check.verdict.decide import run_statistics
 
 
-def _m(**kw):
-    base = dict(error="", coverage=0.8, homography_reason="", n_inliers=100, inlier_ratio=0.5,
-                corner_error_px=2.0, width=640, height=480)
-    base.update(kw)
-    return base
+def _m(error="", coverage=0.8, homography_reason="", n_inliers=100, inlier_ratio=0.5,
+       corner_error_px=2.0):
+    """A measurement whose raw path decides, with the given fields."""
+    ok = not homography_reason
+    path = PathMeasurement(
+        kind="raw", method="render", evidence=Evidence.ABSOLUTE, n_kpts_render=500,
+        n_kpts_photo=500, n_matches=200, n_inliers=n_inliers, inlier_ratio=inlier_ratio,
+        reason=homography_reason, photo_from_render=tuple(map(tuple, np.eye(3))) if ok else None,
+        corner_error_px=corner_error_px if ok else None,
+    )
+    return FrameMeasurement(
+        frame_id="f", timestamp=0, image_path="f.png", width=640, height=480,
+        center=(0.0, 0.0, 0.0), error=MeasureReason(error), coverage=coverage, raw=path,
+        verdict_path="raw",
+    )
 
 
 def test_threshold_defaults_to_fraction_of_diagonal():
