@@ -16,6 +16,11 @@ from pathlib import Path
 
 import numpy as np
 
+from pgt_check._checks import check_shape
+from pgt_check.geometry.transforms import invert_rigid
+
+__all__ = ["CAMERA_MODELS", "Camera", "Frame", "Trajectory", "check_shape"]
+
 # COLMAP camera models we accept, with their parameter names (COLMAP order).
 CAMERA_MODELS: dict[str, tuple[str, ...]] = {
     "SIMPLE_PINHOLE": ("f", "cx", "cy"),
@@ -25,15 +30,6 @@ CAMERA_MODELS: dict[str, tuple[str, ...]] = {
     "OPENCV": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"),
     "FULL_OPENCV": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"),
 }
-
-
-def check_shape(name: str, array: np.ndarray, shape: tuple[int | None, ...]) -> None:
-    """Raise ``ValueError`` unless ``array.shape`` matches ``shape`` (None = any size)."""
-    if array.ndim != len(shape) or any(
-        want is not None and have != want for have, want in zip(array.shape, shape, strict=False)
-    ):
-        pretty = "x".join("N" if s is None else str(s) for s in shape)
-        raise ValueError(f"{name}: expected shape ({pretty}), got {tuple(array.shape)}")
 
 
 @dataclass(frozen=True)
@@ -168,8 +164,6 @@ class Frame:
 
     @property
     def cam_from_world(self) -> np.ndarray:
-        from pgt_check.geometry.transforms import invert_rigid
-
         return invert_rigid(self.world_from_cam)
 
     @property
