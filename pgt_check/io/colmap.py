@@ -14,7 +14,7 @@ import numpy as np
 
 from pgt_check.errors import FormatError, InputError
 from pgt_check.geometry.transforms import invert_rigid
-from pgt_check.io._text import camera_from_colmap
+from pgt_check.io.camera import camera_from_colmap
 from pgt_check.types import Camera, Frame, Trajectory
 
 logger = logging.getLogger(__name__)

@@ -21,6 +21,8 @@ from typing import Any
 import numpy as np
 
 from pgt_check.errors import FormatError, InputError
+from pgt_check.io._text import UniqueKeys
+from pgt_check.io.camera import COLMAP_PIXEL_OFFSET
 from pgt_check.io.images import image_size
 from pgt_check.types import Camera, Frame, Trajectory
 
@@ -105,8 +107,8 @@ def _camera(path: Path, where: str, values: dict[str, Any], image: Path) -> Came
         fy = 0.5 * height / math.tan(0.5 * num["camera_angle_y"])
     else:
         fy = fx
-    cx = num.get("cx", width / 2.0) - 0.5
-    cy = num.get("cy", height / 2.0) - 0.5
+    cx = num.get("cx", width / 2.0) - COLMAP_PIXEL_OFFSET
+    cy = num.get("cy", height / 2.0) - COLMAP_PIXEL_OFFSET
     dist = {k: num.get(k, 0.0) for k in DISTORTION_KEYS}
     if dist["k4"]:
         raise FormatError(
@@ -154,7 +156,7 @@ def read_nerfstudio(path: str | Path, *, images: str | Path | None = None) -> Tr
     root = Path(images) if images is not None else path.parent
     shared = {k: v for k, v in data.items() if k != "frames"}
     frames: list[Frame] = []
-    seen: set[str] = set()
+    seen = UniqueKeys(path, "unique 'file_path'")
     for i, entry in enumerate(data["frames"]):
         where = f"frames[{i}]"
         if not isinstance(entry, dict):
@@ -180,11 +182,7 @@ def read_nerfstudio(path: str | Path, *, images: str | Path | None = None) -> Tr
                 None,
                 f"{where}: expected a 4x4 'transform_matrix'; got {entry.get('transform_matrix')!r:.80}",
             )
-        if file_path in seen:
-            raise FormatError(
-                path, None, f"{where}: expected unique 'file_path'; got {file_path!r} again"
-            )
-        seen.add(file_path)
+        seen.add(file_path, repr(file_path), None, where)
         try:
             frames.append(Frame(file_path, camera, matrix @ GL_FROM_CV, file_path, image))
         except ValueError as err:

@@ -93,12 +93,20 @@ def test_sparse_zero_layout_finds_project_images(tmp_path: Path, random_rigid) -
     assert read_colmap(model)[0].image_file == tmp_path / "images" / "img_00.png"
 
 
+def test_fisheye_camera_model_is_read(tmp_path: Path, random_rigid) -> None:
+    cameras = "1 OPENCV_FISHEYE 640 480 500 510 320 240 0.1 0.01 0 0\n"
+    model = write_text_model(tmp_path / "m", [random_rigid()], cameras=cameras)
+    cam = read_colmap(model)[0].camera
+    assert cam == Camera("OPENCV_FISHEYE", 640, 480, (500, 510, 319.5, 239.5, 0.1, 0.01, 0, 0))
+    assert cam.is_distorted
+
+
 def test_unsupported_camera_model(tmp_path: Path, random_rigid, check_error) -> None:
-    cameras = "1 OPENCV_FISHEYE 640 480 500 510 320 240 0 0 0 0\n2 PINHOLE 64 48 50 50 32 24\n"
+    cameras = "1 EQUIRECTANGULAR 640 480 640 480\n2 PINHOLE 64 48 50 50 32 24\n"
     model = write_text_model(tmp_path / "m", [random_rigid()], cameras=cameras)
     with pytest.raises(FormatError) as info:
         read_colmap(model)
-    check_error(info.value, model / "cameras.txt", None, "'OPENCV_FISHEYE'")
+    check_error(info.value, model / "cameras.txt", None, "'EQUIRECTANGULAR'")
 
 
 def test_corrupt_model(tmp_path: Path) -> None:

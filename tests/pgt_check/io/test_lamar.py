@@ -205,9 +205,9 @@ BAD_CASES = {
     ),
     "sensors-model": (
         "sensors.txt",
-        HEAD + "cam0, x, camera, FISHEYE, 640, 480, 1, 2, 3\n",
+        HEAD + "cam0, x, camera, FISHEYE_X, 640, 480, 1, 2, 3\n",
         2,
-        "'FISHEYE'",
+        "'FISHEYE_X'",
     ),
     "sensors-params": (
         "sensors.txt",
