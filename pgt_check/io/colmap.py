@@ -22,14 +22,36 @@ logger = logging.getLogger(__name__)
 MODEL_FILES = ("cameras", "images", "points3D", "rigs", "frames")
 
 
+def _has_cameras(directory: Path) -> bool:
+    return any((directory / f"cameras.{ext}").is_file() for ext in ("txt", "bin"))
+
+
 def colmap_model_dir(path: str | Path) -> Path | None:
-    """The model directory for a model directory or one of its files, else None."""
+    """The model directory for a model directory, one of its files or a COLMAP project root.
+
+    A project root (a folder with ``sparse/0/`` or ``sparse/`` holding cameras.txt/.bin) is
+    descended into; with several numbered models ``sparse/0`` is taken (logged at INFO).
+    """
     path = Path(path)
     directory = path if path.is_dir() else path.parent
     if path.is_file() and path.stem not in MODEL_FILES:
         return None
-    if any((directory / f"cameras.{ext}").is_file() for ext in ("txt", "bin")):
+    if _has_cameras(directory):
         return directory
+    if path.is_dir():
+        sparse = path / "sparse"
+        numbered = sorted(
+            (d for d in sparse.glob("[0-9]*") if d.name.isdigit() and _has_cameras(d)),
+            key=lambda d: int(d.name),
+        )
+        if numbered:
+            if len(numbered) > 1:
+                logger.info(
+                    "%s: %d models under sparse/; reading %s", path, len(numbered), numbered[0]
+                )
+            return numbered[0]
+        if _has_cameras(sparse):
+            return sparse
     return None
 
 
@@ -66,7 +88,8 @@ def read_colmap(path: str | Path, *, images: str | Path | None = None) -> Trajec
         raise FormatError(
             path,
             None,
-            "expected a COLMAP model directory with cameras.txt or cameras.bin; got none",
+            "expected a COLMAP model directory with cameras.txt or cameras.bin (or a project "
+            "root with sparse/0/ or sparse/); got none",
         )
     try:
         import pycolmap

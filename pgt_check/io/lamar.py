@@ -182,13 +182,36 @@ def read_poses(path: Path, device_ids: set[str]) -> dict[tuple[float, str], np.n
     return poses
 
 
+def _first_image_path(rows: list[tuple[int, str]]) -> str | None:
+    fields = rows[0][1].split(",") if rows else []
+    return fields[2].strip() if len(fields) == 3 else None
+
+
+def default_image_root(images_file: Path, first_image: str | None) -> Path:
+    """Where the paths of a LaMAR images file are resolved when no folder is given.
+
+    A LaMAR session keeps its images under ``raw_data/`` beside ``images.txt``, with paths
+    relative to it; other exports write paths relative to the images file's folder. ``raw_data/``
+    is taken when it exists, unless the first listed image exists beside the file and not under
+    ``raw_data/``.
+    """
+    base = images_file.parent
+    raw = base / "raw_data"
+    if not raw.is_dir():
+        return base
+    if first_image and (base / first_image).exists() and not (raw / first_image).exists():
+        return base
+    return raw
+
+
 def read_lamar(
     path: str | Path, *, sensors: str | Path | None = None, images: str | Path | None = None
 ) -> Trajectory:
     """Read a LaMAR trajectories file with its sensors, images and rigs files.
 
     ``images`` may be a list file (replaces ``images*.txt``) or a folder (the root that image
-    paths are resolved against; default: the images file's folder). frame_id is
+    paths are resolved against; default: ``default_image_root``, the images file's folder or the
+    session's ``raw_data/``). frame_id is
     ``"{timestamp}/{sensor_id}"`` as written in the images file. Images without a pose are
     skipped (one WARNING with the count); frames are sorted by timestamp, then sensor id.
     """
@@ -210,11 +233,15 @@ def read_lamar(
     for rig, sensor in rigs:
         rigs_of.setdefault(sensor, []).append(rig)
 
-    root = Path(images) if images is not None and Path(images).is_dir() else files.images.parent
+    image_rows = data_lines(files.images)
+    if images is not None and Path(images).is_dir():
+        root = Path(images)
+    else:
+        root = default_image_root(files.images, _first_image_path(image_rows))
     frames: list[tuple[float, str, Frame]] = []
     seen = UniqueKeys(files.images, "one image per (timestamp, sensor)")
     unposed: list[str] = []
-    for line, text in data_lines(files.images):
+    for line, text in image_rows:
         fields = split_row(
             files.images, line, text, count=3, sep=",", layout="timestamp, sensor_id, image_path"
         )
@@ -267,6 +294,7 @@ def read_lamar(
         "trajectories_file": str(files.trajectories),
         "sensors_file": str(files.sensors),
         "images_file": str(files.images),
+        "images_dir": str(root),
     }
     if files.rigs is not None:
         metadata["rigs_file"] = str(files.rigs)
