@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -73,6 +74,42 @@ def _cam_from_world(image: object) -> np.ndarray:
     return matrix
 
 
+def load_model(model_dir: Path) -> tuple[Any, dict[int, Camera]]:
+    """(pycolmap.Reconstruction, Camera by camera id) of a model directory."""
+    try:
+        import pycolmap
+    except ImportError as err:
+        raise InputError("reading COLMAP models needs pycolmap: pip install pycolmap") from err
+    try:
+        reconstruction = pycolmap.Reconstruction(str(model_dir))
+    except (RuntimeError, ValueError, OSError) as err:
+        message = " ".join(str(err).split())
+        raise FormatError(
+            model_dir, None, f"expected a readable COLMAP model; pycolmap failed: {message}"
+        ) from None
+    cameras_file = next(
+        model_dir / f"cameras.{e}" for e in ("txt", "bin") if (model_dir / f"cameras.{e}").is_file()
+    )
+    cameras: dict[int, Camera] = {}
+    for camera_id, cam in reconstruction.cameras.items():
+        model = cam.model.name if hasattr(cam.model, "name") else str(cam.model)
+        cameras[camera_id] = camera_from_colmap(
+            cameras_file, None, model, cam.width, cam.height, [float(p) for p in cam.params]
+        )
+    return reconstruction, cameras
+
+
+def cameras_by_image_name(path: str | Path) -> tuple[dict[str, Camera], list[Camera]]:
+    """The Camera of every image of a COLMAP model (dir, file or project root) by image name,
+    and every camera of the model (for images the model does not name)."""
+    model_dir = colmap_model_dir(path)
+    if model_dir is None:
+        raise FormatError(path, None, "expected a COLMAP model with cameras.txt or cameras.bin")
+    reconstruction, cameras = load_model(model_dir)
+    by_name = {im.name: cameras[im.camera_id] for im in reconstruction.images.values()}
+    return by_name, list(cameras.values())
+
+
 def read_colmap(path: str | Path, *, images: str | Path | None = None) -> Trajectory:
     """Read a COLMAP model directory (or one of its files) into world_from_cam frames.
 
@@ -91,27 +128,7 @@ def read_colmap(path: str | Path, *, images: str | Path | None = None) -> Trajec
             "expected a COLMAP model directory with cameras.txt or cameras.bin (or a project "
             "root with sparse/0/ or sparse/); got none",
         )
-    try:
-        import pycolmap
-    except ImportError as err:
-        raise InputError("reading COLMAP models needs pycolmap: pip install pycolmap") from err
-    try:
-        reconstruction = pycolmap.Reconstruction(str(model_dir))
-    except (RuntimeError, ValueError, OSError) as err:
-        message = " ".join(str(err).split())
-        raise FormatError(
-            model_dir, None, f"expected a readable COLMAP model; pycolmap failed: {message}"
-        ) from None
-    cameras_file = next(
-        model_dir / f"cameras.{e}" for e in ("txt", "bin") if (model_dir / f"cameras.{e}").is_file()
-    )
-
-    cameras: dict[int, Camera] = {}
-    for camera_id, cam in reconstruction.cameras.items():
-        model = cam.model.name if hasattr(cam.model, "name") else str(cam.model)
-        cameras[camera_id] = camera_from_colmap(
-            cameras_file, None, model, cam.width, cam.height, [float(p) for p in cam.params]
-        )
+    reconstruction, cameras = load_model(model_dir)
 
     root = Path(images) if images is not None else default_images_dir(model_dir)
     if images is not None and not root.is_dir():
