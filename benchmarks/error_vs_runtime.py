@@ -17,22 +17,17 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from _common import REPORTS, command_line, machine, md_table, shared_data
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _common import REPORTS, command_line, machine, md_table, shared_data  # noqa: E402
-
-from pgt_check.config import RunConfig, merge  # noqa: E402
-from pgt_check.evaluation import perturb_trajectory, roc_auc  # noqa: E402
-from pgt_check.io import read_trajectory  # noqa: E402
-from pgt_check.measure import FrameChecker, pick_references  # noqa: E402
-from pgt_check.types import Trajectory  # noqa: E402
+from pgt_check.config import RunConfig, merge
+from pgt_check.evaluation import perturb_trajectory, roc_auc
+from pgt_check.io import read_trajectory
+from pgt_check.measure import FrameChecker, pick_references
+from pgt_check.types import Trajectory
 
 STAGES = ("t_load_s", "t_render_s", "t_enhance_s", "t_match_s", "t_homography_s", "t_pose_s")
 
@@ -85,7 +80,7 @@ def run_point(traj, bad, mesh, base, point):
     for t in (traj, bad):
         checker = FrameChecker(cfg, pick_references(t, t.frames, cfg))
         checker.measure(t.frames[0])  # warm-up: GL context, model load
-        recs.append([checker.measure(f) for f in t.frames])
+        recs.append([checker.measure(f).row() for f in t.frames])
         checker.close()
     return recs
 

@@ -16,9 +16,7 @@ import sys
 import tempfile
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _common import REPO, REPORTS, command_line, machine, md_table  # noqa: E402
+from _common import REPO, REPORTS, command_line, machine, md_table
 
 SCENE = REPO / "sample_data" / "scene"
 

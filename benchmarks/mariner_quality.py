@@ -22,20 +22,18 @@ from __future__ import annotations
 import argparse
 import json
 import logging
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import torch
+from _common import REPORTS, command_line, machine, shared_data
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from benchmarks._common import REPORTS, command_line, machine, shared_data  # noqa: E402
-from mariner_core.data import FrameCache, load_frame_cache, to_tensor  # noqa: E402
-from mariner_core.enhancer import DEFAULT_CHECKPOINT, load_checkpoint  # noqa: E402
-from mariner_core.metrics import LPIPS, psnr_y, ssim_y  # noqa: E402
-from pgt_check.enhance.training_data import build_frame_cache, fixed_offset_pairs  # noqa: E402
+from mariner_core.data import FrameCache, load_frame_cache, to_tensor
+from mariner_core.enhancer import DEFAULT_CHECKPOINT, load_checkpoint
+from mariner_core.metrics import LPIPS, psnr_y, ssim_y
+from pgt_check.enhance.training_data import build_frame_cache, fixed_offset_pairs
+from pgt_check.io.images import resize_image
 
 logger = logging.getLogger("mariner_quality")
 
@@ -161,7 +159,7 @@ def save_grid(examples: dict, path: Path, picks: dict[str, list[int]], k_show: i
             row = [renders[i], refs[i], y[i], photos[i]]
             row = [(t.permute(1, 2, 0).numpy() * 255).round().astype(np.uint8) for t in row]
             h = row[0].shape[0]
-            row = [cv2.resize(r, (round(r.shape[1] * h / r.shape[0]), h)) for r in row]
+            row = [resize_image(r, (round(r.shape[1] * h / r.shape[0]), h)) for r in row]
             img = np.concatenate([np.pad(r, ((2, 2), (2, 2), (0, 0))) for r in row], axis=1)
             label = f"{prefix} #{i} ref offset {off}"
             cv2.putText(img, label, (6, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.4, (255, 255, 0), 1)

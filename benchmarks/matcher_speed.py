@@ -20,22 +20,19 @@ import time
 from pathlib import Path
 
 import numpy as np
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from benchmarks._common import REPORTS, command_line, machine, md_table, shared_data  # noqa: E402
+from _common import REPORTS, command_line, machine, md_table, shared_data
 
 DEFAULT = "sift,xfeat,xfeat-lighterglue,aliked-lightglue,disk-lightglue"
 
 
 def load(path: Path, size: tuple[int, int]) -> np.ndarray:
-    import cv2
+    from pgt_check.errors import InputError
+    from pgt_check.io.images import load_image, resize_image
 
-    bgr = cv2.imread(str(path))
-    if bgr is None:
-        sys.exit(f"cannot read {path}")
-    if bgr.shape[1::-1] != size:
-        bgr = cv2.resize(bgr, size, interpolation=cv2.INTER_AREA)
-    return bgr[:, :, ::-1].astype(np.float32) / 255.0
+    try:
+        return resize_image(load_image(path), size)
+    except InputError as err:
+        sys.exit(str(err))
 
 
 def main(argv: list[str] | None = None) -> int:

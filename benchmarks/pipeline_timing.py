@@ -7,21 +7,16 @@ from __future__ import annotations
 
 import argparse
 import statistics
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from _common import REPORTS, command_line, machine, md_table, shared_data
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _common import REPORTS, command_line, machine, md_table, shared_data  # noqa: E402
-
-from pgt_check.config import RunConfig  # noqa: E402
-from pgt_check.io import read_trajectory  # noqa: E402
-from pgt_check.measure import FrameChecker  # noqa: E402
-from pgt_check.verdict import apply_verdicts  # noqa: E402
+from pgt_check.config import RunConfig
+from pgt_check.io import read_trajectory
+from pgt_check.measure import FrameChecker
+from pgt_check.verdict import apply_verdicts
 
 STAGES = ("t_load_s", "t_render_s", "t_match_s", "t_homography_s", "time_s")
 

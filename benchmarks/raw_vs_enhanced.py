@@ -17,23 +17,18 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
+from _common import REPORTS, command_line, machine, md_table, shared_data
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from _common import REPORTS, command_line, machine, md_table, shared_data  # noqa: E402
-
-from pgt_check.config import RunConfig  # noqa: E402
-from pgt_check.evaluation import perturb_trajectory, roc_auc  # noqa: E402
-from pgt_check.io import read_trajectory  # noqa: E402
-from pgt_check.measure import FrameChecker, pick_references  # noqa: E402
-from pgt_check.types import Trajectory  # noqa: E402
-from pgt_check.verdict import resolve_threshold_px  # noqa: E402
+from pgt_check.config import RunConfig
+from pgt_check.evaluation import perturb_trajectory, roc_auc
+from pgt_check.io import read_trajectory
+from pgt_check.measure import FrameChecker, pick_references
+from pgt_check.types import Trajectory
+from pgt_check.verdict import resolve_threshold_px
 
 PAPER = "paper (SuperPoint+SuperGlue, CAB): matches 39.21 -> 58.89, inliers 61.24 % -> 78.16 %, homography error 4.86 -> 1.88 px"
 
@@ -63,7 +58,7 @@ def measure(traj, mesh, shading, matcher, method, threshold):
     })
     checker = FrameChecker(cfg, pick_references(traj, traj.frames, cfg))
     t = time.perf_counter()
-    recs = [checker.measure(f) for f in traj.frames]
+    recs = [checker.measure(f).row() for f in traj.frames]
     checker.close()
     return cfg, recs, (time.perf_counter() - t) / max(1, len(recs))
 

@@ -182,6 +182,275 @@ def _rng_state(rng: np.random.Generator) -> dict[str, Any]:
     }
 
 
+def _resolve_device(name: str) -> torch.device:
+    return torch.device(
+        ("cuda" if torch.cuda.is_available() else "cpu") if name == "auto" else name
+    )
+
+
+def _validation_pairs(cache: FrameCache, val_pos: np.ndarray, cfg: TrainConfig) -> list:
+    """At most ``cfg.val_frames`` fixed (frame, reference) pairs spread over the validation range."""
+    if len(val_pos) <= 1:
+        return []
+    pairs = fixed_pairs(cache.t, val_pos, cfg.val_offset)
+    sel = np.linspace(0, len(pairs) - 1, min(cfg.val_frames, len(pairs))).round().astype(int)
+    return [pairs[k] for k in sorted(set(sel.tolist()))]
+
+
+def _log_split(cache: FrameCache, train_pos: np.ndarray, val_pos: np.ndarray, n_pairs: int) -> None:
+    logger.info(
+        "frames: %d train (t %.0f..%.0f), %d val (t %.0f..%.0f), %d val pairs",
+        len(train_pos),
+        cache.t[train_pos[0]],
+        cache.t[train_pos[-1]],
+        len(val_pos),
+        cache.t[val_pos[0]] if len(val_pos) else float("nan"),
+        cache.t[val_pos[-1]] if len(val_pos) else float("nan"),
+        n_pairs,
+    )
+
+
+@dataclass
+class _Progress:
+    """What ``last.pt`` carries across a resume."""
+
+    step: int = 0
+    samples: int = 0
+    elapsed_before: float = 0.0
+    best: float = -float("inf")
+
+
+class _Trainer:
+    """One training run: the networks, optimisers, data and bookkeeping that ``train`` drives."""
+
+    def __init__(
+        self,
+        model_cfg: MarinerConfig,
+        sampler_cfg: SamplerConfig,
+        cfg: TrainConfig,
+        data: str | Path | FrameCache,
+        out: Path,
+        perceptual: PerceptualLoss | None,
+    ) -> None:
+        # the construction order fixes the RNG streams: seed, data, model, discriminator, VGG
+        self.cfg, self.out = cfg, out
+        if cfg.num_threads:
+            torch.set_num_threads(cfg.num_threads)
+        self.device = _resolve_device(cfg.device)
+        _seed_all(cfg.seed)
+        self.rng = np.random.default_rng(cfg.seed)
+        self.cache = data if isinstance(data, FrameCache) else load_frame_cache(data)
+        train_pos, val_pos = split_frames(self.cache.t, cfg.val_fraction, cfg.split_gap)
+        self.sampler = TripletSampler(self.cache, train_pos, sampler_cfg)
+        self.val_pairs = _validation_pairs(self.cache, val_pos, cfg)
+        _log_split(self.cache, train_pos, val_pos, len(self.val_pairs))
+        self.model = Mariner(model_cfg).to(self.device).train()
+        self.opt = torch.optim.Adam(self.model.parameters(), lr=cfg.lr)
+        self.use_gan = cfg.gan_start is not None and cfg.lambda_adv > 0
+        self.disc = (
+            Discriminator(input_size=sampler_cfg.crop).to(self.device).train()
+            if self.use_gan
+            else None
+        )
+        self.d_opt = (
+            torch.optim.Adam(self.disc.parameters(), lr=cfg.disc_lr)
+            if self.disc is not None
+            else None
+        )
+        if perceptual is None and cfg.lambda_per > 0:
+            perceptual = (
+                PerceptualLoss.pretrained() if cfg.pretrained_perceptual else PerceptualLoss()
+            )
+        self.perceptual = perceptual.to(self.device) if perceptual is not None else None
+        run_meta = {
+            "model": model_cfg.to_dict(),
+            "sampler": asdict(sampler_cfg),
+            "train": asdict(cfg),
+            "data": str(self.cache.root),
+            "train_t": [float(self.cache.t[train_pos[0]]), float(self.cache.t[train_pos[-1]])],
+            "val_t": (
+                [float(self.cache.t[val_pos[0]]), float(self.cache.t[val_pos[-1]])]
+                if len(val_pos)
+                else []
+            ),
+        }
+        (out / "config.json").write_text(json.dumps(run_meta, indent=1, default=str))
+        self.last_path = out / "last.pt"
+        self.state = _Progress()
+        self.t_start = time.perf_counter()
+
+    def elapsed(self) -> float:
+        return self.state.elapsed_before + time.perf_counter() - self.t_start
+
+    def resume(self) -> None:
+        """Load ``last.pt`` (networks, optimisers, counters, RNG states) if it exists."""
+        if not self.last_path.is_file():
+            return
+        st = torch.load(self.last_path, map_location="cpu", weights_only=True)
+        self.model.load_state_dict(st["model"], strict=True)
+        self.opt.load_state_dict(st["opt"])
+        if self.disc is not None and st.get("disc") is not None:
+            self.disc.load_state_dict(st["disc"])
+            self.d_opt.load_state_dict(st["d_opt"])
+        self.state = _Progress(
+            int(st["step"]), int(st["samples"]), float(st["elapsed_s"]), float(st["best"])
+        )
+        self.rng.bit_generator.state = json.loads(st["rng"]["numpy"])
+        torch.set_rng_state(st["rng"]["torch"])
+        logger.info(
+            "resumed from %s at step %d (%.1f min)",
+            self.last_path,
+            self.state.step,
+            self.state.elapsed_before / 60,
+        )
+
+    def save_last(self) -> None:
+        st = {
+            "model": self.model.state_dict(),
+            "opt": self.opt.state_dict(),
+            "disc": self.disc.state_dict() if self.disc is not None else None,
+            "d_opt": self.d_opt.state_dict() if self.d_opt is not None else None,
+            "step": self.state.step,
+            "samples": self.state.samples,
+            "elapsed_s": self.elapsed(),
+            "best": self.state.best,
+            "rng": _rng_state(self.rng),
+        }
+        tmp = self.last_path.with_suffix(".tmp")
+        torch.save(st, tmp)
+        tmp.replace(self.last_path)
+
+    def validate(self, writer: csv.DictWriter, log_file: Any) -> None:
+        """One validation row in the log; ``best.pt`` when PSNR-Y improves."""
+        if not self.val_pairs:
+            return
+        s = self.state
+        v, vr = validate(
+            self.model, self.cache, self.val_pairs, self.cfg.val_iterations, self.device
+        )
+        row = {k: "" for k in LOG_FIELDS}
+        row.update(step=s.step, samples=s.samples, elapsed_s=f"{self.elapsed():.1f}")
+        row.update(val_psnr=f"{v:.3f}", val_psnr_render=f"{vr:.3f}")
+        writer.writerow(row)
+        log_file.flush()
+        logger.info("step %d: val PSNR-Y %.2f dB (render %.2f dB)", s.step, v, vr)
+        if v > s.best:
+            s.best = v
+            save_checkpoint(
+                self.model,
+                self.out / "best.pt",
+                extra={
+                    "step": s.step,
+                    "samples": s.samples,
+                    "val_psnr_y": v,
+                    "elapsed_s": self.elapsed(),
+                },
+            )
+
+    def step(self, prog: float, lr: float) -> dict[str, float]:
+        """One optimisation step at schedule progress ``prog``; returns the step's losses."""
+        cfg = self.cfg
+        for g in self.opt.param_groups:
+            g["lr"] = lr
+        render, ref, target = self.sampler.batch(cfg.batch_size, self.rng)
+        render, ref, target = render.to(self.device), ref.to(self.device), target.to(self.device)
+        outputs = self.model(render, ref, iterations=cfg.train_iterations)
+        l1 = sum(float((y.detach() - target).abs().mean()) for y in outputs)
+        loss = refinement_loss(outputs, target, self.perceptual, cfg.lambda_rec, cfg.lambda_per)
+        rec = float(loss.detach())
+        gan_on = self.use_gan and prog >= float(cfg.gan_start)
+        losses: dict[str, float] = {}
+        if gan_on:
+            self.disc.requires_grad_(False)
+            g_loss = generator_adversarial_loss(self.disc(target).detach(), self.disc(outputs[-1]))
+            self.disc.requires_grad_(True)
+            loss = loss + cfg.lambda_adv * g_loss
+            losses["g_adv"] = float(g_loss)
+        self.opt.zero_grad(set_to_none=True)
+        loss.backward()
+        self.opt.step()
+        if gan_on:
+            for g in self.d_opt.param_groups:
+                g["lr"] = cfg.disc_lr * lr / cfg.lr
+            d_loss = discriminator_loss(self.disc(target), self.disc(outputs[-1].detach()))
+            self.d_opt.zero_grad(set_to_none=True)
+            d_loss.backward()
+            self.d_opt.step()
+            losses["d_loss"] = float(d_loss)
+        self.state.step += 1
+        self.state.samples += cfg.batch_size
+        return {"loss": float(loss.detach()), "l1": l1, "rec": rec, **losses}
+
+    def loss_row(self, acc: dict[str, list[float]], lr: float) -> tuple[dict[str, Any], float]:
+        """The log row of the steps accumulated in ``acc`` (means), and their mean loss."""
+        cfg = self.cfg
+        mean = {k: float(np.mean(v)) for k, v in acc.items()}
+        row = {k: "" for k in LOG_FIELDS}
+        per = (mean["rec"] - cfg.lambda_rec * mean["l1"]) / max(cfg.lambda_per, 1e-12)
+        row.update(
+            step=self.state.step,
+            samples=self.state.samples,
+            elapsed_s=f"{self.elapsed():.1f}",
+            lr=f"{lr:.3e}",
+            loss=f"{mean['loss']:.5f}",
+            l1=f"{mean['l1']:.5f}",
+            perceptual=f"{per:.5f}" if self.perceptual is not None else "",
+            g_adv=f"{mean['g_adv']:.5f}" if "g_adv" in mean else "",
+            d_loss=f"{mean['d_loss']:.5f}" if "d_loss" in mean else "",
+        )
+        return row, mean["loss"]
+
+
+def _open_log(out: Path, resume: bool) -> tuple[Any, csv.DictWriter]:
+    """``log.csv``: appended to on resume, else started with a header."""
+    log_path = out / "log.csv"
+    new_log = not log_path.is_file() or not resume
+    log_file = log_path.open("w" if new_log else "a", newline="")
+    writer = csv.DictWriter(log_file, fieldnames=LOG_FIELDS)
+    if new_log:
+        writer.writeheader()
+    return log_file, writer
+
+
+def _run_loop(
+    tr: _Trainer,
+    total_steps: int,
+    max_minutes: float | None,
+    writer: csv.DictWriter,
+    log_file: Any,
+    bar: Any,
+) -> None:
+    """Steps until ``total_steps`` or the time budget; periodic log rows, validation, last.pt."""
+    cfg, s = tr.cfg, tr.state
+    t_ckpt = t_val = tr.t_start
+    acc: dict[str, list[float]] = {}
+    budget_s = None if max_minutes is None else max_minutes * 60.0
+    while s.step < total_steps:
+        if budget_s is not None and tr.elapsed() >= budget_s:
+            logger.info("time budget of %.1f min reached at step %d", max_minutes, s.step)
+            break
+        prog = s.step / max(1, total_steps)
+        if cfg.time_schedule and budget_s is not None:
+            prog = max(prog, tr.elapsed() / budget_s)
+        lr = cosine_lr(prog, cfg.lr, cfg.lr_min)
+        for k, v in tr.step(prog, lr).items():
+            acc.setdefault(k, []).append(v)
+        bar.update(1)
+        if s.step % cfg.log_every == 0 or s.step == total_steps:
+            row, mean_loss = tr.loss_row(acc, lr)
+            writer.writerow(row)
+            log_file.flush()
+            bar.set_postfix(loss=f"{mean_loss:.4f}", lr=f"{lr:.1e}")
+            acc.clear()
+        now = time.perf_counter()
+        if now - t_val >= cfg.val_every_minutes * 60:
+            tr.validate(writer, log_file)
+            t_val = time.perf_counter()
+        if now - t_ckpt >= cfg.ckpt_every_minutes * 60:
+            tr.save_last()
+            t_ckpt = time.perf_counter()
+
+
 def train(
     model_cfg: MarinerConfig,
     sampler_cfg: SamplerConfig,
@@ -199,226 +468,29 @@ def train(
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     total_steps = cfg.steps if steps is None else int(steps)
-    if cfg.num_threads:
-        torch.set_num_threads(cfg.num_threads)
-    device = torch.device(
-        ("cuda" if torch.cuda.is_available() else "cpu") if cfg.device == "auto" else cfg.device
-    )
-    _seed_all(cfg.seed)
-    rng = np.random.default_rng(cfg.seed)
-    cache = data if isinstance(data, FrameCache) else load_frame_cache(data)
-    train_pos, val_pos = split_frames(cache.t, cfg.val_fraction, cfg.split_gap)
-    sampler = TripletSampler(cache, train_pos, sampler_cfg)
-    val_pairs = []
-    if len(val_pos) > 1:
-        pairs = fixed_pairs(cache.t, val_pos, cfg.val_offset)
-        sel = np.linspace(0, len(pairs) - 1, min(cfg.val_frames, len(pairs))).round().astype(int)
-        val_pairs = [pairs[k] for k in sorted(set(sel.tolist()))]
-    logger.info(
-        "frames: %d train (t %.0f..%.0f), %d val (t %.0f..%.0f), %d val pairs",
-        len(train_pos),
-        cache.t[train_pos[0]],
-        cache.t[train_pos[-1]],
-        len(val_pos),
-        cache.t[val_pos[0]] if len(val_pos) else float("nan"),
-        cache.t[val_pos[-1]] if len(val_pos) else float("nan"),
-        len(val_pairs),
-    )
-    model = Mariner(model_cfg).to(device).train()
-    opt = torch.optim.Adam(model.parameters(), lr=cfg.lr)
-    use_gan = cfg.gan_start is not None and cfg.lambda_adv > 0
-    disc = Discriminator(input_size=sampler_cfg.crop).to(device).train() if use_gan else None
-    d_opt = torch.optim.Adam(disc.parameters(), lr=cfg.disc_lr) if disc is not None else None
-    if perceptual is None and cfg.lambda_per > 0:
-        perceptual = PerceptualLoss.pretrained() if cfg.pretrained_perceptual else PerceptualLoss()
-    if perceptual is not None:
-        perceptual = perceptual.to(device)
-    run_meta = {
-        "model": model_cfg.to_dict(),
-        "sampler": asdict(sampler_cfg),
-        "train": asdict(cfg),
-        "data": str(cache.root),
-        "train_t": [float(cache.t[train_pos[0]]), float(cache.t[train_pos[-1]])],
-        "val_t": [float(cache.t[val_pos[0]]), float(cache.t[val_pos[-1]])] if len(val_pos) else [],
-    }
-    (out / "config.json").write_text(json.dumps(run_meta, indent=1, default=str))
-
-    step, samples, elapsed_before, best = 0, 0, 0.0, -float("inf")
-    last_path = out / "last.pt"
-    if resume and last_path.is_file():
-        st = torch.load(last_path, map_location="cpu", weights_only=True)
-        model.load_state_dict(st["model"], strict=True)
-        opt.load_state_dict(st["opt"])
-        if disc is not None and st.get("disc") is not None:
-            disc.load_state_dict(st["disc"])
-            d_opt.load_state_dict(st["d_opt"])
-        step, samples = int(st["step"]), int(st["samples"])
-        elapsed_before, best = float(st["elapsed_s"]), float(st["best"])
-        rng.bit_generator.state = json.loads(st["rng"]["numpy"])
-        torch.set_rng_state(st["rng"]["torch"])
-        logger.info("resumed from %s at step %d (%.1f min)", last_path, step, elapsed_before / 60)
-
-    def save_last() -> None:
-        st = {
-            "model": model.state_dict(),
-            "opt": opt.state_dict(),
-            "disc": disc.state_dict() if disc is not None else None,
-            "d_opt": d_opt.state_dict() if d_opt is not None else None,
-            "step": step,
-            "samples": samples,
-            "elapsed_s": elapsed_before + (time.perf_counter() - t_start),
-            "best": best,
-            "rng": _rng_state(rng),
-        }
-        tmp = last_path.with_suffix(".tmp")
-        torch.save(st, tmp)
-        tmp.replace(last_path)
-
-    log_path = out / "log.csv"
-    new_log = not log_path.is_file() or not resume
-    log_file = log_path.open("w" if new_log else "a", newline="")
-    writer = csv.DictWriter(log_file, fieldnames=LOG_FIELDS)
-    if new_log:
-        writer.writeheader()
-
-    t_start = time.perf_counter()
-    t_ckpt = t_val = t_start
-    acc: dict[str, list[float]] = {}
-    budget_s = None if max_minutes is None else max_minutes * 60.0
-    bar = tqdm(total=total_steps, initial=step, disable=not progress, desc="train")
-
-    def do_validate() -> None:
-        nonlocal best
-        if not val_pairs:
-            return
-        v, vr = validate(model, cache, val_pairs, cfg.val_iterations, device)
-        row = {k: "" for k in LOG_FIELDS}
-        row.update(step=step, samples=samples, elapsed_s=f"{elapsed():.1f}")
-        row.update(val_psnr=f"{v:.3f}", val_psnr_render=f"{vr:.3f}")
-        writer.writerow(row)
-        log_file.flush()
-        logger.info("step %d: val PSNR-Y %.2f dB (render %.2f dB)", step, v, vr)
-        if v > best:
-            best = v
-            save_checkpoint(
-                model,
-                out / "best.pt",
-                extra={"step": step, "samples": samples, "val_psnr_y": v, "elapsed_s": elapsed()},
-            )
-
-    def elapsed() -> float:
-        return elapsed_before + time.perf_counter() - t_start
-
+    tr = _Trainer(model_cfg, sampler_cfg, cfg, data, out, perceptual)
+    if resume:
+        tr.resume()
+    log_file, writer = _open_log(out, resume)
+    tr.t_start = time.perf_counter()
+    bar = tqdm(total=total_steps, initial=tr.state.step, disable=not progress, desc="train")
     try:
-        while step < total_steps:
-            if budget_s is not None and elapsed() >= budget_s:
-                logger.info("time budget of %.1f min reached at step %d", max_minutes, step)
-                break
-            prog = step / max(1, total_steps)
-            if cfg.time_schedule and budget_s is not None:
-                prog = max(prog, elapsed() / budget_s)
-            lr = cosine_lr(prog, cfg.lr, cfg.lr_min)
-            for g in opt.param_groups:
-                g["lr"] = lr
-            render, ref, target = sampler.batch(cfg.batch_size, rng)
-            render, ref, target = render.to(device), ref.to(device), target.to(device)
-            outputs = model(render, ref, iterations=cfg.train_iterations)
-            l1 = sum(float((y.detach() - target).abs().mean()) for y in outputs)
-            loss = refinement_loss(outputs, target, perceptual, cfg.lambda_rec, cfg.lambda_per)
-            rec = float(loss.detach())
-            g_adv = d_l = float("nan")
-            gan_on = use_gan and prog >= float(cfg.gan_start)
-            if gan_on:
-                fake = outputs[-1]
-                disc.requires_grad_(False)
-                g_loss = generator_adversarial_loss(disc(target).detach(), disc(fake))
-                disc.requires_grad_(True)
-                loss = loss + cfg.lambda_adv * g_loss
-                g_adv = float(g_loss)
-            opt.zero_grad(set_to_none=True)
-            loss.backward()
-            opt.step()
-            if gan_on:
-                for g in d_opt.param_groups:
-                    g["lr"] = cfg.disc_lr * lr / cfg.lr
-                d_loss = discriminator_loss(disc(target), disc(outputs[-1].detach()))
-                d_opt.zero_grad(set_to_none=True)
-                d_loss.backward()
-                d_opt.step()
-                d_l = float(d_loss)
-            step += 1
-            samples += cfg.batch_size
-            for k, v in (("loss", float(loss.detach())), ("l1", l1), ("rec", rec)):
-                acc.setdefault(k, []).append(v)
-            if gan_on:
-                acc.setdefault("g_adv", []).append(g_adv)
-                acc.setdefault("d_loss", []).append(d_l)
-            bar.update(1)
-            if step % cfg.log_every == 0 or step == total_steps:
-                mean = {k: float(np.mean(v)) for k, v in acc.items()}
-                row = {k: "" for k in LOG_FIELDS}
-                per = (mean["rec"] - cfg.lambda_rec * mean["l1"]) / max(cfg.lambda_per, 1e-12)
-                row.update(
-                    step=step,
-                    samples=samples,
-                    elapsed_s=f"{elapsed():.1f}",
-                    lr=f"{lr:.3e}",
-                    loss=f"{mean['loss']:.5f}",
-                    l1=f"{mean['l1']:.5f}",
-                    perceptual=f"{per:.5f}" if perceptual is not None else "",
-                    g_adv=f"{mean['g_adv']:.5f}" if "g_adv" in mean else "",
-                    d_loss=f"{mean['d_loss']:.5f}" if "d_loss" in mean else "",
-                )
-                writer.writerow(row)
-                log_file.flush()
-                bar.set_postfix(loss=f"{mean['loss']:.4f}", lr=f"{lr:.1e}")
-                acc.clear()
-            now = time.perf_counter()
-            if now - t_val >= cfg.val_every_minutes * 60:
-                do_validate()
-                t_val = time.perf_counter()
-            if now - t_ckpt >= cfg.ckpt_every_minutes * 60:
-                save_last()
-                t_ckpt = time.perf_counter()
-        do_validate()
-        save_last()
+        _run_loop(tr, total_steps, max_minutes, writer, log_file, bar)
+        tr.validate(writer, log_file)
+        tr.save_last()
     finally:
         bar.close()
         log_file.close()
-    summary = {"steps": step, "samples": samples, "elapsed_s": elapsed(), "best_val_psnr": best}
+    s = tr.state
+    summary = {
+        "steps": s.step,
+        "samples": s.samples,
+        "elapsed_s": tr.elapsed(),
+        "best_val_psnr": s.best,
+    }
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     logger.info("done: %s", summary)
     return summary
-
-
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description="Train a MaRINeR generator on a frame cache.")
-    parser.add_argument("--config", required=True, help="cpu-small, gpu or a JSON file")
-    parser.add_argument("--data", required=True, help="frame cache folder (index.json + npz)")
-    parser.add_argument("--out", required=True, help="run folder (checkpoints, log.csv)")
-    parser.add_argument("--resume", action="store_true")
-    parser.add_argument("--max-minutes", type=float, default=None)
-    parser.add_argument("--steps", type=int, default=None, help="override train.steps")
-    parser.add_argument("--no-progress", action="store_true")
-    args = parser.parse_args(argv)
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
-    model_cfg, sampler_cfg, cfg = load_run_config(args.config)
-    train(
-        model_cfg,
-        sampler_cfg,
-        cfg,
-        args.data,
-        args.out,
-        resume=args.resume,
-        max_minutes=args.max_minutes,
-        steps=args.steps,
-        progress=not args.no_progress,
-    )
-    return 0
-
-
-if __name__ == "__main__":
-    raise SystemExit(main())
 
 
 def export_weights(
@@ -452,3 +524,33 @@ def export_weights(
     )
     meta.update(extra or {})
     return save_checkpoint(model, dst, extra=meta, fp16=True)
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description="Train a MaRINeR generator on a frame cache.")
+    parser.add_argument("--config", required=True, help="cpu-small, gpu or a JSON file")
+    parser.add_argument("--data", required=True, help="frame cache folder (index.json + npz)")
+    parser.add_argument("--out", required=True, help="run folder (checkpoints, log.csv)")
+    parser.add_argument("--resume", action="store_true")
+    parser.add_argument("--max-minutes", type=float, default=None)
+    parser.add_argument("--steps", type=int, default=None, help="override train.steps")
+    parser.add_argument("--no-progress", action="store_true")
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
+    model_cfg, sampler_cfg, cfg = load_run_config(args.config)
+    train(
+        model_cfg,
+        sampler_cfg,
+        cfg,
+        args.data,
+        args.out,
+        resume=args.resume,
+        max_minutes=args.max_minutes,
+        steps=args.steps,
+        progress=not args.no_progress,
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

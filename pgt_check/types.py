@@ -16,7 +16,21 @@ from pathlib import Path
 
 import numpy as np
 
-# COLMAP camera models we accept, with their parameter names (COLMAP order).
+from pgt_check._checks import check_shape
+from pgt_check.geometry.transforms import invert_rigid
+
+__all__ = [
+    "CAMERA_MODELS",
+    "FISHEYE_MODELS",
+    "OPENCV_MODELS",
+    "Camera",
+    "Frame",
+    "Trajectory",
+    "check_shape",
+]
+
+# COLMAP camera models we accept, with their parameter names (COLMAP order): every model of
+# pycolmap with a focal length and a principal point (EQUIRECTANGULAR, spherical, is left out).
 CAMERA_MODELS: dict[str, tuple[str, ...]] = {
     "SIMPLE_PINHOLE": ("f", "cx", "cy"),
     "PINHOLE": ("fx", "fy", "cx", "cy"),
@@ -24,16 +38,39 @@ CAMERA_MODELS: dict[str, tuple[str, ...]] = {
     "RADIAL": ("f", "cx", "cy", "k1", "k2"),
     "OPENCV": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2"),
     "FULL_OPENCV": ("fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6"),
+    "SIMPLE_RADIAL_FISHEYE": ("f", "cx", "cy", "k1"),
+    "RADIAL_FISHEYE": ("f", "cx", "cy", "k1", "k2"),
+    "OPENCV_FISHEYE": ("fx", "fy", "cx", "cy", "k1", "k2", "k3", "k4"),
+    "FOV": ("fx", "fy", "cx", "cy", "omega"),
+    "THIN_PRISM_FISHEYE": (
+        "fx", "fy", "cx", "cy", "k1", "k2", "p1", "p2", "k3", "k4", "sx1", "sy1"
+    ),  # fmt: skip
+    "RAD_TAN_THIN_PRISM_FISHEYE": (
+        "fx", "fy", "cx", "cy", "k0", "k1", "k2", "k3", "k4", "k5", "p0", "p1",
+        "s0", "s1", "s2", "s3",
+    ),  # fmt: skip
+    "SIMPLE_DIVISION": ("f", "cx", "cy", "k1"),
+    "DIVISION": ("fx", "fy", "cx", "cy", "k1"),
+    "SIMPLE_FISHEYE": ("f", "cx", "cy"),
+    "FISHEYE": ("fx", "fy", "cx", "cy"),
+    "EUCM": ("fx", "fy", "cx", "cy", "alpha", "beta"),
 }
 
-
-def check_shape(name: str, array: np.ndarray, shape: tuple[int | None, ...]) -> None:
-    """Raise ``ValueError`` unless ``array.shape`` matches ``shape`` (None = any size)."""
-    if array.ndim != len(shape) or any(
-        want is not None and have != want for have, want in zip(array.shape, shape, strict=False)
-    ):
-        pretty = "x".join("N" if s is None else str(s) for s in shape)
-        raise ValueError(f"{name}: expected shape ({pretty}), got {tuple(array.shape)}")
+#: models whose distortion OpenCV's ``cv2.undistort`` models (``Camera.dist_coeffs``)
+OPENCV_MODELS = ("SIMPLE_PINHOLE", "PINHOLE", "SIMPLE_RADIAL", "RADIAL", "OPENCV", "FULL_OPENCV")
+#: fisheye projections: distorted relative to a pinhole even with every coefficient zero
+FISHEYE_MODELS = (
+    "SIMPLE_RADIAL_FISHEYE",
+    "RADIAL_FISHEYE",
+    "OPENCV_FISHEYE",
+    "THIN_PRISM_FISHEYE",
+    "RAD_TAN_THIN_PRISM_FISHEYE",
+    "SIMPLE_FISHEYE",
+    "FISHEYE",
+)
+#: parameters that do not distort when the others are zero (EUCM with alpha = 0 is a pinhole)
+_NEUTRAL_PARAMS = {"EUCM": ("beta",)}
+_PINHOLE_NAMES = ("f", "fx", "fy", "cx", "cy")
 
 
 @dataclass(frozen=True)
@@ -99,15 +136,28 @@ class Camera:
 
     @property
     def dist_coeffs(self) -> np.ndarray:
-        """OpenCV distortion coefficients (k1, k2, p1, p2[, k3, k4, k5, k6]); zeros if none."""
+        """OpenCV distortion coefficients (k1, k2, p1, p2[, k3, k4, k5, k6]); zeros if none.
+
+        Only for ``OPENCV_MODELS``; other models raise ValueError (undistort them with
+        ``pgt_check.io.camera.undistort_to_pinhole``).
+        """
         p = self._named
+        if self.model not in OPENCV_MODELS:
+            raise ValueError(
+                f"camera model {self.model} has no OpenCV distortion coefficients; "
+                "use pgt_check.io.camera.undistort_to_pinhole"
+            )
         if self.model == "FULL_OPENCV":
             return np.array([p[k] for k in ("k1", "k2", "p1", "p2", "k3", "k4", "k5", "k6")])
         return np.array([p.get("k1", 0.0), p.get("k2", 0.0), p.get("p1", 0.0), p.get("p2", 0.0)])
 
     @property
     def is_distorted(self) -> bool:
-        return bool(np.any(self.dist_coeffs != 0.0))
+        """False only for a pinhole projection (fisheye models are distorted with zero k)."""
+        if self.model in FISHEYE_MODELS:
+            return True
+        neutral = (*_PINHOLE_NAMES, *_NEUTRAL_PARAMS.get(self.model, ()))
+        return any(v != 0.0 for k, v in self._named.items() if k not in neutral)
 
     @property
     def diagonal(self) -> float:
@@ -131,10 +181,9 @@ class Camera:
 
     def to_colmap_params(self) -> tuple[float, ...]:
         """Parameters in COLMAP convention (principal point + 0.5), for writers."""
-        out = dict(self._named)
-        out["cx"] += 0.5
-        out["cy"] += 0.5
-        return tuple(out[k] for k in CAMERA_MODELS[self.model])
+        from pgt_check.io.camera import opencv_to_colmap_params  # the one converter
+
+        return opencv_to_colmap_params(self.model, self.params)
 
 
 @dataclass(frozen=True, eq=False)
@@ -168,8 +217,6 @@ class Frame:
 
     @property
     def cam_from_world(self) -> np.ndarray:
-        from pgt_check.geometry.transforms import invert_rigid
-
         return invert_rigid(self.world_from_cam)
 
     @property

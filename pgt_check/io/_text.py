@@ -4,14 +4,13 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Hashable, Sequence
 from pathlib import Path
 
 import numpy as np
 
 from pgt_check.errors import FormatError, InputError
 from pgt_check.geometry.transforms import QuaternionError, make_rigid, quat_to_rotmat
-from pgt_check.types import CAMERA_MODELS, Camera
 
 logger = logging.getLogger(__name__)
 
@@ -124,30 +123,33 @@ class QuaternionCounter:
             )
 
 
-def camera_from_colmap(
-    path: Path | str,
-    line: int | None,
-    model: str,
-    width: float,
-    height: float,
-    params: Sequence[float],
-) -> Camera:
-    """A Camera from COLMAP-convention values (principal point at +0.5): subtracts 0.5 from cx, cy."""
-    if model not in CAMERA_MODELS:
-        raise FormatError(
-            path, line, f"expected a camera model in {', '.join(CAMERA_MODELS)}; got {model!r}"
-        )
-    names = CAMERA_MODELS[model]
-    if len(params) != len(names):
-        raise FormatError(
-            path,
-            line,
-            f"expected {len(names)} parameters for {model} ({', '.join(names)}); got {len(params)}",
-        )
-    if width != int(width) or height != int(height):
-        raise FormatError(path, line, f"expected integer image size; got {width}x{height}")
-    values = [p - 0.5 if n in ("cx", "cy") else p for n, p in zip(names, params, strict=True)]
-    try:
-        return Camera(model, int(width), int(height), tuple(values))
-    except ValueError as err:
-        raise FormatError(path, line, f"expected a valid camera; got {err}") from None
+
+class UniqueKeys:
+    """Where each key of a file was first seen; a repeated key is a FormatError naming both.
+
+    ``expected`` completes "expected ..." in the message (e.g. "unique sensor ids").
+    """
+
+    def __init__(self, path: Path | str, expected: str) -> None:
+        self.path = path
+        self.expected = expected
+        self.first: dict[Hashable, int | str] = {}
+
+    def add(self, key: Hashable, shown: str, line: int | None, where: str | None = None) -> None:
+        """Record ``key`` at ``line`` (or at ``where``, for files without lines, e.g. JSON).
+
+        ``shown``: how the key is written in the message.
+        """
+        if key in self.first:
+            first = self.first[key]
+            at = f"on line {first}" if isinstance(first, int) else f"at {first}"
+            prefix = f"{where}: " if where else ""
+            raise FormatError(
+                self.path,
+                line,
+                f"{prefix}expected {self.expected}; got {shown} again (first {at})",
+            )
+        self.first[key] = line if where is None else where
+
+    def __contains__(self, key: object) -> bool:
+        return key in self.first

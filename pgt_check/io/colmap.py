@@ -9,12 +9,13 @@ from __future__ import annotations
 
 import logging
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from pgt_check.errors import FormatError, InputError
 from pgt_check.geometry.transforms import invert_rigid
-from pgt_check.io._text import camera_from_colmap
+from pgt_check.io.camera import camera_from_colmap
 from pgt_check.types import Camera, Frame, Trajectory
 
 logger = logging.getLogger(__name__)
@@ -22,14 +23,36 @@ logger = logging.getLogger(__name__)
 MODEL_FILES = ("cameras", "images", "points3D", "rigs", "frames")
 
 
+def _has_cameras(directory: Path) -> bool:
+    return any((directory / f"cameras.{ext}").is_file() for ext in ("txt", "bin"))
+
+
 def colmap_model_dir(path: str | Path) -> Path | None:
-    """The model directory for a model directory or one of its files, else None."""
+    """The model directory for a model directory, one of its files or a COLMAP project root.
+
+    A project root (a folder with ``sparse/0/`` or ``sparse/`` holding cameras.txt/.bin) is
+    descended into; with several numbered models ``sparse/0`` is taken (logged at INFO).
+    """
     path = Path(path)
     directory = path if path.is_dir() else path.parent
     if path.is_file() and path.stem not in MODEL_FILES:
         return None
-    if any((directory / f"cameras.{ext}").is_file() for ext in ("txt", "bin")):
+    if _has_cameras(directory):
         return directory
+    if path.is_dir():
+        sparse = path / "sparse"
+        numbered = sorted(
+            (d for d in sparse.glob("[0-9]*") if d.name.isdigit() and _has_cameras(d)),
+            key=lambda d: int(d.name),
+        )
+        if numbered:
+            if len(numbered) > 1:
+                logger.info(
+                    "%s: %d models under sparse/; reading %s", path, len(numbered), numbered[0]
+                )
+            return numbered[0]
+        if _has_cameras(sparse):
+            return sparse
     return None
 
 
@@ -51,6 +74,42 @@ def _cam_from_world(image: object) -> np.ndarray:
     return matrix
 
 
+def load_model(model_dir: Path) -> tuple[Any, dict[int, Camera]]:
+    """(pycolmap.Reconstruction, Camera by camera id) of a model directory."""
+    try:
+        import pycolmap
+    except ImportError as err:
+        raise InputError("reading COLMAP models needs pycolmap: pip install pycolmap") from err
+    try:
+        reconstruction = pycolmap.Reconstruction(str(model_dir))
+    except (RuntimeError, ValueError, OSError) as err:
+        message = " ".join(str(err).split())
+        raise FormatError(
+            model_dir, None, f"expected a readable COLMAP model; pycolmap failed: {message}"
+        ) from None
+    cameras_file = next(
+        model_dir / f"cameras.{e}" for e in ("txt", "bin") if (model_dir / f"cameras.{e}").is_file()
+    )
+    cameras: dict[int, Camera] = {}
+    for camera_id, cam in reconstruction.cameras.items():
+        model = cam.model.name if hasattr(cam.model, "name") else str(cam.model)
+        cameras[camera_id] = camera_from_colmap(
+            cameras_file, None, model, cam.width, cam.height, [float(p) for p in cam.params]
+        )
+    return reconstruction, cameras
+
+
+def cameras_by_image_name(path: str | Path) -> tuple[dict[str, Camera], list[Camera]]:
+    """The Camera of every image of a COLMAP model (dir, file or project root) by image name,
+    and every camera of the model (for images the model does not name)."""
+    model_dir = colmap_model_dir(path)
+    if model_dir is None:
+        raise FormatError(path, None, "expected a COLMAP model with cameras.txt or cameras.bin")
+    reconstruction, cameras = load_model(model_dir)
+    by_name = {im.name: cameras[im.camera_id] for im in reconstruction.images.values()}
+    return by_name, list(cameras.values())
+
+
 def read_colmap(path: str | Path, *, images: str | Path | None = None) -> Trajectory:
     """Read a COLMAP model directory (or one of its files) into world_from_cam frames.
 
@@ -66,29 +125,10 @@ def read_colmap(path: str | Path, *, images: str | Path | None = None) -> Trajec
         raise FormatError(
             path,
             None,
-            "expected a COLMAP model directory with cameras.txt or cameras.bin; got none",
+            "expected a COLMAP model directory with cameras.txt or cameras.bin (or a project "
+            "root with sparse/0/ or sparse/); got none",
         )
-    try:
-        import pycolmap
-    except ImportError as err:
-        raise InputError("reading COLMAP models needs pycolmap: pip install pycolmap") from err
-    try:
-        reconstruction = pycolmap.Reconstruction(str(model_dir))
-    except (RuntimeError, ValueError, OSError) as err:
-        message = " ".join(str(err).split())
-        raise FormatError(
-            model_dir, None, f"expected a readable COLMAP model; pycolmap failed: {message}"
-        ) from None
-    cameras_file = next(
-        model_dir / f"cameras.{e}" for e in ("txt", "bin") if (model_dir / f"cameras.{e}").is_file()
-    )
-
-    cameras: dict[int, Camera] = {}
-    for camera_id, cam in reconstruction.cameras.items():
-        model = cam.model.name if hasattr(cam.model, "name") else str(cam.model)
-        cameras[camera_id] = camera_from_colmap(
-            cameras_file, None, model, cam.width, cam.height, [float(p) for p in cam.params]
-        )
+    reconstruction, cameras = load_model(model_dir)
 
     root = Path(images) if images is not None else default_images_dir(model_dir)
     if images is not None and not root.is_dir():

@@ -10,6 +10,7 @@ from pathlib import Path
 from pgt_check.errors import InputError
 from pgt_check.io._text import read_text
 from pgt_check.io.colmap import colmap_model_dir, read_colmap
+from pgt_check.io.hloc import read_hloc
 from pgt_check.io.lamar import read_lamar
 from pgt_check.io.nerfstudio import read_nerfstudio
 from pgt_check.io.pgt import read_pgt
@@ -18,7 +19,7 @@ from pgt_check.types import Camera, Trajectory
 
 logger = logging.getLogger(__name__)
 
-FORMATS = ("lamar", "colmap", "tum", "pgt", "nerfstudio")
+FORMATS = ("lamar", "colmap", "tum", "pgt", "nerfstudio", "hloc")
 
 #: how many data rows detect_format looks at
 _SNIFF_ROWS = 5
@@ -50,16 +51,19 @@ def _row_format(text: str) -> str | None:
         return "tum"
     if len(tokens) == 9 and not _is_number(tokens[0]) and all(_is_number(t) for t in tokens[1:]):
         return "pgt"
+    if len(tokens) == 8 and not _is_number(tokens[0]) and all(_is_number(t) for t in tokens[1:]):
+        return "hloc"
     return None
 
 
 def detect_format(path: str | Path) -> str:
     """Guess the format of a trajectory path: one of ``FORMATS``.
 
-    A directory with cameras.txt/.bin is COLMAP (also any file of such a model); a directory with
-    trajectories.txt is LaMAR, with transforms.json nerfstudio; a ``.json`` with "frames" is
-    nerfstudio; a text file is judged by its first data rows: 9 comma-separated fields with a
-    timestamp and a device id -> lamar, 8 whitespace numbers -> tum, a path and 8 numbers -> pgt.
+    A directory with cameras.txt/.bin is COLMAP (also any file of such a model, and a project root
+    with sparse/0/ or sparse/); a directory with trajectories.txt is LaMAR, with transforms.json
+    nerfstudio; a ``.json`` with "frames" is nerfstudio; a text file is judged by its first data
+    rows: 9 comma-separated fields with a timestamp and a device id -> lamar, 8 whitespace numbers
+    -> tum, a path and 8 numbers -> pgt, a path and 7 numbers -> hloc.
     Raises InputError naming the file and the formats tried.
     """
     path = Path(path)
@@ -100,6 +104,7 @@ def detect_format(path: str | Path) -> str:
     raise InputError(
         f"{path}: cannot tell the format (tried lamar: 'timestamp, device, qw..tz'; "
         f"tum: 'timestamp tx ty tz qx qy qz qw'; pgt: 'rgb_file qw qx qy qz tx ty tz f'; "
+        f"hloc: 'name qw qx qy qz tx ty tz'; "
         f"colmap; nerfstudio); first data row: {first!r}"
     )
 
@@ -111,14 +116,17 @@ def read_trajectory(
     images: str | Path | None = None,
     camera: Camera | str | None = None,
     sensors: str | Path | None = None,
+    dataparser_transforms: str | Path | None = None,
 ) -> Trajectory:
     """Read any supported pose file into a Trajectory of world_from_cam frames (OpenCV axes and
     pixel convention).
 
     ``format``: "auto" (``detect_format``) or one of ``FORMATS``. ``images``: folder (or list
-    file for tum/lamar) to resolve images; ``camera``: intrinsics for tum (Camera or
+    file for tum/lamar) to resolve images; ``camera``: intrinsics for tum and hloc (Camera or
     ``"MODEL,w,h,params"`` spec in COLMAP convention); ``sensors``: a LaMAR sensors file that
-    overrides the paired one. An option a format does not use is an InputError.
+    overrides the paired one, or for hloc a COLMAP model / query list with intrinsics;
+    ``dataparser_transforms``: nerfstudio's ``dataparser_transforms.json`` to undo. An option a
+    format does not use is an InputError.
     """
     if format not in ("auto", *FORMATS):
         raise InputError(
@@ -127,17 +135,25 @@ def read_trajectory(
     fmt = detect_format(path) if format == "auto" else format
     if format == "auto":
         logger.info("%s: detected format %s", path, fmt)
-    if camera is not None and fmt != "tum":
+    if camera is not None and fmt not in ("tum", "hloc"):
         raise InputError(
-            f"--camera applies to TUM trajectories only; {path} is {fmt}, which stores its intrinsics"
+            f"--camera applies to TUM and hloc trajectories only; {path} is {fmt}, which stores "
+            "its intrinsics"
         )
-    if sensors is not None and fmt != "lamar":
-        raise InputError(f"--sensors applies to LaMAR trajectories only; {path} is {fmt}")
+    if sensors is not None and fmt not in ("lamar", "hloc"):
+        raise InputError(f"--sensors applies to LaMAR and hloc trajectories only; {path} is {fmt}")
+    if dataparser_transforms is not None and fmt != "nerfstudio":
+        raise InputError(
+            f"--dataparser-transforms applies to nerfstudio trajectories only; {path} is {fmt}"
+        )
     readers: dict[str, Callable[[], Trajectory]] = {
         "lamar": lambda: read_lamar(path, sensors=sensors, images=images),
         "colmap": lambda: read_colmap(path, images=images),
         "tum": lambda: read_tum(path, camera=camera, images=images),
         "pgt": lambda: read_pgt(path, images=images),
-        "nerfstudio": lambda: read_nerfstudio(path, images=images),
+        "nerfstudio": lambda: read_nerfstudio(
+            path, images=images, dataparser_transforms=dataparser_transforms
+        ),
+        "hloc": lambda: read_hloc(path, camera=camera, sensors=sensors, images=images),
     }
     return readers[fmt]()

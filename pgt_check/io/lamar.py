@@ -29,12 +29,13 @@ from pgt_check.errors import FormatError, InputError
 from pgt_check.geometry.transforms import rotmat_to_quat
 from pgt_check.io._text import (
     QuaternionCounter,
-    camera_from_colmap,
+    UniqueKeys,
     data_lines,
     parse_float,
     parse_timestamp,
     split_row,
 )
+from pgt_check.io.camera import camera_from_colmap, opencv_to_colmap_params
 from pgt_check.types import Camera, Frame, Trajectory
 
 logger = logging.getLogger(__name__)
@@ -101,7 +102,7 @@ def find_lamar_files(
 def read_sensors(path: Path) -> tuple[dict[str, Camera], set[str]]:
     """Cameras by sensor id, and the ids of every sensor (cameras or not)."""
     cameras: dict[str, Camera] = {}
-    seen: dict[str, int] = {}
+    seen = UniqueKeys(path, "unique sensor ids")
     for line, text in data_lines(path):
         fields = [f.strip() for f in text.split(",")]
         if len(fields) < 3:
@@ -113,13 +114,7 @@ def read_sensors(path: Path) -> tuple[dict[str, Camera], set[str]]:
         sensor_id, _name, sensor_type = fields[:3]
         if not sensor_id:
             raise FormatError(path, line, "expected a sensor id; got an empty field")
-        if sensor_id in seen:
-            raise FormatError(
-                path,
-                line,
-                f"expected unique sensor ids; got {sensor_id!r} again (first on line {seen[sensor_id]})",
-            )
-        seen[sensor_id] = line
+        seen.add(sensor_id, repr(sensor_id), line)
         if sensor_type != "camera":
             continue
         if len(fields) < 6:
@@ -132,14 +127,14 @@ def read_sensors(path: Path) -> tuple[dict[str, Camera], set[str]]:
         height = parse_float(path, line, fields[5], "height")
         params = [parse_float(path, line, p, "camera parameter") for p in fields[6:]]
         cameras[sensor_id] = camera_from_colmap(path, line, fields[3], width, height, params)
-    return cameras, set(seen)
+    return cameras, set(seen.first)
 
 
 def read_rigs(path: Path, sensor_ids: set[str]) -> dict[tuple[str, str], np.ndarray]:
     """rig_from_sensor (4x4) by (rig_id, sensor_id)."""
     quats = QuaternionCounter(path)
     rigs: dict[tuple[str, str], np.ndarray] = {}
-    lines: dict[tuple[str, str], int] = {}
+    seen = UniqueKeys(path, "unique (rig, sensor) pairs")
     for line, text in data_lines(path, allow_empty=True):
         fields = split_row(
             path, line, text, count=9, sep=",", layout=f"rig_id, sensor_id, {POSE_LAYOUT}"
@@ -149,15 +144,8 @@ def read_rigs(path: Path, sensor_ids: set[str]) -> dict[tuple[str, str], np.ndar
             raise FormatError(
                 path, line, f"expected a sensor id from the sensors file; got {sensor_id!r}"
             )
-        key = (rig_id, sensor_id)
-        if key in rigs:
-            raise FormatError(
-                path,
-                line,
-                f"expected unique (rig, sensor) pairs; got {rig_id}, {sensor_id} again (first on line {lines[key]})",
-            )
-        rigs[key] = _parse_pose(path, line, fields[2:], quats)
-        lines[key] = line
+        seen.add((rig_id, sensor_id), f"{rig_id}, {sensor_id}", line)
+        rigs[(rig_id, sensor_id)] = _parse_pose(path, line, fields[2:], quats)
     quats.report()
     return rigs
 
@@ -175,7 +163,7 @@ def read_poses(path: Path, device_ids: set[str]) -> dict[tuple[float, str], np.n
     """world_from_device (4x4) by (timestamp, device_id)."""
     quats = QuaternionCounter(path)
     poses: dict[tuple[float, str], np.ndarray] = {}
-    lines: dict[tuple[float, str], int] = {}
+    seen = UniqueKeys(path, "one pose per (timestamp, device)")
     for line, text in data_lines(path):
         fields = split_row(
             path, line, text, count=9, sep=",", layout=f"timestamp, device_id, {POSE_LAYOUT}"
@@ -188,17 +176,32 @@ def read_poses(path: Path, device_ids: set[str]) -> dict[tuple[float, str], np.n
                 line,
                 f"expected a device id from the sensors or rigs file ({', '.join(sorted(device_ids))}); got {device_id!r}",
             )
-        key = (timestamp, device_id)
-        if key in poses:
-            raise FormatError(
-                path,
-                line,
-                f"expected one pose per (timestamp, device); got {fields[0]}, {device_id} again (first on line {lines[key]})",
-            )
-        poses[key] = _parse_pose(path, line, fields[2:], quats)
-        lines[key] = line
+        seen.add((timestamp, device_id), f"{fields[0]}, {device_id}", line)
+        poses[(timestamp, device_id)] = _parse_pose(path, line, fields[2:], quats)
     quats.report()
     return poses
+
+
+def _first_image_path(rows: list[tuple[int, str]]) -> str | None:
+    fields = rows[0][1].split(",") if rows else []
+    return fields[2].strip() if len(fields) == 3 else None
+
+
+def default_image_root(images_file: Path, first_image: str | None) -> Path:
+    """Where the paths of a LaMAR images file are resolved when no folder is given.
+
+    A LaMAR session keeps its images under ``raw_data/`` beside ``images.txt``, with paths
+    relative to it; other exports write paths relative to the images file's folder. ``raw_data/``
+    is taken when it exists, unless the first listed image exists beside the file and not under
+    ``raw_data/``.
+    """
+    base = images_file.parent
+    raw = base / "raw_data"
+    if not raw.is_dir():
+        return base
+    if first_image and (base / first_image).exists() and not (raw / first_image).exists():
+        return base
+    return raw
 
 
 def read_lamar(
@@ -207,7 +210,8 @@ def read_lamar(
     """Read a LaMAR trajectories file with its sensors, images and rigs files.
 
     ``images`` may be a list file (replaces ``images*.txt``) or a folder (the root that image
-    paths are resolved against; default: the images file's folder). frame_id is
+    paths are resolved against; default: ``default_image_root``, the images file's folder or the
+    session's ``raw_data/``). frame_id is
     ``"{timestamp}/{sensor_id}"`` as written in the images file. Images without a pose are
     skipped (one WARNING with the count); frames are sorted by timestamp, then sensor id.
     """
@@ -229,11 +233,15 @@ def read_lamar(
     for rig, sensor in rigs:
         rigs_of.setdefault(sensor, []).append(rig)
 
-    root = Path(images) if images is not None and Path(images).is_dir() else files.images.parent
+    image_rows = data_lines(files.images)
+    if images is not None and Path(images).is_dir():
+        root = Path(images)
+    else:
+        root = default_image_root(files.images, _first_image_path(image_rows))
     frames: list[tuple[float, str, Frame]] = []
-    seen: dict[str, int] = {}
+    seen = UniqueKeys(files.images, "one image per (timestamp, sensor)")
     unposed: list[str] = []
-    for line, text in data_lines(files.images):
+    for line, text in image_rows:
         fields = split_row(
             files.images, line, text, count=3, sep=",", layout="timestamp, sensor_id, image_path"
         )
@@ -250,13 +258,7 @@ def read_lamar(
         if not image_path:
             raise FormatError(files.images, line, "expected an image path; got an empty field")
         frame_id = f"{stamp_text}/{sensor_id}"
-        if frame_id in seen:
-            raise FormatError(
-                files.images,
-                line,
-                f"expected one image per (timestamp, sensor); got {frame_id} again (first on line {seen[frame_id]})",
-            )
-        seen[frame_id] = line
+        seen.add(frame_id, frame_id, line)
         world_from_cam = poses.get((timestamp, sensor_id))
         if world_from_cam is None:
             for rig in rigs_of.get(sensor_id, ()):
@@ -292,6 +294,7 @@ def read_lamar(
         "trajectories_file": str(files.trajectories),
         "sensors_file": str(files.sensors),
         "images_file": str(files.images),
+        "images_dir": str(root),
     }
     if files.rigs is not None:
         metadata["rigs_file"] = str(files.rigs)
@@ -334,7 +337,7 @@ def write_lamar(trajectory: Trajectory, directory: str | Path, suffix: str = "")
 
     sensors_rows = ["# sensor_id, name, sensor_type, [sensor_params]+"]
     for camera, cam_id in camera_ids.items():
-        values = ", ".join(_fmt(p) for p in camera.to_colmap_params())
+        values = ", ".join(_fmt(p) for p in opencv_to_colmap_params(camera.model, camera.params))
         sensors_rows.append(
             f"{cam_id}, {cam_id}, camera, {camera.model}, {camera.width}, {camera.height}, {values}"
         )

@@ -8,6 +8,11 @@ principal point puts the top-left pixel centre at (0.5, 0.5), so 0.5 is subtract
 ``file_path`` is relative to the json's folder. An ``applied_transform`` (nerfstudio's record of
 the world-axis change it made when converting from COLMAP) is not undone; it is kept in the
 trajectory metadata.
+
+Poses exported from a trained nerfstudio model live in its dataparser frame: nerfstudio stored
+``M' = T @ M`` with the translation then multiplied by ``scale`` (``dataparser_transforms.json``:
+``transform`` 3x4, ``scale``). ``read_nerfstudio(..., dataparser_transforms=PATH)`` undoes that:
+``M = T^-1 @ [R' | t' / scale]``.
 """
 
 from __future__ import annotations
@@ -21,6 +26,8 @@ from typing import Any
 import numpy as np
 
 from pgt_check.errors import FormatError, InputError
+from pgt_check.io._text import UniqueKeys
+from pgt_check.io.camera import COLMAP_PIXEL_OFFSET
 from pgt_check.io.images import image_size
 from pgt_check.types import Camera, Frame, Trajectory
 
@@ -105,8 +112,8 @@ def _camera(path: Path, where: str, values: dict[str, Any], image: Path) -> Came
         fy = 0.5 * height / math.tan(0.5 * num["camera_angle_y"])
     else:
         fy = fx
-    cx = num.get("cx", width / 2.0) - 0.5
-    cy = num.get("cy", height / 2.0) - 0.5
+    cx = num.get("cx", width / 2.0) - COLMAP_PIXEL_OFFSET
+    cy = num.get("cy", height / 2.0) - COLMAP_PIXEL_OFFSET
     dist = {k: num.get(k, 0.0) for k in DISTORTION_KEYS}
     if dist["k4"]:
         raise FormatError(
@@ -137,13 +144,59 @@ def _camera(path: Path, where: str, values: dict[str, Any], image: Path) -> Came
         raise FormatError(path, None, f"{where}: expected a valid camera; got {err}") from None
 
 
-def read_nerfstudio(path: str | Path, *, images: str | Path | None = None) -> Trajectory:
+def read_dataparser_transforms(path: str | Path) -> tuple[np.ndarray, float]:
+    """(4x4 rigid ``transform``, ``scale``) of a nerfstudio ``dataparser_transforms.json``."""
+    path = Path(path)
+    data = load_json(path)
+    if not isinstance(data, dict) or "transform" not in data or "scale" not in data:
+        raise FormatError(path, None, "expected an object with 'transform' (3x4) and 'scale'")
+    try:
+        t = np.asarray(data["transform"], dtype=np.float64)
+    except (TypeError, ValueError):
+        t = np.zeros(0)
+    if t.shape == (3, 4):
+        t = np.vstack([t, [0.0, 0.0, 0.0, 1.0]])
+    if t.shape != (4, 4) or not np.all(np.isfinite(t)):
+        raise FormatError(
+            path, None, f"expected a finite 3x4 'transform'; got {data['transform']!r:.80}"
+        )
+    r = t[:3, :3]
+    if not np.allclose(r @ r.T, np.eye(3), atol=1e-6) or np.linalg.det(r) < 0:
+        raise FormatError(path, None, "expected 'transform' to be a rotation and a translation")
+    scale = _number(path, "dataparser", "scale", data["scale"])
+    if scale <= 0:
+        raise FormatError(path, None, f"expected a positive 'scale'; got {scale}")
+    return t, scale
+
+
+def undo_dataparser_transform(
+    matrix: np.ndarray, transform: np.ndarray, scale: float
+) -> np.ndarray:
+    """(4, 4) pose in nerfstudio's dataparser frame -> the original frame (see module doc)."""
+    unscaled = np.array(matrix, dtype=np.float64)
+    unscaled[:3, 3] /= scale
+    return np.linalg.inv(transform) @ unscaled
+
+
+def read_nerfstudio(
+    path: str | Path,
+    *,
+    images: str | Path | None = None,
+    dataparser_transforms: str | Path | None = None,
+) -> Trajectory:
     """Read a ``transforms.json`` (or a folder holding one) into world_from_cam frames.
 
     frame_id and image_path are ``file_path`` as written; files are resolved against ``images``
-    (default: the json's folder). Frames keep the file's order.
+    (default: the json's folder). Frames keep the file's order. ``dataparser_transforms``: a
+    nerfstudio ``dataparser_transforms.json`` whose transform and scale are undone (poses
+    exported in a trained model's frame back to the data's frame).
     """
     path = Path(path)
+    undo = (
+        read_dataparser_transforms(dataparser_transforms)
+        if dataparser_transforms is not None
+        else None
+    )
     if path.is_dir():
         path = path / "transforms.json"
     data = load_json(path)
@@ -154,7 +207,7 @@ def read_nerfstudio(path: str | Path, *, images: str | Path | None = None) -> Tr
     root = Path(images) if images is not None else path.parent
     shared = {k: v for k, v in data.items() if k != "frames"}
     frames: list[Frame] = []
-    seen: set[str] = set()
+    seen = UniqueKeys(path, "unique 'file_path'")
     for i, entry in enumerate(data["frames"]):
         where = f"frames[{i}]"
         if not isinstance(entry, dict):
@@ -180,11 +233,9 @@ def read_nerfstudio(path: str | Path, *, images: str | Path | None = None) -> Tr
                 None,
                 f"{where}: expected a 4x4 'transform_matrix'; got {entry.get('transform_matrix')!r:.80}",
             )
-        if file_path in seen:
-            raise FormatError(
-                path, None, f"{where}: expected unique 'file_path'; got {file_path!r} again"
-            )
-        seen.add(file_path)
+        if undo is not None:
+            matrix = undo_dataparser_transform(matrix, *undo)
+        seen.add(file_path, repr(file_path), None, where)
         try:
             frames.append(Frame(file_path, camera, matrix @ GL_FROM_CV, file_path, image))
         except ValueError as err:
@@ -192,6 +243,8 @@ def read_nerfstudio(path: str | Path, *, images: str | Path | None = None) -> Tr
                 path, None, f"{where}: expected a rigid cam-to-world 'transform_matrix'; got {err}"
             ) from None
     metadata = {"images_dir": str(root)}
+    if dataparser_transforms is not None:
+        metadata["dataparser_transforms"] = str(dataparser_transforms)
     if "applied_transform" in data:
         metadata["applied_transform"] = json.dumps(data["applied_transform"])
         logger.info("%s: has an applied_transform; poses are kept in the file's world frame", path)

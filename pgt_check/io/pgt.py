@@ -15,7 +15,7 @@ import numpy as np
 
 from pgt_check.errors import FormatError, InputError
 from pgt_check.geometry.transforms import invert_rigid
-from pgt_check.io._text import QuaternionCounter, data_lines, parse_float, split_row
+from pgt_check.io._text import QuaternionCounter, UniqueKeys, data_lines, parse_float, split_row
 from pgt_check.io.images import image_size
 from pgt_check.types import Camera, Frame, Trajectory
 
@@ -38,17 +38,11 @@ def read_pgt(path: str | Path, *, images: str | Path | None = None) -> Trajector
         raise InputError(f"{root}: images folder not found")
     quats = QuaternionCounter(path)
     rows: list[tuple[int, str, float, np.ndarray]] = []
-    seen: dict[str, int] = {}
+    seen = UniqueKeys(path, "unique image names")
     for line, text in data_lines(path):
         fields = split_row(path, line, text, count=9, sep=None, layout=LAYOUT)
         name = fields[0]
-        if name in seen:
-            raise FormatError(
-                path,
-                line,
-                f"expected unique image names; got {name!r} again (first on line {seen[name]})",
-            )
-        seen[name] = line
+        seen.add(name, repr(name), line)
         v = [
             parse_float(path, line, f, n)
             for f, n in zip(fields[1:], LAYOUT.split()[1:], strict=True)

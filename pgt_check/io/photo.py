@@ -22,10 +22,10 @@ def prepare_photo(image: np.ndarray, camera: Camera) -> tuple[np.ndarray, Camera
 
     image: (H, W, 3) float32 RGB. A photo whose size differs from the camera's but has the same
     aspect ratio (within 1 %) is treated as a resized capture and the camera is scaled to it.
-    Distorted camera models are undistorted to their pinhole part. Raises InputError for an
+    Distorted camera models (fisheye included) are undistorted to their pinhole part. Raises InputError for an
     incompatible size.
     """
-    import cv2
+    from pgt_check.io.camera import undistort_to_pinhole
 
     h, w = image.shape[:2]
     if (w, h) != (camera.width, camera.height):
@@ -35,8 +35,4 @@ def prepare_photo(image: np.ndarray, camera: Camera) -> tuple[np.ndarray, Camera
             )
         if not camera.is_distorted:
             camera = camera.scaled(w / camera.width, h / camera.height)
-    if camera.is_distorted:
-        pinhole = camera.as_pinhole()
-        image = cv2.undistort(image, camera.K, camera.dist_coeffs, None, pinhole.K)
-        camera = pinhole
-    return image, camera
+    return undistort_to_pinhole(image, camera)

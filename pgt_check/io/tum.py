@@ -16,9 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from pgt_check.errors import FormatError, InputError
+from pgt_check.errors import InputError
 from pgt_check.io._text import (
     QuaternionCounter,
+    UniqueKeys,
     data_lines,
     is_integer_token,
     parse_float,
@@ -82,17 +83,11 @@ def images_from_folder(folder: Path) -> list[TimedImage]:
 def images_from_list(path: Path) -> list[TimedImage]:
     """A TUM ``rgb.txt``-style list: ``timestamp path`` per line, paths relative to its folder."""
     out: list[TimedImage] = []
-    seen: dict[float, int] = {}
+    seen = UniqueKeys(path, "unique timestamps")
     for line, text in data_lines(path):
         fields = split_row(path, line, text, count=2, sep=None, layout="timestamp image_path")
         stamp = parse_timestamp(path, line, fields[0])
-        if stamp in seen:
-            raise FormatError(
-                path,
-                line,
-                f"expected unique timestamps; got {fields[0]} again (first on line {seen[stamp]})",
-            )
-        seen[stamp] = line
+        seen.add(stamp, fields[0], line)
         out.append(
             TimedImage(stamp, is_integer_token(fields[0]), fields[1], path.parent / fields[1])
         )
@@ -143,19 +138,13 @@ def read_tum(
         camera = parse_camera_spec(camera)
     quats = QuaternionCounter(path)
     rows: list[tuple[int, str, float, np.ndarray]] = []
-    seen: dict[float, int] = {}
+    seen = UniqueKeys(path, "unique timestamps")
     for line, text in data_lines(path):
         fields = split_row(
             path, line, text, count=8, sep=None, layout="timestamp tx ty tz qx qy qz qw"
         )
         stamp = parse_timestamp(path, line, fields[0])
-        if stamp in seen:
-            raise FormatError(
-                path,
-                line,
-                f"expected unique timestamps; got {fields[0]} again (first on line {seen[stamp]})",
-            )
-        seen[stamp] = line
+        seen.add(stamp, fields[0], line)
         v = [
             parse_float(path, line, f, n)
             for f, n in zip(fields[1:], ("tx", "ty", "tz", "qx", "qy", "qz", "qw"), strict=True)

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from pgt_check.errors import InputError, MissingExtraError
+from pgt_check.match.base import Matches
 from pgt_check.types import check_shape
 
 logger = logging.getLogger(__name__)
@@ -189,3 +190,55 @@ def filter_by_mask(kpts: Any, desc: Any, mask: np.ndarray | None) -> tuple[Any, 
 
     keep = torch.from_numpy(keypoints_in_mask(kpts.double().cpu().numpy(), mask)).to(kpts.device)
     return kpts[keep], desc[keep]
+
+
+class DetectAndMatch(PicklesWithoutModels):
+    """The ``match()`` of the detect-describe-match backends (LightGlue, XFeat).
+
+    Subclasses set ``device`` and implement ``_load() -> models``,
+    ``_detect(models, image) -> (kpts (N, 2), desc (N, D))`` and
+    ``_pair(models, k0, d0, size0, k1, d1, size1) -> (idx0 (S,), idx1 (S,), scores (S,))``
+    (torch tensors; sizes are (W, H)).
+    """
+
+    device: str
+
+    def _load(self) -> Any:
+        raise NotImplementedError
+
+    def _detect(self, models: Any, image: np.ndarray) -> tuple[Any, Any]:
+        raise NotImplementedError
+
+    def _pair(
+        self,
+        models: Any,
+        k0: Any,
+        d0: Any,
+        size0: tuple[int, int],
+        k1: Any,
+        d1: Any,
+        size1: tuple[int, int],
+    ) -> tuple[Any, Any, Any]:
+        raise NotImplementedError
+
+    def match(
+        self, image0: np.ndarray, image1: np.ndarray, mask0: np.ndarray | None = None
+    ) -> Matches:
+        """Match image0 (render) to image1 (photo); both (H, W, 3) RGB float32 in [0, 1]."""
+        torch = require("torch")
+        im0, im1, m0 = check_pair(image0, image1, mask0)
+        models = self._load()
+        with torch.inference_mode():
+            k0, d0 = self._detect(models, im0)
+            k1, d1 = self._detect(models, im1)
+            k0, d0 = filter_by_mask(k0, d0, m0)
+            # like the OpenCV matchers: image0 keypoints are counted inside the mask
+            n0, n1 = int(k0.shape[0]), int(k1.shape[0])
+            if n0 == 0 or n1 == 0:
+                return Matches(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), n0, n1)
+            size0 = (im0.shape[1], im0.shape[0])
+            size1 = (im1.shape[1], im1.shape[0])
+            i0, i1, scores = self._pair(models, k0, d0, size0, k1, d1, size1)
+            kp0 = k0[i0].double().cpu().numpy()
+            kp1 = k1[i1].double().cpu().numpy()
+            return Matches(kp0, kp1, scores.double().cpu().numpy(), n0, n1)

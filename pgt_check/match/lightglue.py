@@ -21,7 +21,6 @@ from typing import Any
 import numpy as np
 
 from pgt_check.match import _torch
-from pgt_check.match.base import Matches
 
 logger = logging.getLogger(__name__)
 
@@ -103,7 +102,7 @@ def run_lightglue(
 
 
 @dataclass
-class LightGlueMatcher(_torch.PicklesWithoutModels):
+class LightGlueMatcher(_torch.DetectAndMatch):
     """DISK or ALIKED keypoints matched by LightGlue (kornia modules, bundled weights).
 
     features: "disk" | "aliked"; max_keypoints: per image; device: "cpu" | "cuda";
@@ -160,7 +159,8 @@ class LightGlueMatcher(_torch.PicklesWithoutModels):
             logger.debug("loaded %s from %s", self.name, self._glue_path.parent)
         return self._models
 
-    def _detect(self, detector: Any, image: np.ndarray) -> tuple[Any, Any]:
+    def _detect(self, models: tuple[Any, Any], image: np.ndarray) -> tuple[Any, Any]:
+        detector = models[0]
         t = _torch.image_to_tensor(image, self.device)
         if self.features == "disk":
             f = detector(
@@ -174,25 +174,6 @@ class LightGlueMatcher(_torch.PicklesWithoutModels):
             f = detector(t)[0]
         return f.keypoints, f.descriptors
 
-    def match(
-        self, image0: np.ndarray, image1: np.ndarray, mask0: np.ndarray | None = None
-    ) -> Matches:
-        """Match image0 (render) to image1 (photo); both (H, W, 3) RGB float32 in [0, 1]."""
-        torch = _torch.require("torch")
-        im0, im1, m0 = _torch.check_pair(image0, image1, mask0)
-        detector, glue = self._load()
-        with torch.inference_mode():
-            k0, d0 = self._detect(detector, im0)
-            k1, d1 = self._detect(detector, im1)
-            k0, d0 = _torch.filter_by_mask(k0, d0, m0)
-            # like the OpenCV matchers: image0 keypoints are counted inside the mask
-            n0, n1 = int(k0.shape[0]), int(k1.shape[0])
-            if k0.shape[0] == 0 or k1.shape[0] == 0:
-                return Matches(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), n0, n1)
-            size0 = (im0.shape[1], im0.shape[0])
-            size1 = (im1.shape[1], im1.shape[0])
-            idx, scores = run_lightglue(glue, k0, d0, size0, k1, d1, size1)
-            idx = idx.cpu().numpy()
-            kp0 = k0.double().cpu().numpy()[idx[:, 0]]
-            kp1 = k1.double().cpu().numpy()[idx[:, 1]]
-            return Matches(kp0, kp1, scores.double().cpu().numpy(), n0, n1)
+    def _pair(self, models, k0, d0, size0, k1, d1, size1) -> tuple[Any, Any, Any]:
+        idx, scores = run_lightglue(models[1], k0, d0, size0, k1, d1, size1)
+        return idx[:, 0], idx[:, 1], scores

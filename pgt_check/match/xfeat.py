@@ -21,7 +21,6 @@ from typing import Any
 import numpy as np
 
 from pgt_check.match import _torch
-from pgt_check.match.base import Matches
 from pgt_check.match.lightglue import build_lightglue, convert_lightglue_state_dict, run_lightglue
 
 logger = logging.getLogger(__name__)
@@ -61,7 +60,7 @@ def pad_to_multiple(image: np.ndarray, multiple: int) -> np.ndarray:
 
 
 @dataclass
-class XFeatMatcher(_torch.PicklesWithoutModels):
+class XFeatMatcher(_torch.DetectAndMatch):
     """XFeat keypoints + descriptors, matched by mutual nearest neighbours or by LighterGlue.
 
     lighterglue: match with LighterGlue instead of MNN; max_keypoints: per image;
@@ -115,35 +114,17 @@ class XFeatMatcher(_torch.PicklesWithoutModels):
             self._models = (xfeat.to(self.device), glue)
         return self._models
 
-    def _detect(self, xfeat: Any, image: np.ndarray) -> tuple[Any, Any]:
+    def _detect(self, models: tuple[Any, Any], image: np.ndarray) -> tuple[Any, Any]:
         h, w = image.shape[:2]
         t = _torch.image_to_tensor(pad_to_multiple(image, XFEAT_MULTIPLE), self.device)
-        out = xfeat.detectAndCompute(t, top_k=self.max_keypoints)[0]
+        out = models[0].detectAndCompute(t, top_k=self.max_keypoints)[0]
         k, d = out["keypoints"].float(), out["descriptors"]
         inside = (k[:, 0] <= w - 1) & (k[:, 1] <= h - 1)
         return k[inside], d[inside]
 
-    def match(
-        self, image0: np.ndarray, image1: np.ndarray, mask0: np.ndarray | None = None
-    ) -> Matches:
-        """Match image0 (render) to image1 (photo); both (H, W, 3) RGB float32 in [0, 1]."""
-        torch = _torch.require("torch")
-        im0, im1, m0 = _torch.check_pair(image0, image1, mask0)
-        xfeat, glue = self._load()
-        with torch.inference_mode():
-            k0, d0 = self._detect(xfeat, im0)
-            k1, d1 = self._detect(xfeat, im1)
-            k0, d0 = _torch.filter_by_mask(k0, d0, m0)
-            n0, n1 = int(k0.shape[0]), int(k1.shape[0])
-            if n0 == 0 or n1 == 0:
-                return Matches(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), n0, n1)
-            if glue is None:
-                i0, i1, scores = _torch.mutual_nearest_neighbours(d0, d1, self.min_similarity)
-            else:
-                size0 = (im0.shape[1], im0.shape[0])
-                size1 = (im1.shape[1], im1.shape[0])
-                idx, scores = run_lightglue(glue, k0, d0, size0, k1, d1, size1)
-                i0, i1 = idx[:, 0], idx[:, 1]
-            kp0 = k0[i0].double().cpu().numpy()
-            kp1 = k1[i1].double().cpu().numpy()
-            return Matches(kp0, kp1, scores.double().cpu().numpy(), n0, n1)
+    def _pair(self, models, k0, d0, size0, k1, d1, size1) -> tuple[Any, Any, Any]:
+        glue = models[1]
+        if glue is None:
+            return _torch.mutual_nearest_neighbours(d0, d1, self.min_similarity)
+        idx, scores = run_lightglue(glue, k0, d0, size0, k1, d1, size1)
+        return idx[:, 0], idx[:, 1], scores

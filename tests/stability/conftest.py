@@ -1,16 +1,10 @@
-"""Fixtures of the stability suite; the scene builders live in stab_scenes.py (put on sys.path
-here, like tests/pgt_check/report/report_testdata.py is through pyproject)."""
+"""Fixtures of the stability suite; the scene builders live in stab_scenes.py (on sys.path
+through pyproject's pythonpath, like tests/pgt_check/report/report_testdata.py)."""
 
 from __future__ import annotations
 
-import sys
-from pathlib import Path
-
 import pytest
-
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-from stab_scenes import MeshData, Scene, box_room_mesh  # noqa: E402
+from stab_scenes import MeshData, Scene, box_room_mesh
 
 
 @pytest.fixture

@@ -153,3 +153,19 @@ def test_config_min_inliers_enforced():
     p0 = _grid_points(30)
     res = estimate_homography(p0, p0, W, H, HomographyConfig(min_matches=4, min_inliers=40))
     assert not res.success and res.reason == Reason.TOO_FEW_INLIERS
+
+
+def test_auc_matches_the_trapezoid_rule_on_random_errors():
+    """The written-out trapezoid rule (NumPy 1.24 has no np.trapezoid) against a dense integral
+    of the recall curve: linear between the sorted errors (0 at 0), flat after the last one."""
+    rng = np.random.default_rng(3)
+    errors = np.concatenate([rng.uniform(0, 6, 50), [np.inf] * 5])
+    got = auc_at_thresholds(errors, (1.0, 3.0, 5.0))
+    e = np.concatenate([[0.0], np.sort(errors)])
+    r = np.arange(len(e)) / len(errors)
+    for t in (1.0, 3.0, 5.0):
+        xs = np.linspace(0, t, 200_001)
+        inside = e < t
+        curve = np.interp(xs, e[inside], r[inside])
+        assert got[f"auc@{t:g}px"] == pytest.approx(curve.mean(), abs=1e-4)
+        assert 0.0 < got[f"auc@{t:g}px"] < 1.0

@@ -53,3 +53,19 @@ def test_invert_and_apply():
     np.testing.assert_allclose(back, p, atol=1e-8)
     assert rotation_angle_deg(r) == pytest.approx(37.0)
     assert rotation_angle_deg(np.eye(3)) == 0.0
+
+
+def test_transforms_do_not_import_types():
+    """No import circle: geometry.transforms needs only pgt_check._checks, and types imports it
+    at the top (check_shape stays importable from pgt_check.types)."""
+    import subprocess
+    import sys
+
+    code = (
+        "import sys; import pgt_check.geometry.transforms; "
+        "assert 'pgt_check.types' not in sys.modules, 'transforms imported types'; "
+        "from pgt_check.types import check_shape; "
+        "from pgt_check._checks import check_shape as c; assert check_shape is c"
+    )
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr

@@ -93,12 +93,20 @@ def test_sparse_zero_layout_finds_project_images(tmp_path: Path, random_rigid) -
     assert read_colmap(model)[0].image_file == tmp_path / "images" / "img_00.png"
 
 
+def test_fisheye_camera_model_is_read(tmp_path: Path, random_rigid) -> None:
+    cameras = "1 OPENCV_FISHEYE 640 480 500 510 320 240 0.1 0.01 0 0\n"
+    model = write_text_model(tmp_path / "m", [random_rigid()], cameras=cameras)
+    cam = read_colmap(model)[0].camera
+    assert cam == Camera("OPENCV_FISHEYE", 640, 480, (500, 510, 319.5, 239.5, 0.1, 0.01, 0, 0))
+    assert cam.is_distorted
+
+
 def test_unsupported_camera_model(tmp_path: Path, random_rigid, check_error) -> None:
-    cameras = "1 OPENCV_FISHEYE 640 480 500 510 320 240 0 0 0 0\n2 PINHOLE 64 48 50 50 32 24\n"
+    cameras = "1 EQUIRECTANGULAR 640 480 640 480\n2 PINHOLE 64 48 50 50 32 24\n"
     model = write_text_model(tmp_path / "m", [random_rigid()], cameras=cameras)
     with pytest.raises(FormatError) as info:
         read_colmap(model)
-    check_error(info.value, model / "cameras.txt", None, "'OPENCV_FISHEYE'")
+    check_error(info.value, model / "cameras.txt", None, "'EQUIRECTANGULAR'")
 
 
 def test_corrupt_model(tmp_path: Path) -> None:
@@ -116,3 +124,22 @@ def test_not_a_model(tmp_path: Path) -> None:
         read_colmap(tmp_path)
     with pytest.raises(InputError, match="not found"):
         read_colmap(tmp_path / "nope")
+
+
+def test_project_root_is_descended_into(tmp_path: Path, random_rigid) -> None:
+    """A COLMAP project (images/, sparse/0/, sparse/1/) given by its root: sparse/0 is read."""
+    poses = [random_rigid() for _ in range(2)]
+    write_text_model(tmp_path / "proj" / "sparse" / "0", poses)
+    write_text_model(tmp_path / "proj" / "sparse" / "1", [random_rigid()])
+    (tmp_path / "proj" / "images").mkdir()
+    assert detect_format(tmp_path / "proj") == "colmap"
+    traj = read_trajectory(tmp_path / "proj")
+    assert traj.source == str(tmp_path / "proj" / "sparse" / "0") and len(traj) == 2
+    assert_allclose(traj[0].world_from_cam, invert_rigid(poses[0]), atol=1e-9)
+    assert traj[0].image_file == tmp_path / "proj" / "images" / "img_00.png"
+    # an unnumbered sparse/ works too; a folder without a model is not COLMAP
+    write_text_model(tmp_path / "flat" / "sparse", poses)
+    assert read_colmap(tmp_path / "flat").source == str(tmp_path / "flat" / "sparse")
+    (tmp_path / "empty" / "sparse" / "0").mkdir(parents=True)
+    with pytest.raises(FormatError, match="sparse/0"):
+        read_colmap(tmp_path / "empty")

@@ -15,6 +15,7 @@ SAMPLES = {
     "gt.txt": ("# h\n1305031102.17 1 2 3 0 0 0 1\n", "tum"),
     "pgt.txt": ("seq-01/frame-000000.color.png 1 0 0 0 0 0 0 525\n", "pgt"),
     "transforms.json": (json.dumps({"frames": []}), "nerfstudio"),
+    "results.txt": ("query/night/IMG_01.jpg 1 0 0 0 0.1 0.2 0.3\n", "hloc"),
 }
 
 
@@ -80,7 +81,7 @@ def test_read_trajectory_option_checks(tmp_path: Path) -> None:
     gt.write_text(SAMPLES["gt.txt"][0])
     with pytest.raises(InputError, match="--sensors applies to LaMAR"):
         read_trajectory(gt, sensors=path)
-    assert set(FORMATS) == {"lamar", "colmap", "tum", "pgt", "nerfstudio"}
+    assert set(FORMATS) == {"lamar", "colmap", "tum", "pgt", "nerfstudio", "hloc"}
 
 
 def test_import_is_light() -> None:

@@ -205,9 +205,9 @@ BAD_CASES = {
     ),
     "sensors-model": (
         "sensors.txt",
-        HEAD + "cam0, x, camera, FISHEYE, 640, 480, 1, 2, 3\n",
+        HEAD + "cam0, x, camera, FISHEYE_X, 640, 480, 1, 2, 3\n",
         2,
-        "'FISHEYE'",
+        "'FISHEYE_X'",
     ),
     "sensors-params": (
         "sensors.txt",
@@ -334,3 +334,20 @@ def test_round_trip_property(tmp_path_factory, q, t, cx) -> None:
     assert_allclose(back.world_from_cam[:3, 3], pose[:3, 3], rtol=0, atol=1e-9)
     assert_allclose(back.camera.params, cam.params, rtol=0, atol=1e-12)  # cx +0.5 -0.5: 1 ulp
     assert back.frame_id == "7/cam0"
+
+
+def test_images_under_raw_data_are_found(tmp_path: Path) -> None:
+    """A LaMAR session keeps images under raw_data/, with paths relative to it."""
+    path = write_session(tmp_path / "s")
+    (tmp_path / "s" / "raw_data" / "images").mkdir(parents=True)
+    (tmp_path / "s" / "raw_data" / "images" / "a.jpg").write_bytes(b"")
+    traj = read_trajectory(path)
+    assert traj[0].image_file == tmp_path / "s" / "raw_data" / "images" / "a.jpg"
+    assert traj.metadata["images_dir"] == str(tmp_path / "s" / "raw_data")
+    # paths that resolve beside images.txt (and not under raw_data/) keep that root
+    (tmp_path / "s" / "images").mkdir()
+    (tmp_path / "s" / "images" / "a.jpg").write_bytes(b"")
+    (tmp_path / "s" / "raw_data" / "images" / "a.jpg").unlink()
+    assert read_lamar(path)[0].image_file == tmp_path / "s" / "images" / "a.jpg"
+    # an explicit folder wins
+    assert read_lamar(path, images=tmp_path)[0].image_file == tmp_path / "images" / "a.jpg"

@@ -148,3 +148,32 @@ def test_invalid_json_line_number(tmp_path: Path, check_error) -> None:
     with pytest.raises(FormatError) as info:
         read_nerfstudio(path)
     check_error(info.value, path, 3, "expected valid JSON")
+
+
+def test_dataparser_transform_round_trip(tmp_path: Path, random_rigid) -> None:
+    """Poses exported in a trained model's frame (scale * (T @ M)) come back as M."""
+    originals = [random_rigid() for _ in range(3)]
+    transform, scale = random_rigid(), 0.37
+    frames = []
+    for i, m in enumerate(originals):
+        stored = transform @ m
+        stored[:3, 3] *= scale  # nerfstudio's auto_scale_poses
+        frames.append({"file_path": f"f{i}.png", "transform_matrix": stored.tolist()})
+    data = {"fl_x": 50.0, "w": 64, "h": 48, "frames": frames}
+    path = write_json(tmp_path / "ns", data)
+    dp = tmp_path / "ns" / "dataparser_transforms.json"
+    dp.write_text(json.dumps({"transform": transform[:3].tolist(), "scale": scale}))
+    traj = read_trajectory(path, dataparser_transforms=dp)
+    for frame, m in zip(traj, originals, strict=True):
+        assert_allclose(frame.world_from_cam, m @ FLIP, atol=1e-9)
+    assert traj.metadata["dataparser_transforms"] == str(dp)
+    # without the option the poses stay in the dataparser frame
+    plain = read_nerfstudio(path)
+    assert not np.allclose(plain[0].world_from_cam, originals[0] @ FLIP, atol=1e-3)
+    # a transform that is not rigid, or a bad scale, is a FormatError
+    dp.write_text(json.dumps({"transform": (2 * transform[:3]).tolist(), "scale": scale}))
+    with pytest.raises(FormatError, match="rotation"):
+        read_nerfstudio(path, dataparser_transforms=dp)
+    dp.write_text(json.dumps({"transform": transform[:3].tolist(), "scale": 0}))
+    with pytest.raises(FormatError, match="positive 'scale'"):
+        read_nerfstudio(path, dataparser_transforms=dp)
