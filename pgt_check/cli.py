@@ -21,6 +21,12 @@ EXIT_PASSED, EXIT_FAILED, EXIT_INPUT = 0, 1, 2
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from pgt_check.config import PRESETS
+    from pgt_check.enhance import ENHANCERS
+    from pgt_check.io import FORMATS
+    from pgt_check.match import MATCHERS
+    from pgt_check.render import BACKENDS
+
     p = argparse.ArgumentParser(
         prog="pgt-check",
         description="Check pseudo-ground-truth camera poses frame by frame against a mesh.",
@@ -31,23 +37,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--mesh", required=True, help="mesh (PLY/OBJ/GLB) in the poses' world frame")
     p.add_argument("--out", default=None, help="output directory (default: pgt-check-out)")
     p.add_argument("--config", default=None, help="JSON or TOML config file (CLI options win)")
-    p.add_argument("--preset", default=None, choices=["fast", "balanced", "accurate"],
+    p.add_argument("--preset", default=None, choices=list(PRESETS),
                    help="named settings from the error-vs-runtime study (config file and CLI "
                    "options override them)")
     g = p.add_argument_group("input")
-    g.add_argument(
-        "--format", default=None, choices=["auto", "lamar", "colmap", "tum", "pgt", "nerfstudio"]
-    )
-    g.add_argument("--images", default=None, help="image folder or list (TUM, pgt, COLMAP)")
-    g.add_argument("--camera", default=None, help="intrinsics, e.g. PINHOLE,640,480,fx,fy,cx,cy "
-                   "(COLMAP convention: top-left pixel centre at 0.5,0.5)")
-    g.add_argument("--sensors", default=None, help="LaMAR sensors file (default: paired by suffix)")
+    g.add_argument("--format", default=None, choices=["auto", *FORMATS])
+    g.add_argument("--images", default=None, help="image folder or list (TUM, pgt, COLMAP, hloc)")
+    g.add_argument("--camera", default=None, help="intrinsics for TUM / hloc, e.g. "
+                   "PINHOLE,640,480,fx,fy,cx,cy (COLMAP convention: top-left pixel centre at "
+                   "0.5,0.5)")
+    g.add_argument("--sensors", default=None, help="LaMAR sensors file (default: paired by "
+                   "suffix); for hloc a COLMAP model or query list with the intrinsics")
+    g.add_argument("--dataparser-transforms", default=None,
+                   help="nerfstudio: dataparser_transforms.json to undo (poses back in the "
+                   "mesh's frame)")
     g = p.add_argument_group("render")
-    g.add_argument("--renderer", default=None, choices=["moderngl", "pyrender"])
+    g.add_argument("--renderer", default=None, choices=list(BACKENDS))
     g.add_argument("--shading", default=None, choices=["auto", "vertex", "texture", "shaded"],
                    help="'shaded' renders geometry only (for colourless meshes)")
     g = p.add_argument_group("match")
-    g.add_argument("--matcher", default=None,
+    g.add_argument("--matcher", default=None, choices=list(MATCHERS),
                    help="sift (default), orb, akaze; with the [enhance] extra: xfeat, "
                    "xfeat-lighterglue, aliked-lightglue, disk-lightglue, loftr")
     g.add_argument("--max-keypoints", type=int, default=None)
@@ -59,7 +68,7 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--enhance", default=None, choices=["never", "auto", "always"],
                    help="enhance renders with a reference photo: auto (default: only frames "
                    "whose raw result is not decisive), always, or never (raw only)")
-    g.add_argument("--enhance-method", default=None, choices=["mariner", "reproject"],
+    g.add_argument("--enhance-method", default=None, choices=list(ENHANCERS),
                    help="reproject (default: the reference photo projected through the mesh) "
                    "or mariner (the learned MaRINeR enhancer, needs the [enhance] extra)")
     g.add_argument("--weights", default=None, help="MaRINeR checkpoint (default: shipped)")
@@ -111,6 +120,7 @@ def _cli_overrides(args: argparse.Namespace) -> dict[str, Any]:
         ("input", "images"): args.images,
         ("input", "camera"): args.camera,
         ("input", "sensors"): args.sensors,
+        ("input", "dataparser_transforms"): args.dataparser_transforms,
         ("render", "backend"): args.renderer,
         ("render", "shading"): args.shading,
         ("match", "method"): args.matcher,

@@ -56,21 +56,41 @@ class ReferenceConfig:
     count: int = 2
 
 
+def _check_name(section: str, key: str, value: str, table: Any) -> None:
+    """``value`` must be a key of the backend table ``table`` (the one source of the names)."""
+    if value not in table:
+        raise ValueError(f"{section}.{key}: unknown {value!r} (allowed: {', '.join(table)})")
+
+
 @dataclass(frozen=True)
 class InputConfig:
     trajectory: str = ""
-    format: Literal["auto", "lamar", "colmap", "tum", "pgt", "nerfstudio"] = "auto"
+    #: "auto" or a name of ``pgt_check.io.FORMATS``
+    format: str = "auto"
     images: str | None = None
     camera: str | None = None
     sensors: str | None = None
+    #: nerfstudio: dataparser_transforms.json whose transform and scale are undone
+    dataparser_transforms: str | None = None
     mesh: str = ""
+
+    def __post_init__(self) -> None:
+        from pgt_check.registry import FORMATS
+
+        _check_name("input", "format", self.format, ("auto", *FORMATS))
 
 
 @dataclass(frozen=True)
 class RenderConfig:
-    backend: Literal["moderngl", "pyrender"] = "moderngl"
+    #: a name of ``pgt_check.render.BACKENDS``
+    backend: str = "moderngl"
     #: "auto" picks texture > vertex colours > shaded geometry from what the mesh has
     shading: Literal["auto", "vertex", "texture", "shaded"] = "auto"
+
+    def __post_init__(self) -> None:
+        from pgt_check.registry import RENDER_BACKENDS
+
+        _check_name("render", "backend", self.backend, RENDER_BACKENDS)
 
 
 @dataclass(frozen=True)
@@ -81,6 +101,11 @@ class MatchConfig:
     resize_max: int | None = 640
     #: LoFTR checkpoint (no LoFTR weights are bundled); only for method "loftr"
     loftr_weights: str | None = None
+
+    def __post_init__(self) -> None:
+        from pgt_check.registry import MATCHERS
+
+        _check_name("match", "method", self.method, MATCHERS)
 
 
 @dataclass(frozen=True)
@@ -97,7 +122,7 @@ class EnhanceConfig:
     mode: Literal["never", "auto", "always"] = "auto"
     #: default "reproject": on the shared data it beats the shipped (CPU-trained) MaRINeR
     #: weights, see reports/raw_vs_enhanced.md and reports/mariner_quality.md
-    method: Literal["mariner", "reproject"] = "reproject"
+    method: str = "reproject"
     weights: str | None = None
     iterations: int | None = None
     short_side: int = 160
@@ -105,6 +130,11 @@ class EnhanceConfig:
     auto_min_inliers: int = 40
     auto_margin: float = 0.5
     reference: ReferenceConfig = field(default_factory=ReferenceConfig)
+
+    def __post_init__(self) -> None:
+        from pgt_check.registry import ENHANCERS
+
+        _check_name("enhance", "method", self.method, ENHANCERS)
 
 
 @dataclass(frozen=True)

@@ -42,7 +42,8 @@ def load_trajectory(config: RunConfig) -> Trajectory:
     if not Path(inp.mesh).is_file():
         raise InputError(f"mesh not found: {inp.mesh}")
     traj = read_trajectory(
-        inp.trajectory, inp.format, images=inp.images, camera=inp.camera, sensors=inp.sensors
+        inp.trajectory, inp.format, images=inp.images, camera=inp.camera, sensors=inp.sensors,
+        dataparser_transforms=inp.dataparser_transforms,
     )
     if len(traj) == 0:
         raise InputError(f"{inp.trajectory}: no frames with both a pose and an image")

@@ -11,13 +11,13 @@ Conventions (one for the whole package, converted at the reader edge):
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from pgt_check._checks import check_shape
-from pgt_check.geometry.transforms import invert_rigid
 
 __all__ = [
     "CAMERA_MODELS",
@@ -71,6 +71,36 @@ FISHEYE_MODELS = (
 #: parameters that do not distort when the others are zero (EUCM with alpha = 0 is a pinhole)
 _NEUTRAL_PARAMS = {"EUCM": ("beta",)}
 _PINHOLE_NAMES = ("f", "fx", "fy", "cx", "cy")
+
+
+#: COLMAP pixel coordinate = OpenCV pixel coordinate + COLMAP_PIXEL_OFFSET
+COLMAP_PIXEL_OFFSET = 0.5
+
+_PRINCIPAL = ("cx", "cy")
+
+
+def _shift_principal(model: str, params: Sequence[float], delta: float) -> tuple[float, ...]:
+    if model not in CAMERA_MODELS:
+        raise ValueError(f"unknown camera model {model!r} (allowed: {', '.join(CAMERA_MODELS)})")
+    names = CAMERA_MODELS[model]
+    if len(params) != len(names):
+        raise ValueError(
+            f"camera model {model} takes {len(names)} parameters ({', '.join(names)}), "
+            f"got {len(params)}"
+        )
+    return tuple(
+        float(p) + delta if n in _PRINCIPAL else float(p) for n, p in zip(names, params, strict=True)
+    )
+
+
+def colmap_to_opencv_params(model: str, params: Sequence[float]) -> tuple[float, ...]:
+    """COLMAP-order parameters in COLMAP pixel convention -> OpenCV convention (cx, cy - 0.5)."""
+    return _shift_principal(model, params, -COLMAP_PIXEL_OFFSET)
+
+
+def opencv_to_colmap_params(model: str, params: Sequence[float]) -> tuple[float, ...]:
+    """COLMAP-order parameters in OpenCV pixel convention -> COLMAP convention (cx, cy + 0.5)."""
+    return _shift_principal(model, params, COLMAP_PIXEL_OFFSET)
 
 
 @dataclass(frozen=True)
@@ -181,8 +211,6 @@ class Camera:
 
     def to_colmap_params(self) -> tuple[float, ...]:
         """Parameters in COLMAP convention (principal point + 0.5), for writers."""
-        from pgt_check.io.camera import opencv_to_colmap_params  # the one converter
-
         return opencv_to_colmap_params(self.model, self.params)
 
 
@@ -217,7 +245,10 @@ class Frame:
 
     @property
     def cam_from_world(self) -> np.ndarray:
-        return invert_rigid(self.world_from_cam)
+        r, c = self.world_from_cam[:3, :3], self.world_from_cam[:3, 3]
+        out = np.eye(4)
+        out[:3, :3], out[:3, 3] = r.T, -r.T @ c
+        return out
 
     @property
     def center(self) -> np.ndarray:

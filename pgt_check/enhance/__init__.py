@@ -7,22 +7,14 @@ imported only when it is built.
 from __future__ import annotations
 
 import importlib
-from typing import TYPE_CHECKING
+from typing import Any
 
 from pgt_check.enhance.base import EnhancedImage, Enhancer, Evidence, ReferenceView, View
-
-if TYPE_CHECKING:
-    from pgt_check.config import EnhanceConfig
-
-#: method name -> "module:class"; each class is built with ``from_config(EnhanceConfig)``
-ENHANCERS: dict[str, str] = {
-    "reproject": "pgt_check.enhance.reproject:ReprojectEnhancer",
-    "mariner": "pgt_check.enhance.mariner:MarinerEnhancer",
-}
+from pgt_check.registry import ENHANCERS
 
 
-def make_enhancer(config: EnhanceConfig) -> Enhancer:
-    """Build the enhancement method named by ``config.method``."""
+def make_enhancer(config: Any) -> Enhancer:
+    """Build the enhancement method named by ``config.method`` (an ``EnhanceConfig``)."""
     if config.method not in ENHANCERS:
         raise ValueError(
             f"unknown enhancement method {config.method!r} (available: {', '.join(ENHANCERS)})"

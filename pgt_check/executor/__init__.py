@@ -26,88 +26,38 @@ dropped (their frames count as not done), and the generator returns.
 
 from __future__ import annotations
 
-import collections
-import contextlib
-import logging
-import os
-import signal
 import threading
-from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass, field
-from typing import Any, Protocol
+from collections.abc import Iterable, Iterator
 
 from pgt_check.config import RunConfig
-from pgt_check.measure.checker import format_exception
-from pgt_check.measure.record import FrameMeasurement, MeasureReason, failed_measurement
+from pgt_check.executor.common import (
+    INFLIGHT_PER_WORKER,
+    Checker,
+    CheckerFactory,
+    CheckerSetupError,
+    ExecutorStats,
+    Task,
+    build_checker,
+    close_checker,
+    default_workers,
+    internal_error,
+    note_stop,
+    stop_on_sigint,
+)
+from pgt_check.measure.record import FrameMeasurement
 from pgt_check.types import Frame
 
-logger = logging.getLogger(__name__)
-
-#: submitted-but-unfinished frames per worker (bounds memory, keeps workers busy)
-INFLIGHT_PER_WORKER = 2
-
-
-class Checker(Protocol):
-    def measure(self, frame: Frame) -> FrameMeasurement: ...
-
-
-CheckerFactory = Callable[[], Checker]
-
-
-class CheckerSetupError(RuntimeError):
-    """Building the checker failed in a worker (bad mesh, missing GL): the run cannot go on."""
-
-
-@dataclass
-class ExecutorStats:
-    """Counters of one :func:`iter_results` call (filled while it runs)."""
-
-    executor: str = "serial"
-    workers: int = 1
-    submitted: int = 0
-    yielded: int = 0
-    worker_crashes: int = 0
-    crashed_frames: list[str] = field(default_factory=list)
-    stopped: bool = False
-
-
-@dataclass
-class Task:
-    """One frame in flight; ``isolated`` = it runs alone (suspected of crashing its worker)."""
-
-    frame: Frame
-    crashes: int = 0
-    isolated: bool = False
-
-
-def default_workers() -> int:
-    try:
-        return max(1, len(os.sched_getaffinity(0)))
-    except AttributeError:  # pragma: no cover - not Linux
-        return max(1, os.cpu_count() or 1)
-
-
-@contextlib.contextmanager
-def stop_on_sigint() -> Iterator[threading.Event]:
-    """While active, the first SIGINT sets the yielded event; a second raises KeyboardInterrupt.
-
-    Outside the main thread (where signal handlers cannot be installed) it only yields an event.
-    """
-    stop = threading.Event()
-    if threading.current_thread() is not threading.main_thread():
-        yield stop
-        return
-
-    def handler(signum: int, frame: Any) -> None:
-        if stop.is_set():
-            raise KeyboardInterrupt
-        stop.set()
-
-    previous = signal.signal(signal.SIGINT, handler)
-    try:
-        yield stop
-    finally:
-        signal.signal(signal.SIGINT, previous)
+__all__ = [
+    "INFLIGHT_PER_WORKER",
+    "Checker",
+    "CheckerFactory",
+    "CheckerSetupError",
+    "ExecutorStats",
+    "Task",
+    "default_workers",
+    "iter_results",
+    "stop_on_sigint",
+]
 
 
 def iter_results(
@@ -135,82 +85,6 @@ def iter_results(
 
         return iter_dask(frames, checker_factory, config, stop, stats)
     raise ValueError(f"unknown executor {config.executor!r} (allowed: serial, process, dask)")
-
-
-def internal_error(frame: Frame, err: BaseException) -> FrameMeasurement:
-    """The measurement of a frame whose ``measure`` raised."""
-    logger.error("frame %s: internal error: %s", frame.frame_id, err)
-    return failed_measurement(frame, MeasureReason.INTERNAL_ERROR, format_exception(err))
-
-
-def worker_crashed(task: Task, how: str) -> FrameMeasurement:
-    """The measurement of a frame whose worker died ``task.crashes`` times."""
-    logger.error("frame %s: its worker died %d times (%s); recorded as worker_crashed",
-                 task.frame.frame_id, task.crashes, how)
-    return failed_measurement(
-        task.frame, MeasureReason.WORKER_CRASHED,
-        f"the worker process died while measuring this frame {task.crashes} times ({how})",
-    )
-
-
-def build_checker(checker_factory: CheckerFactory) -> Checker:
-    try:
-        return checker_factory()
-    except Exception as err:
-        raise CheckerSetupError(f"building the checker failed: {format_exception(err)}") from err
-
-
-def close_checker(checker: Any) -> None:
-    close = getattr(checker, "close", None)
-    if callable(close):
-        try:
-            close()
-        except Exception:  # closing must not hide the run's result
-            logger.exception("closing the checker failed")
-
-
-def note_stop(stop: threading.Event, noted: list[bool], inflight: int) -> None:
-    if stop.is_set() and not noted[0]:
-        noted[0] = True
-        logger.warning(
-            "interrupt: finishing %d frames in flight, then stopping (Ctrl-C again aborts now)",
-            inflight,
-        )
-
-
-def fill(
-    stop: threading.Event,
-    inflight: dict[Any, Task],
-    retry: collections.deque[Task],
-    source: Iterator[Frame],
-    exhausted: bool,
-    max_inflight: int,
-    submit: Callable[[Task], bool],
-) -> bool:
-    """Submit work under the policy both pools share; returns whether ``source`` is exhausted.
-
-    A frame suspected of crashing its worker (in ``retry``) runs alone: nothing else is
-    submitted while it is in flight, and it waits until the pool is empty. Otherwise new frames
-    are submitted until ``max_inflight`` are in flight. ``submit`` returns False when the pool
-    refused the task (it then re-queued it itself).
-    """
-    while not stop.is_set():
-        if any(t.isolated for t in inflight.values()):
-            break
-        if retry:
-            if not inflight:
-                task = retry.popleft()
-                task.isolated = True
-                submit(task)
-            break
-        if len(inflight) >= max_inflight or exhausted:
-            break
-        frame = next(source, None)
-        if frame is None:
-            return True
-        if not submit(Task(frame)):
-            break
-    return exhausted
 
 
 def _iter_serial(

@@ -10,7 +10,7 @@ from collections.abc import Iterable, Iterator
 from typing import Any
 
 from pgt_check.config import RunConfig
-from pgt_check.executor import (
+from pgt_check.executor.common import (
     INFLIGHT_PER_WORKER,
     CheckerFactory,
     CheckerSetupError,

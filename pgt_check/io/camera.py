@@ -15,38 +15,15 @@ from typing import Any
 import numpy as np
 
 from pgt_check.errors import FormatError, InputError
-from pgt_check.types import CAMERA_MODELS, Camera
+from pgt_check.types import (
+    CAMERA_MODELS,
+    COLMAP_PIXEL_OFFSET,
+    Camera,
+    colmap_to_opencv_params,
+    opencv_to_colmap_params,
+)
 
 logger = logging.getLogger(__name__)
-
-#: COLMAP pixel coordinate = OpenCV pixel coordinate + COLMAP_PIXEL_OFFSET
-COLMAP_PIXEL_OFFSET = 0.5
-
-_PRINCIPAL = ("cx", "cy")
-
-
-def _shift_principal(model: str, params: Sequence[float], delta: float) -> tuple[float, ...]:
-    if model not in CAMERA_MODELS:
-        raise ValueError(f"unknown camera model {model!r} (allowed: {', '.join(CAMERA_MODELS)})")
-    names = CAMERA_MODELS[model]
-    if len(params) != len(names):
-        raise ValueError(
-            f"camera model {model} takes {len(names)} parameters ({', '.join(names)}), "
-            f"got {len(params)}"
-        )
-    return tuple(
-        float(p) + delta if n in _PRINCIPAL else float(p) for n, p in zip(names, params, strict=True)
-    )
-
-
-def colmap_to_opencv_params(model: str, params: Sequence[float]) -> tuple[float, ...]:
-    """COLMAP-order parameters in COLMAP pixel convention -> OpenCV convention (cx, cy - 0.5)."""
-    return _shift_principal(model, params, -COLMAP_PIXEL_OFFSET)
-
-
-def opencv_to_colmap_params(model: str, params: Sequence[float]) -> tuple[float, ...]:
-    """COLMAP-order parameters in OpenCV pixel convention -> COLMAP convention (cx, cy + 0.5)."""
-    return _shift_principal(model, params, COLMAP_PIXEL_OFFSET)
 
 
 def camera_from_colmap(

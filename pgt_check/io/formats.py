@@ -15,11 +15,11 @@ from pgt_check.io.lamar import read_lamar
 from pgt_check.io.nerfstudio import read_nerfstudio
 from pgt_check.io.pgt import read_pgt
 from pgt_check.io.tum import read_tum
+from pgt_check.registry import FORMATS
 from pgt_check.types import Camera, Trajectory
 
 logger = logging.getLogger(__name__)
 
-FORMATS = ("lamar", "colmap", "tum", "pgt", "nerfstudio", "hloc")
 
 #: how many data rows detect_format looks at
 _SNIFF_ROWS = 5

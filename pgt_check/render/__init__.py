@@ -16,13 +16,12 @@ import importlib
 from typing import Any
 
 from pgt_check.errors import ConfigError
+from pgt_check.registry import RENDER_BACKENDS
 from pgt_check.render.base import SHADING_MODES, Render, Renderer
 from pgt_check.render.mesh import MeshData, load_mesh, mesh_from_trimesh
 
 #: backend name -> (module, class); modules are imported only when that backend is made
-BACKENDS: dict[str, tuple[str, str]] = {
-    "moderngl": ("pgt_check.render.moderngl_backend", "ModernGLRenderer"),
-}
+BACKENDS = RENDER_BACKENDS
 
 
 def make_renderer(mesh: MeshData, backend: str = "moderngl", **options: Any) -> Renderer:

@@ -1,0 +1,97 @@
+"""The import structure of ``pgt_check``: no cycles (imports inside functions count too), and the
+pipeline layers point one way (see docs/architecture.md)."""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+PKG = Path(__file__).resolve().parents[1] / "pgt_check"
+
+#: layer of each top-level part; a module may import only its own layer or lower ones
+LAYERS = {
+    "errors": 0, "_checks": 0, "types": 0, "config": 0, "registry": 0,
+    "io": 1, "render": 1, "match": 1, "geometry": 1, "enhance": 1, "evaluation": 1,
+    "measure": 2,
+    "verdict": 3,
+    "store": 3,
+    "report": 4,
+    "executor": 5, "runner": 5,
+    "cli": 6, "__main__": 6,
+}
+
+
+def _module_name(path: Path) -> str:
+    rel = path.relative_to(PKG.parent).with_suffix("")
+    parts = list(rel.parts)
+    if parts[-1] == "__init__":
+        parts = parts[:-1]
+    return ".".join(parts)
+
+
+def import_graph() -> dict[str, set[str]]:
+    """module -> pgt_check modules it imports anywhere in its file (TYPE_CHECKING included)."""
+    modules = {_module_name(p): p for p in PKG.rglob("*.py")}
+    graph: dict[str, set[str]] = {}
+    for name, path in modules.items():
+        deps: set[str] = set()
+        for node in ast.walk(ast.parse(path.read_text())):
+            targets = []
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                targets = [node.module] + [f"{node.module}.{a.name}" for a in node.names]
+            for t in targets:
+                if t in modules and t != name:
+                    deps.add(t)
+        graph[name] = deps
+    return graph
+
+
+def _part(module: str) -> str:
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 else "__init__"
+
+
+def test_no_import_cycles():
+    graph = import_graph()
+    # parent packages are imported with their children; an edge to a package's __init__ is an
+    # edge to that module only (what Python executes), so plain DFS over the module graph
+    state: dict[str, int] = {}
+    stack: list[str] = []
+    cycles: list[list[str]] = []
+
+    def visit(m: str) -> None:
+        state[m] = 1
+        stack.append(m)
+        for d in sorted(graph[m]):
+            if state.get(d) == 1:
+                cycles.append(stack[stack.index(d):] + [d])
+            elif d not in state:
+                visit(d)
+        stack.pop()
+        state[m] = 2
+
+    for m in sorted(graph):
+        if m not in state:
+            visit(m)
+    assert not cycles, "import cycles:\n" + "\n".join(" -> ".join(c) for c in cycles)
+
+
+def test_layers_point_one_way():
+    graph = import_graph()
+    bad = []
+    for m, deps in graph.items():
+        lm = LAYERS.get(_part(m))
+        if lm is None:
+            continue
+        for d in deps:
+            ld = LAYERS.get(_part(d))
+            if ld is not None and ld > lm:
+                bad.append(f"{m} ({_part(m)}, layer {lm}) imports {d} (layer {ld})")
+    assert not bad, "\n".join(sorted(bad))
+
+
+def test_every_part_has_a_layer():
+    parts = {_part(m) for m in import_graph()} - {"__init__"}
+    assert parts <= set(LAYERS), sorted(parts - set(LAYERS))
