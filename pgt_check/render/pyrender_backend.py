@@ -1,7 +1,7 @@
 """pyrender renderer (optional backend, the ``[pyrender]`` extra): same output as moderngl.
 
 Select it with ``make_renderer(mesh, backend="pyrender")`` or ``--renderer pyrender``. It gives
-the same ``Render`` as the default moderngl backend (see docs/renderer.md for the measurements):
+the same ``Render`` as the default moderngl backend (docs/rendering.md has the measurements):
 
 * exact OpenCV projection: ``IntrinsicsCamera(fx, fy, cx + 0.5, cy + 0.5)`` (OpenGL pixel
   corners are integers) and camera node pose ``world_from_cam @ diag(1, -1, -1, 1)``;
