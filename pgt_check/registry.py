@@ -11,6 +11,7 @@ FORMATS: tuple[str, ...] = ("lamar", "colmap", "tum", "pgt", "nerfstudio", "hloc
 #: render backend name -> (module, class)
 RENDER_BACKENDS: dict[str, tuple[str, str]] = {
     "moderngl": ("pgt_check.render.moderngl_backend", "ModernGLRenderer"),
+    "pyrender": ("pgt_check.render.pyrender_backend", "PyrenderRenderer"),
 }
 
 #: matcher name -> ("module:factory", fixed keyword arguments)

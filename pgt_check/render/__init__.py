@@ -4,10 +4,11 @@
 from pgt_check.render import load_mesh, make_renderer
 mesh = load_mesh("mesh.ply")                 # MeshData, shading "auto" -> vertex/texture/shaded
 renderer = make_renderer(mesh)               # moderngl + EGL; GL context created on first render
+# make_renderer(mesh, backend="pyrender")    # optional [pyrender] extra, same Render output
 r = renderer.render(camera, world_from_cam)  # Render(rgb, depth, coverage, shading)
 renderer.close()
 ```
-Importing this package does not import moderngl or trimesh.
+Importing this package does not import moderngl, pyrender or trimesh.
 """
 
 from __future__ import annotations

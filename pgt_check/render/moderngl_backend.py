@@ -1,6 +1,6 @@
 """moderngl renderer on a headless EGL standalone context (the default backend).
 
-Recipe (measured, see docs/renderer.md in the repository): exact OpenCV projection
+Recipe (measured, see docs/renderer.md and docs/rendering.md): exact OpenCV projection
 (cx, cy + 0.5), no MSAA, back-face culling off, unlit colours, camera-space z written to a second
 float32 attachment.
 The GL context is created on the first ``render`` call, never at import or construction, so
