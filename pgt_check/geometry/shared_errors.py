@@ -279,9 +279,7 @@ def _to_json(obj) -> dict:
         elif isinstance(v, float | np.floating):
             out[k] = None if not np.isfinite(v) else round(float(v), 6)
         elif isinstance(v, tuple):
-            out[k] = [
-                (None if isinstance(x, float) and not np.isfinite(x) else x) for x in v
-            ]
+            out[k] = [(None if isinstance(x, float) and not np.isfinite(x) else x) for x in v]
         else:
             out[k] = v
     return out
@@ -326,8 +324,9 @@ class _State:
 
     @staticmethod
     def identity(n_cams: int) -> _State:
-        return _State(np.eye(3), np.zeros(3), 0.0, np.tile(np.eye(3), (n_cams, 1, 1)),
-                      np.zeros(n_cams))
+        return _State(
+            np.eye(3), np.zeros(3), 0.0, np.tile(np.eye(3), (n_cams, 1, 1)), np.zeros(n_cams)
+        )
 
 
 def _rodrigues(v: np.ndarray) -> np.ndarray:
@@ -348,8 +347,10 @@ def _rotvec(r: np.ndarray) -> np.ndarray:
     """(..., 3, 3) rotations -> (..., 3) rotation vectors (angles < 180 deg)."""
     c = np.clip((np.trace(r, axis1=-2, axis2=-1) - 1) / 2, -1, 1)
     th = np.arccos(c)
-    w = np.stack([r[..., 2, 1] - r[..., 1, 2], r[..., 0, 2] - r[..., 2, 0],
-                  r[..., 1, 0] - r[..., 0, 1]], axis=-1)
+    w = np.stack(
+        [r[..., 2, 1] - r[..., 1, 2], r[..., 0, 2] - r[..., 2, 0], r[..., 1, 0] - r[..., 0, 1]],
+        axis=-1,
+    )
     s = np.sin(th)
     f = np.where(th < 1e-8, 0.5, th / (2 * np.where(th < 1e-8, 1.0, s)))
     return w * f[..., None]
@@ -417,9 +418,17 @@ def _subset(p: _Problem, frames: np.ndarray) -> _Problem:
     remap[frames] = np.arange(len(frames))
     counts = np.bincount(p.fidx[pts], minlength=p.n_frames)[frames]
     return _Problem(
-        origin=p.origin, frame_ids=tuple(p.frame_ids[i] for i in frames), index=p.index[frames],
-        cam=p.cam[frames], camera_ids=p.camera_ids, rt=p.rt[frames], centre=p.centre[frames],
-        K=p.K[frames], y=p.y[pts], obs=p.obs[pts], fidx=remap[p.fidx[pts]],
+        origin=p.origin,
+        frame_ids=tuple(p.frame_ids[i] for i in frames),
+        index=p.index[frames],
+        cam=p.cam[frames],
+        camera_ids=p.camera_ids,
+        rt=p.rt[frames],
+        centre=p.centre[frames],
+        K=p.K[frames],
+        y=p.y[pts],
+        obs=p.obs[pts],
+        fidx=remap[p.fidx[pts]],
         starts=np.concatenate([[0], np.cumsum(counts)[:-1]]),
     )
 
@@ -436,7 +445,12 @@ def _layout(p: _Problem, world: bool, similarity: bool, calib: bool) -> tuple[in
 
 
 def _residuals(
-    p: _Problem, st: _State, *, jac: bool = False, world: bool = True, similarity: bool = False,
+    p: _Problem,
+    st: _State,
+    *,
+    jac: bool = False,
+    world: bool = True,
+    similarity: bool = False,
     calib: bool = False,
 ) -> tuple[np.ndarray, np.ndarray | None]:
     """Residuals (N, 2) = predicted - observed, and the Jacobian (N, 2, P) of the active blocks.
@@ -487,8 +501,9 @@ def _residuals(
     return r, jm
 
 
-def _update(p: _Problem, st: _State, delta: np.ndarray, world: bool, similarity: bool,
-            calib: bool) -> _State:
+def _update(
+    p: _Problem, st: _State, delta: np.ndarray, world: bool, similarity: bool, calib: bool
+) -> _State:
     nw, off, _ = _layout(p, world, similarity, calib)
     q, tau, ls, rcal, lz = st.q, st.tau, st.log_sigma, st.rcal, st.log_zoom
     if world:
@@ -519,8 +534,15 @@ class _Fit:
 
 
 def _solve(
-    p: _Problem, st: _State, *, world: bool, similarity: bool, calib: bool,
-    loss_scale_px: float, frame_w: np.ndarray | None = None, anneal: bool = True,
+    p: _Problem,
+    st: _State,
+    *,
+    world: bool,
+    similarity: bool,
+    calib: bool,
+    loss_scale_px: float,
+    frame_w: np.ndarray | None = None,
+    anneal: bool = True,
     max_iter: int = 30,
 ) -> _Fit:
     """Robust Gauss-Newton (IRLS, Cauchy loss) from ``st``, scale graduated down to the target."""
@@ -584,7 +606,9 @@ def _frame_blocks(p: _Problem, fit: _Fit) -> tuple[np.ndarray, np.ndarray]:
     """Per-frame normal-equation blocks H_f (F, P, P) and gradients g_f (F, P)."""
     jm, w, r = fit.jac, fit.weights, fit.residuals
     ends = np.append(p.starts[1:], len(r))
-    blocks = [_normal_equations(jm[a:b], w[a:b], r[a:b]) for a, b in zip(p.starts, ends)]
+    blocks = [
+        _normal_equations(jm[a:b], w[a:b], r[a:b]) for a, b in zip(p.starts, ends, strict=True)
+    ]
     return np.stack([b[0] for b in blocks]), np.stack([b[1] for b in blocks])
 
 
@@ -628,8 +652,9 @@ def _effect_points(p: _Problem, inliers: np.ndarray) -> np.ndarray:
     return inliers | (n_in[p.fidx] < 3)
 
 
-def _project_world(p: _Problem, q: np.ndarray, sig: np.ndarray, tau: np.ndarray,
-                   sel: np.ndarray) -> np.ndarray:
+def _project_world(
+    p: _Problem, q: np.ndarray, sig: np.ndarray, tau: np.ndarray, sel: np.ndarray
+) -> np.ndarray:
     """(B, n, 2) pixels of the selected points under B world maps D (no calibration)."""
     f = p.fidx[sel]
     y = p.y[sel]
@@ -672,7 +697,11 @@ def _correction_summary(q, sig, tau):
 
 
 def _joint_fit(
-    p: _Problem, *, similarity: bool, calibration: str, loss_scale_px: float,
+    p: _Problem,
+    *,
+    similarity: bool,
+    calibration: str,
+    loss_scale_px: float,
     max_correlation: float,
 ) -> tuple[_Fit, bool, bool, float]:
     """World fit with per-camera calibration as nuisance when separable.
@@ -682,8 +711,9 @@ def _joint_fit(
     st0 = _State.identity(p.n_cams)
     corr = float("nan")
     if calibration in ("auto", "joint") and p.n_frames >= 3:
-        fit = _solve(p, st0, world=True, similarity=similarity, calib=True,
-                     loss_scale_px=loss_scale_px)
+        fit = _solve(
+            p, st0, world=True, similarity=similarity, calib=True, loss_scale_px=loss_scale_px
+        )
         nw, off, ncol = _layout(p, True, similarity, True)
         corrs = [
             _max_canonical_corr(fit.hessian, np.arange(nw), off + 4 * gi + np.arange(4))
@@ -692,23 +722,41 @@ def _joint_fit(
         corr = max(corrs) if fit.ok else 1.0
         if calibration == "joint" or corr < max_correlation:
             return fit, True, False, corr
-    fit = _solve(p, st0, world=True, similarity=similarity, calib=False,
-                 loss_scale_px=loss_scale_px)
+    fit = _solve(
+        p, st0, world=True, similarity=similarity, calib=False, loss_scale_px=loss_scale_px
+    )
     return fit, False, calibration == "auto", corr
 
 
 def _registration_from_fit(
-    p: _Problem, fit: _Fit, *, similarity: bool, calib: bool, n_bootstrap: int, seed: int,
-    max_error_px: float, scene_depth: float | None, reference: _State | None = None,
-    ambiguous: bool = False, corr: float = float("nan"), min_inliers: int = 12,
+    p: _Problem,
+    fit: _Fit,
+    *,
+    similarity: bool,
+    calib: bool,
+    n_bootstrap: int,
+    seed: int,
+    max_error_px: float,
+    scene_depth: float | None,
+    reference: _State | None = None,
+    ambiguous: bool = False,
+    corr: float = float("nan"),
+    min_inliers: int = 12,
 ) -> RegistrationEstimate:
     """Summaries and bootstrap CIs of a world fit (relative to ``reference`` if given)."""
     st = fit.state
     rn = np.linalg.norm(fit.residuals, axis=1)
     inl = rn < max_error_px
-    base = dict(n_frames=p.n_frames, n_points=len(rn), n_inliers=int(inl.sum()),
-                frame_ids=p.frame_ids, similarity=similarity, calibration_fitted=calib,
-                ambiguous_with_calibration=ambiguous, max_correlation=corr)
+    base = dict(
+        n_frames=p.n_frames,
+        n_points=len(rn),
+        n_inliers=int(inl.sum()),
+        frame_ids=p.frame_ids,
+        similarity=similarity,
+        calibration_fitted=calib,
+        ambiguous_with_calibration=ambiguous,
+        max_correlation=corr,
+    )
     if not fit.ok:
         return RegistrationEstimate(False, "ill_conditioned", **base)
     if inl.sum() < min_inliers:
@@ -741,10 +789,12 @@ def _registration_from_fit(
     t_rel = t_all - s_rel[:, None] * (tr[0] @ q_rel.transpose(0, 2, 1))
     angle, scale, trans = _correction_summary(q_rel, s_rel, t_rel)
     tnorm = np.linalg.norm(trans, axis=1)
-    eff = np.concatenate([
-        [np.median(eff_f[0])],
-        _weighted_median(eff_f[1:], counts) if deltas is not None else [],
-    ])
+    eff = np.concatenate(
+        [
+            [np.median(eff_f[0])],
+            _weighted_median(eff_f[1:], counts) if deltas is not None else [],
+        ]
+    )
 
     def ci(x: np.ndarray) -> _CI:
         return tuple(_ci(x[1:]).tolist()) if deltas is not None else _NAN_CI
@@ -757,12 +807,20 @@ def _registration_from_fit(
     c_mat[:3, :3] = s_abs * r_abs
     c_mat[:3, 3] = p.origin + t_abs - s_abs * r_abs @ p.origin
     return RegistrationEstimate(
-        True, "", corrected_world_from_world=c_mat,
-        angle_deg=float(angle[0]), angle_deg_ci=ci(angle),
-        translation=float(tnorm[0]), translation_ci=ci(tnorm),
-        translation_frac=float(tnorm[0] / depth), translation_frac_ci=ci(tnorm / depth),
-        scale=float(scale[0]), scale_ci=ci(scale) if similarity else (1.0, 1.0),
-        effect_px=float(eff[0]), effect_px_ci=ci(eff), effect_px_per_frame=eff_f[0],
+        True,
+        "",
+        corrected_world_from_world=c_mat,
+        angle_deg=float(angle[0]),
+        angle_deg_ci=ci(angle),
+        translation=float(tnorm[0]),
+        translation_ci=ci(tnorm),
+        translation_frac=float(tnorm[0] / depth),
+        translation_frac_ci=ci(tnorm / depth),
+        scale=float(scale[0]),
+        scale_ci=ci(scale) if similarity else (1.0, 1.0),
+        effect_px=float(eff[0]),
+        effect_px_ci=ci(eff),
+        effect_px_per_frame=eff_f[0],
         median_scene_depth=depth,
         residual_median_before=float(np.median(np.linalg.norm(r_before[inl], axis=1))),
         residual_median_after=float(np.median(rn[inl])),
@@ -797,14 +855,27 @@ def estimate_registration(
     if isinstance(p, str):
         return RegistrationEstimate(False, p, n_frames=len(evidence), similarity=similarity)
     fit, calib, ambiguous, corr = _joint_fit(
-        p, similarity=similarity, calibration=calibration, loss_scale_px=loss_scale_px,
-        max_correlation=max_correlation)
+        p,
+        similarity=similarity,
+        calibration=calibration,
+        loss_scale_px=loss_scale_px,
+        max_correlation=max_correlation,
+    )
     if ambiguous:
         logger.info("registration: calibration not separable (corr %.3f); world-only fit", corr)
     return _registration_from_fit(
-        p, fit, similarity=similarity, calib=calib, n_bootstrap=n_bootstrap, seed=seed,
-        max_error_px=max_error_px, scene_depth=scene_depth, ambiguous=ambiguous, corr=corr,
-        min_inliers=min_inliers)
+        p,
+        fit,
+        similarity=similarity,
+        calib=calib,
+        n_bootstrap=n_bootstrap,
+        seed=seed,
+        max_error_px=max_error_px,
+        scene_depth=scene_depth,
+        ambiguous=ambiguous,
+        corr=corr,
+        min_inliers=min_inliers,
+    )
 
 
 def estimate_calibration(
@@ -836,15 +907,19 @@ def estimate_calibration(
     fit = None
     world = False
     if registration in ("auto", "joint"):
-        fit = _solve(p, st0, world=True, similarity=False, calib=True,
-                     loss_scale_px=loss_scale_px)
+        fit = _solve(p, st0, world=True, similarity=False, calib=True, loss_scale_px=loss_scale_px)
         nw, off, _ = _layout(p, True, False, True)
-        corr = max(_max_canonical_corr(fit.hessian, np.arange(nw), off + 4 * g + np.arange(4))
-                   for g in range(p.n_cams)) if fit.ok else 1.0
+        corr = (
+            max(
+                _max_canonical_corr(fit.hessian, np.arange(nw), off + 4 * g + np.arange(4))
+                for g in range(p.n_cams)
+            )
+            if fit.ok
+            else 1.0
+        )
         world = registration == "joint" or corr < max_correlation
     if not world:
-        fit = _solve(p, st0, world=False, similarity=False, calib=True,
-                     loss_scale_px=loss_scale_px)
+        fit = _solve(p, st0, world=False, similarity=False, calib=True, loss_scale_px=loss_scale_px)
     separable = not (registration == "auto" and not world)
     out: dict[str, CalibrationEstimate] = {}
     rn = np.linalg.norm(fit.residuals, axis=1)
@@ -858,9 +933,14 @@ def estimate_calibration(
     for g, cid in enumerate(p.camera_ids):
         frames = np.flatnonzero(p.cam == g)
         pts = p.cam[p.fidx] == g
-        base = dict(n_frames=len(frames), n_points=int(pts.sum()),
-                    n_inliers=int((inl & pts).sum()), separable=separable,
-                    max_correlation=corr, registration_fitted=world)
+        base = dict(
+            n_frames=len(frames),
+            n_points=int(pts.sum()),
+            n_inliers=int((inl & pts).sum()),
+            separable=separable,
+            max_correlation=corr,
+            registration_fitted=world,
+        )
         if not fit.ok:
             out[cid] = CalibrationEstimate(False, "ill_conditioned", cid, **base)
             continue
@@ -895,7 +975,11 @@ def estimate_calibration(
         has_boot = deltas is not None
         eff_b = _weighted_median(eff_f[1:], counts[:, frames]) if has_boot else None
         out[cid] = CalibrationEstimate(
-            True, "", cid, rotation=rc[0], rotvec_deg=rv[0],
+            True,
+            "",
+            cid,
+            rotation=rc[0],
+            rotvec_deg=rv[0],
             rotvec_deg_ci=_ci(rv[1:]).T if has_boot else np.full((3, 2), np.nan),
             equivalent_rotation_deg=float(ang[0]),
             equivalent_rotation_deg_ci=tuple(_ci(ang[1:]).tolist()) if has_boot else _NAN_CI,
@@ -940,8 +1024,12 @@ def estimate_drift(
     if isinstance(p, str):
         return DriftEstimate(False, p, threshold_px=threshold_px)
     fit, calib, ambiguous, corr = _joint_fit(
-        p, similarity=similarity, calibration=calibration, loss_scale_px=loss_scale_px,
-        max_correlation=0.995)
+        p,
+        similarity=similarity,
+        calibration=calibration,
+        loss_scale_px=loss_scale_px,
+        max_correlation=0.995,
+    )
     if not fit.ok:
         return DriftEstimate(False, "ill_conditioned", threshold_px=threshold_px)
     lo, hi = int(p.index.min()), int(p.index.max())
@@ -951,6 +1039,7 @@ def estimate_drift(
     starts = list(range(lo, max(lo, hi - length + 1) + 1, stride))
     if starts[-1] + length <= hi:
         starts.append(hi - length + 1)
+
     def fit_windows(ref: _State) -> list:
         """World fits per window, calibration fixed at the reference's."""
         out = []
@@ -961,8 +1050,15 @@ def estimate_drift(
             sub = _subset(p, frames)
             if len(sub.y) < min_points:
                 continue
-            wf = _solve(sub, ref, world=True, similarity=similarity, calib=False,
-                        loss_scale_px=loss_scale_px, anneal=True)
+            wf = _solve(
+                sub,
+                ref,
+                world=True,
+                similarity=similarity,
+                calib=False,
+                loss_scale_px=loss_scale_px,
+                anneal=True,
+            )
             out.append((s, sub, wf))
         return out
 
@@ -971,18 +1067,31 @@ def estimate_drift(
         win_fits = fit_windows(ref)
         for s, sub, wf in win_fits:
             est = _registration_from_fit(
-                sub, wf, similarity=similarity, calib=calib, n_bootstrap=n_bootstrap, seed=seed,
-                max_error_px=max_error_px, scene_depth=None, reference=ref,
-                min_inliers=min_points // 2)
-            wins.append(DriftWindow(s, s + length, est,
-                                    est.success and est.exceeds(threshold_px)))
+                sub,
+                wf,
+                similarity=similarity,
+                calib=calib,
+                n_bootstrap=n_bootstrap,
+                seed=seed,
+                max_error_px=max_error_px,
+                scene_depth=None,
+                reference=ref,
+                min_inliers=min_points // 2,
+            )
+            wins.append(DriftWindow(s, s + length, est, est.success and est.exceeds(threshold_px)))
         ok = [w for w in wins if w.estimate.success]
         if not ok:
             return wins, None, None
         centres = np.array([(w.start + w.stop - 1) / 2 for w in ok])
         eff = np.array([w.estimate.effect_px for w in ok])
-        low = np.array([w.estimate.effect_px_ci[0] if np.isfinite(w.estimate.effect_px_ci[0])
-                        else w.estimate.effect_px for w in ok])
+        low = np.array(
+            [
+                w.estimate.effect_px_ci[0]
+                if np.isfinite(w.estimate.effect_px_ci[0])
+                else w.estimate.effect_px
+                for w in ok
+            ]
+        )
         return wins, np.interp(p.index, centres, eff), np.interp(p.index, centres, low)
 
     ref_state = fit.state
@@ -993,8 +1102,15 @@ def estimate_drift(
     if flagged.any() and (~flagged).sum() >= 2 * min_frames:
         # refit the reference on the unflagged frames and compare again
         sub = _subset(p, np.flatnonzero(~flagged))
-        rf = _solve(sub, fit.state, world=True, similarity=similarity, calib=calib,
-                    loss_scale_px=loss_scale_px, anneal=False)
+        rf = _solve(
+            sub,
+            fit.state,
+            world=True,
+            similarity=similarity,
+            calib=calib,
+            loss_scale_px=loss_scale_px,
+            anneal=False,
+        )
         if rf.ok:
             ref_state = rf.state
             wins, score, low = evaluate(ref_state)
@@ -1003,8 +1119,17 @@ def estimate_drift(
     wgt = _cauchy_weights(r, loss_scale_px)
     ref_fit = _Fit(ref_state, wgt, r, jm, _normal_equations(jm, wgt, r)[0], True)
     reference = _registration_from_fit(
-        p, ref_fit, similarity=similarity, calib=calib, n_bootstrap=0, seed=seed,
-        max_error_px=max_error_px, scene_depth=None, ambiguous=ambiguous, corr=corr)
+        p,
+        ref_fit,
+        similarity=similarity,
+        calib=calib,
+        n_bootstrap=0,
+        seed=seed,
+        max_error_px=max_error_px,
+        scene_depth=None,
+        ambiguous=ambiguous,
+        corr=corr,
+    )
     segments = []
     i = 0
     while i < len(flagged):
@@ -1017,7 +1142,15 @@ def estimate_drift(
         else:
             i += 1
     return DriftEstimate(
-        True, "", reference=reference, windows=tuple(wins), frame_ids=p.frame_ids,
-        frame_index=p.index.copy(), frame_score_px=score, frame_score_low_px=low,
-        frame_flagged=flagged, segments=tuple(segments), threshold_px=threshold_px,
+        True,
+        "",
+        reference=reference,
+        windows=tuple(wins),
+        frame_ids=p.frame_ids,
+        frame_index=p.index.copy(),
+        frame_score_px=score,
+        frame_score_low_px=low,
+        frame_flagged=flagged,
+        segments=tuple(segments),
+        threshold_px=threshold_px,
     )
