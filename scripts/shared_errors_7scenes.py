@@ -59,7 +59,14 @@ def build_evidence(frames, poses, renderer, matcher) -> list[FrameEvidence]:
     return out
 
 
+SAVE: Path | None = None
+
+
 def summarise(name: str, ev: list[FrameEvidence], threshold_px: float) -> dict:
+    if SAVE is not None:
+        SAVE.mkdir(parents=True, exist_ok=True)
+        slug = name.split(" ")[0].strip(",")
+        (SAVE / f"{slug}.json").write_text(json.dumps([e.to_json() for e in ev]))
     t0 = time.perf_counter()
     reg = estimate_registration(ev)
     reg_none = estimate_registration(ev, calibration="none")
@@ -117,7 +124,10 @@ def main() -> None:
     ap.add_argument("--frames", type=int, default=20)
     ap.add_argument("--threshold-px", type=float, default=2.0)
     ap.add_argument("--json", type=Path)
+    ap.add_argument("--save-evidence", type=Path, help="write the evidence here (JSON per set)")
     args = ap.parse_args()
+    global SAVE
+    SAVE = args.save_evidence
     data = Path(os.environ.get("PGT_SHARED_DATA", "../shared/data")) / "7scenes_redkitchen"
     traj = read_trajectory(data / "trajectories.txt", sensors=data / "sensors.txt")
     rgb = read_trajectory(data / "trajectories_dslam_rgb.txt", sensors=data / "sensors.txt")

@@ -696,6 +696,24 @@ def _correction_summary(q, sig, tau):
 # --------------------------------------------------------------------------------------------
 
 
+def _robust_cost(fit: _Fit, scale: float) -> float:
+    """Sum over points of log(1 + |r|^2 / scale^2) (the Cauchy cost, unit frame weights)."""
+    return float(np.sum(np.log1p(np.sum(fit.residuals**2, axis=1) / scale**2)))
+
+
+def _prefer_larger(small: _Fit, large: _Fit, n_extra: int, scale: float, penalty: float) -> bool:
+    """BIC-like test: does the model with ``n_extra`` more parameters lower the robust cost by
+    more than ``penalty * n_extra * log(n_inliers) * noise^2 / scale^2``? (In the Gaussian
+    limit the Cauchy cost is |r|^2 / scale^2, so this is BIC scaled by ``penalty``.)"""
+    rn2 = np.sum(large.residuals**2, axis=1)
+    inl = rn2 < (3 * scale) ** 2
+    if inl.sum() < 10:
+        return False
+    noise2 = float(np.median(rn2[inl]) / (2 * np.log(2)))  # 2D Gaussian: median |r|^2 = 2ln2 s^2
+    gain = _robust_cost(small, scale) - _robust_cost(large, scale)
+    return gain > penalty * n_extra * np.log(inl.sum()) * noise2 / scale**2
+
+
 def _joint_fit(
     p: _Problem,
     *,
@@ -703,29 +721,42 @@ def _joint_fit(
     calibration: str,
     loss_scale_px: float,
     max_correlation: float,
+    model_penalty: float = 2.0,
 ) -> tuple[_Fit, bool, bool, float]:
-    """World fit with per-camera calibration as nuisance when separable.
+    """World fit, with per-camera calibration as nuisance when it is needed and separable.
 
-    Returns (fit, calibration fitted jointly, ambiguous, largest canonical correlation).
+    "auto": the joint fit is used when it lowers the robust cost significantly
+    (``_prefer_larger``) and the blocks are separable (largest canonical correlation below
+    ``max_correlation``); a significant but inseparable calibration gives the world-only fit
+    marked ambiguous. Returns (fit, calibration fitted, ambiguous, largest canonical corr.).
     """
     st0 = _State.identity(p.n_cams)
     corr = float("nan")
-    if calibration in ("auto", "joint") and p.n_frames >= 3:
-        fit = _solve(
-            p, st0, world=True, similarity=similarity, calib=True, loss_scale_px=loss_scale_px
+    world_only = None
+    if calibration != "joint":
+        world_only = _solve(
+            p, st0, world=True, similarity=similarity, calib=False, loss_scale_px=loss_scale_px
         )
-        nw, off, ncol = _layout(p, True, similarity, True)
-        corrs = [
-            _max_canonical_corr(fit.hessian, np.arange(nw), off + 4 * gi + np.arange(4))
-            for gi in range(p.n_cams)
-        ]
-        corr = max(corrs) if fit.ok else 1.0
-        if calibration == "joint" or corr < max_correlation:
-            return fit, True, False, corr
-    fit = _solve(
-        p, st0, world=True, similarity=similarity, calib=False, loss_scale_px=loss_scale_px
-    )
-    return fit, False, calibration == "auto", corr
+        if calibration == "none":
+            return world_only, False, False, corr
+    if p.n_frames < 3:
+        return world_only, False, False, corr
+    fit = _solve(p, st0, world=True, similarity=similarity, calib=True, loss_scale_px=loss_scale_px)
+    nw, off, _ = _layout(p, True, similarity, True)
+    corrs = [
+        _max_canonical_corr(fit.hessian, np.arange(nw), off + 4 * gi + np.arange(4))
+        for gi in range(p.n_cams)
+    ]
+    corr = max(corrs) if fit.ok else 1.0
+    if calibration == "joint":
+        return fit, True, corr >= max_correlation, corr
+    if not fit.ok or not _prefer_larger(
+        world_only, fit, 4 * p.n_cams, loss_scale_px, model_penalty
+    ):
+        return world_only, False, corr >= max_correlation, corr
+    if corr < max_correlation:
+        return fit, True, False, corr
+    return world_only, False, True, corr
 
 
 def _registration_from_fit(
@@ -842,13 +873,15 @@ def estimate_registration(
     min_points_per_frame: int = 6,
     min_inliers: int = 30,
     max_correlation: float = 0.995,
+    model_penalty: float = 2.0,
 ) -> RegistrationEstimate:
     """One world correction (rigid, or similarity) for the whole trajectory.
 
     calibration: "auto" (default) fits a per-camera camera-frame rotation + zoom jointly when it
-    is separable from the world correction (largest canonical correlation < max_correlation),
-    else fits the world alone and sets ``ambiguous_with_calibration``; "joint" always jointly;
-    "none" never. loss_scale_px: Cauchy scale; max_error_px: inlier threshold. scene_depth:
+    lowers the robust cost significantly (BIC-like test scaled by ``model_penalty``) and is
+    separable from the world correction (largest canonical correlation < max_correlation);
+    ``ambiguous_with_calibration`` is set whenever the blocks are not separable; "joint"
+    always jointly; "none" never. loss_scale_px: Cauchy scale; max_error_px: inlier threshold. scene_depth:
     the depth used for ``translation_frac`` (default: median depth of the inliers).
     """
     p = _prepare(evidence, min_points_per_frame, min_frames)
@@ -860,6 +893,7 @@ def estimate_registration(
         calibration=calibration,
         loss_scale_px=loss_scale_px,
         max_correlation=max_correlation,
+        model_penalty=model_penalty,
     )
     if ambiguous:
         logger.info("registration: calibration not separable (corr %.3f); world-only fit", corr)
@@ -890,11 +924,14 @@ def estimate_calibration(
     min_points_per_frame: int = 6,
     min_inliers: int = 30,
     max_correlation: float = 0.995,
+    model_penalty: float = 2.0,
 ) -> dict[str, CalibrationEstimate]:
     """Per camera_id: shared camera-frame rotation (principal-point shift + roll) and zoom.
 
-    registration: "auto" fits a rigid world correction jointly when separable (else none, and
-    the estimate is marked ``separable=False``); "joint" always; "none" never. Returns one
+    registration: "auto" fits a rigid world correction jointly when it lowers the robust cost
+    significantly (BIC-like, ``model_penalty``) and is separable; "joint" always; "none" never.
+    ``separable`` is False when the largest canonical correlation between the calibration and
+    the world blocks reaches ``max_correlation`` (a world error could look the same). Returns one
     estimate per camera id present in the evidence ({} when there is no evidence at all; a
     single "" entry with the reason when nothing usable remains).
     """
@@ -904,23 +941,28 @@ def estimate_calibration(
         return {cid: CalibrationEstimate(False, p, cid) for cid in ids}
     st0 = _State.identity(p.n_cams)
     corr = float("nan")
-    fit = None
+    fit = _solve(p, st0, world=False, similarity=False, calib=True, loss_scale_px=loss_scale_px)
     world = False
+    separable = True
     if registration in ("auto", "joint"):
-        fit = _solve(p, st0, world=True, similarity=False, calib=True, loss_scale_px=loss_scale_px)
+        joint = _solve(
+            p, st0, world=True, similarity=False, calib=True, loss_scale_px=loss_scale_px
+        )
         nw, off, _ = _layout(p, True, False, True)
         corr = (
             max(
-                _max_canonical_corr(fit.hessian, np.arange(nw), off + 4 * g + np.arange(4))
+                _max_canonical_corr(joint.hessian, np.arange(nw), off + 4 * g + np.arange(4))
                 for g in range(p.n_cams)
             )
-            if fit.ok
+            if joint.ok
             else 1.0
         )
-        world = registration == "joint" or corr < max_correlation
-    if not world:
-        fit = _solve(p, st0, world=False, similarity=False, calib=True, loss_scale_px=loss_scale_px)
-    separable = not (registration == "auto" and not world)
+        needed = registration == "joint" or (
+            joint.ok and _prefer_larger(fit, joint, 6, loss_scale_px, model_penalty)
+        )
+        separable = corr < max_correlation
+        if needed and (separable or registration == "joint"):
+            fit, world = joint, True
     out: dict[str, CalibrationEstimate] = {}
     rn = np.linalg.norm(fit.residuals, axis=1)
     inl = rn < max_error_px
