@@ -159,6 +159,17 @@ class VerdictConfig:
     max_fail_fraction: float = 0.0
     #: and while UNVERIFIABLE frames / all frames <= this (1.0 = never gate on them)
     max_unverifiable_fraction: float = 1.0
+    #: a FAIL of any path with at least this many homography inliers is a FAIL, whichever path
+    #: has more inliers (a confident FAIL is never overruled)
+    confident_inliers: int = 40
+    #: run-level checks of shared errors (registration, drift, calibration); see README
+    shared_checks: bool = True
+    #: threshold of the shared checks in photo px; None = shared_threshold_rel x the per-frame
+    #: threshold (pooled evidence is precise, and an error all frames share matters more)
+    shared_threshold_px: float | None = None
+    shared_threshold_rel: float = 0.25
+    #: judge frames after removing the estimated per-camera calibration error (absolute paths)
+    remove_calibration: bool = False
 
     def threshold_for(self, width: int, height: int) -> float:
         """The PASS threshold in original photo pixels for an image of this size."""

@@ -83,3 +83,92 @@ def roc_auc(scores: np.ndarray, labels: np.ndarray) -> float:
     greater = (pos[:, None] > neg[None, :]).sum()
     ties = (pos[:, None] == neg[None, :]).sum()
     return float((greater + 0.5 * ties) / (len(pos) * len(neg)))
+
+
+# -- errors that neighbouring frames share (see README "What a verdict proves") ---------------
+def _random_unit(rng: np.random.Generator) -> np.ndarray:
+    v = rng.normal(size=3)
+    return v / np.linalg.norm(v)
+
+
+def shared_transform(
+    traj: Trajectory, rotation_deg: float, translation: float, scale: float = 1.0, seed: int = 0
+) -> np.ndarray:
+    """A similarity ``moved_world_from_world`` about the camera centroid: rotation (random
+    axis), translation (random direction, scene units), scale. (4, 4) float64."""
+    rng = np.random.default_rng(seed)
+    c = np.mean([f.center for f in traj.frames], axis=0)
+    r = axis_angle_to_rotmat(_random_unit(rng) * np.deg2rad(rotation_deg))
+    m = np.eye(4)
+    m[:3, :3] = scale * r
+    m[:3, 3] = c - scale * r @ c + translation * _random_unit(rng)
+    return m
+
+
+def _apply(world_from_cam: np.ndarray, moved_from_world: np.ndarray) -> np.ndarray:
+    s = float(np.cbrt(np.linalg.det(moved_from_world[:3, :3])))
+    out = np.eye(4)
+    out[:3, :3] = (moved_from_world[:3, :3] / s) @ world_from_cam[:3, :3]
+    out[:3, 3] = moved_from_world[:3, :3] @ world_from_cam[:3, 3] + moved_from_world[:3, 3]
+    return out
+
+
+def move_trajectory(traj: Trajectory, moved_from_world: np.ndarray) -> Trajectory:
+    """Every pose moved by one rigid / similarity transform (a misregistered trajectory)."""
+    frames = [f.with_pose(_apply(f.world_from_cam, moved_from_world)) for f in traj.frames]
+    return Trajectory(frames, traj.source, traj.format)
+
+
+def drift_trajectory(
+    traj: Trajectory, start: float, rotation_deg: float, translation: float, seed: int = 0
+) -> tuple[Trajectory, list[str]]:
+    """A drifting segment: from fraction ``start`` of the frames to the end the error grows
+    linearly to ``rotation_deg`` + ``translation`` (one axis and direction, about each camera
+    centre). Returns the trajectory and the ids of the drifting frames."""
+    rng = np.random.default_rng(seed)
+    axis, direction = _random_unit(rng), _random_unit(rng)
+    n = len(traj.frames)
+    i0 = int(round(start * n))
+    frames, ids = [], []
+    for i, f in enumerate(traj.frames):
+        if i < i0:
+            frames.append(f)
+            continue
+        a = (i - i0 + 1) / (n - i0)
+        m = np.eye(4)
+        m[:3, :3] = axis_angle_to_rotmat(axis * np.deg2rad(rotation_deg * a))
+        c = f.center
+        m[:3, 3] = c - m[:3, :3] @ c + translation * a * direction
+        frames.append(f.with_pose(_apply(f.world_from_cam, m)))
+        ids.append(f.frame_id)
+    return Trajectory(frames, traj.source, traj.format), ids
+
+
+def change_intrinsics(
+    traj: Trajectory, focal_scale: float = 1.0, principal_shift: tuple[float, float] = (0, 0)
+) -> Trajectory:
+    """Every frame's camera with a focal length scaled and a principal point shifted (px)."""
+    from dataclasses import replace
+
+    frames = []
+    for f in traj.frames:
+        cam = f.camera
+        fx, fy = cam.focal
+        cx, cy = cam.principal_point
+        new = type(cam).pinhole(cam.width, cam.height, fx * focal_scale, fy * focal_scale,
+                                cx + principal_shift[0], cy + principal_shift[1])
+        if cam.model not in ("PINHOLE", "SIMPLE_PINHOLE"):
+            raise ValueError(f"change_intrinsics supports pinhole cameras, got {cam.model}")
+        frames.append(replace(f, camera=new))
+    return Trajectory(frames, traj.source, traj.format)
+
+
+def time_offset_trajectory(traj: Trajectory, offset: int) -> Trajectory:
+    """Each image paired with the pose ``offset`` frames later (clamped at the ends): a time
+    offset between the image stream and the poses."""
+    n = len(traj.frames)
+    frames = [
+        f.with_pose(traj.frames[min(max(i + offset, 0), n - 1)].world_from_cam)
+        for i, f in enumerate(traj.frames)
+    ]
+    return Trajectory(frames, traj.source, traj.format)

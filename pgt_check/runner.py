@@ -26,7 +26,7 @@ from pgt_check.measure import (
     pick_references,
 )
 from pgt_check.types import Frame, Trajectory
-from pgt_check.verdict import apply_verdicts
+from pgt_check.verdict import judge_run
 
 logger = logging.getLogger(__name__)
 
@@ -42,7 +42,11 @@ def load_trajectory(config: RunConfig) -> Trajectory:
     if not Path(inp.mesh).is_file():
         raise InputError(f"mesh not found: {inp.mesh}")
     traj = read_trajectory(
-        inp.trajectory, inp.format, images=inp.images, camera=inp.camera, sensors=inp.sensors,
+        inp.trajectory,
+        inp.format,
+        images=inp.images,
+        camera=inp.camera,
+        sensors=inp.sensors,
         dataparser_transforms=inp.dataparser_transforms,
     )
     if len(traj) == 0:
@@ -133,8 +137,11 @@ def check_frames(
     ) as store:
         done = store.done_ids().intersection(ids)
         if done:
-            logger.info("%d of %d frames already measured with these settings: skipped",
-                        len(done), len(frames))
+            logger.info(
+                "%d of %d frames already measured with these settings: skipped",
+                len(done),
+                len(frames),
+            )
         todo = (f for f in frames if f.frame_id not in done)
         with stop_on_sigint() as stop:
             results = iter_results(todo, checker_factory, config, stop=stop, stats=stats)
@@ -144,11 +151,13 @@ def check_frames(
         if interrupted:
             n_done = len(store.done_ids().intersection(ids))
             if n_done < len(ids):
-                logger.warning("interrupted: %d/%d frames done, stored in %s", n_done, len(ids),
-                               out)
+                logger.warning(
+                    "interrupted: %d/%d frames done, stored in %s", n_done, len(ids), out
+                )
                 raise RunInterrupted(n_done, len(ids), str(out))
         measurements = stored_measurements(store.records_in_order(ids))
-    rows = apply_verdicts(measurements, config)
+    judged = judge_run(measurements, config)
+    rows = judged.rows
     assets = write_report_assets(frames, rows, config, checker_factory)
     shadings = sorted({str(m.shading) for m in measurements if m.shading})
     summary_extra = {
@@ -161,6 +170,7 @@ def check_frames(
             "worker_crashes": stats.worker_crashes,
         },
         **(extra or {}),
+        **judged.summary_extra(),
         "wall_time_s": time.perf_counter() - t0,
     }
     return write_outputs(out, rows, config, extra=summary_extra, assets=assets)

@@ -59,5 +59,6 @@ class Enhancer(Protocol):
     name: str
     evidence: Evidence
 
-    def enhance(self, view: View, reference: ReferenceView, renderer: Renderer) -> EnhancedImage:
-        ...
+    def enhance(
+        self, view: View, reference: ReferenceView, renderer: Renderer
+    ) -> EnhancedImage: ...

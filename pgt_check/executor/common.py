@@ -94,10 +94,15 @@ def internal_error(frame: Frame, err: BaseException) -> FrameMeasurement:
 
 def worker_crashed(task: Task, how: str) -> FrameMeasurement:
     """The measurement of a frame whose worker died ``task.crashes`` times."""
-    logger.error("frame %s: its worker died %d times (%s); recorded as worker_crashed",
-                 task.frame.frame_id, task.crashes, how)
+    logger.error(
+        "frame %s: its worker died %d times (%s); recorded as worker_crashed",
+        task.frame.frame_id,
+        task.crashes,
+        how,
+    )
     return failed_measurement(
-        task.frame, MeasureReason.WORKER_CRASHED,
+        task.frame,
+        MeasureReason.WORKER_CRASHED,
         f"the worker process died while measuring this frame {task.crashes} times ({how})",
     )
 
@@ -160,5 +165,3 @@ def fill(
         if not submit(Task(frame)):
             break
     return exhausted
-
-

@@ -104,8 +104,14 @@ def _describe_exit(codes: list[int]) -> str:
 class _ProcessRun:
     """State of one process-pool run: the pool, frames in flight, frames to retry alone."""
 
-    def __init__(self, frames: Iterable[Frame], checker_factory: CheckerFactory,
-                 config: RunConfig, stop: threading.Event, stats: ExecutorStats) -> None:
+    def __init__(
+        self,
+        frames: Iterable[Frame],
+        checker_factory: CheckerFactory,
+        config: RunConfig,
+        stop: threading.Event,
+        stats: ExecutorStats,
+    ) -> None:
         self.factory, self.config, self.stop, self.stats = checker_factory, config, stop, stats
         self.workers = config.workers or default_workers()
         stats.workers = self.workers
@@ -192,12 +198,15 @@ class _ProcessRun:
                 self.stats.crashed_frames.append(task.frame.frame_id)
                 out = worker_crashed(task, how)
             else:
-                logger.warning("frame %s: its worker died (%s); retrying",
-                               task.frame.frame_id, how)
+                logger.warning("frame %s: its worker died (%s); retrying", task.frame.frame_id, how)
                 self.retry.appendleft(task)
         else:
-            logger.warning("a worker died (%s) with %d frames in flight; re-running them one at "
-                           "a time to find the cause", how, len(crashed))
+            logger.warning(
+                "a worker died (%s) with %d frames in flight; re-running them one at "
+                "a time to find the cause",
+                how,
+                len(crashed),
+            )
             self.retry.extend(crashed)
         if not self.stop.is_set():
             self.pool = self._new_pool()
@@ -206,8 +215,15 @@ class _ProcessRun:
     def results(self) -> Iterator[FrameMeasurement]:
         noted = [False]
         while True:
-            self.exhausted = fill(self.stop, self.inflight, self.retry, self.source,
-                                  self.exhausted, self.max_inflight, self.submit)
+            self.exhausted = fill(
+                self.stop,
+                self.inflight,
+                self.retry,
+                self.source,
+                self.exhausted,
+                self.max_inflight,
+                self.submit,
+            )
             note_stop(self.stop, noted, len(self.inflight))
             if not self.inflight:
                 if self.stop.is_set() or (self.exhausted and not self.retry):
@@ -237,8 +253,9 @@ def iter_process(
     stats: ExecutorStats,
 ) -> Iterator[FrameMeasurement]:
     run = _ProcessRun(frames, checker_factory, config, stop, stats)
-    logger.info("process pool: %d workers (spawn), up to %d frames in flight",
-                run.workers, run.max_inflight)
+    logger.info(
+        "process pool: %d workers (spawn), up to %d frames in flight", run.workers, run.max_inflight
+    )
     clean_exit = False
     try:
         for m in run.results():

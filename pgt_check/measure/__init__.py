@@ -6,17 +6,12 @@ Importing this package does not import OpenCV, moderngl or torch.
 
 from __future__ import annotations
 
-from pgt_check.measure.checker import (
-    FrameChecker,
-    FrameImages,
-    PathResult,
-    build_frame_checker,
-    pick_references,
-)
+from pgt_check.measure.checker import FrameChecker, build_frame_checker, pick_references
+from pgt_check.measure.columns import MEASUREMENT_COLUMNS, TIMING_COLUMNS
+from pgt_check.measure.paths import FrameImages, PathResult
 from pgt_check.measure.record import (
-    MEASUREMENT_COLUMNS,
     SCHEMA_VERSION,
-    TIMING_COLUMNS,
+    AbsoluteEvidence,
     EnhanceWhy,
     FrameMeasurement,
     MeasureReason,
@@ -28,6 +23,7 @@ from pgt_check.measure.record import (
 )
 
 __all__ = [
+    "AbsoluteEvidence",
     "MEASUREMENT_COLUMNS",
     "SCHEMA_VERSION",
     "TIMING_COLUMNS",

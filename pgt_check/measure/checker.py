@@ -21,11 +21,11 @@ import numpy as np
 from pgt_check.config import RunConfig
 from pgt_check.enhance.base import Evidence, ReferenceView, View
 from pgt_check.errors import InputError
+from pgt_check.measure.paths import FrameImages, PathResult, absolute_evidence
 from pgt_check.measure.record import (
     EnhanceWhy,
     FrameMeasurement,
     MeasureReason,
-    PathMeasurement,
     PoseEstimate,
     Timings,
     failed_measurement,
@@ -33,68 +33,6 @@ from pgt_check.measure.record import (
 from pgt_check.types import Camera, Frame, Trajectory
 
 logger = logging.getLogger(__name__)
-
-
-@dataclass
-class FrameImages:
-    """Working-resolution images and matches of one frame, filled on request for report panels.
-
-    photo / render / enhanced: (h, w, 3) float32 RGB [0, 1]; kpts_*: (N, 2) working pixels;
-    inliers: (N,) bool of the homography of the deciding path.
-    """
-
-    photo: np.ndarray | None = None
-    render: np.ndarray | None = None
-    enhanced: np.ndarray | None = None
-    kpts_render: np.ndarray | None = None
-    kpts_photo: np.ndarray | None = None
-    inliers: np.ndarray | None = None
-
-
-@dataclass(frozen=True, eq=False)
-class PathResult:
-    """Matching + homography of one image against the photo, with its arrays (in-process only).
-
-    ``photo_from_render`` is in original photo pixels; keypoints in working pixels.
-    """
-
-    n_matches: int
-    n_inliers: int
-    inlier_ratio: float
-    reason: str  # homography failure reason, "" on success
-    photo_from_render: np.ndarray | None
-    corner_error_px: float | None
-    kpts_render: np.ndarray
-    kpts_photo: np.ndarray
-    inliers: np.ndarray
-    n_kpts_render: int
-    n_kpts_photo: int
-    t_match_s: float
-    t_homography_s: float
-
-    @property
-    def success(self) -> bool:
-        return self.photo_from_render is not None
-
-    def measurement(
-        self, kind: str, method: str, evidence: Evidence, camera: Camera,
-        reference_id: str | None = None,
-    ) -> PathMeasurement:
-        """The stored (JSON-able) part of this result; shifts in ``camera``'s pixels."""
-        from pgt_check.geometry.homography import corner_shift_and_zoom
-
-        h = dx = dy = zoom = None
-        if self.success:
-            h = tuple(tuple(map(float, r)) for r in self.photo_from_render)
-            dx, dy, zoom = corner_shift_and_zoom(self.photo_from_render, camera.width,
-                                                 camera.height)
-        return PathMeasurement(
-            kind=kind, method=method, evidence=evidence, n_kpts_render=self.n_kpts_render,
-            n_kpts_photo=self.n_kpts_photo, n_matches=self.n_matches, n_inliers=self.n_inliers,
-            inlier_ratio=self.inlier_ratio, reason=self.reason, photo_from_render=h,
-            corner_error_px=self.corner_error_px, shift_dx_px=dx, shift_dy_px=dy, zoom=zoom,
-            reference_id=reference_id,
-        )
 
 
 @dataclass
@@ -205,8 +143,13 @@ class FrameChecker:
         render = self.renderer.render(cam_w, frame.world_from_cam)
         clock.add("render", time.perf_counter() - t)
         m = _replace(
-            base, width=camera.width, height=camera.height, match_width=size[0],
-            match_height=size[1], coverage=render.coverage_fraction, shading=render.shading,
+            base,
+            width=camera.width,
+            height=camera.height,
+            match_width=size[0],
+            match_height=size[1],
+            coverage=render.coverage_fraction,
+            shading=render.shading,
         )
         if keep is not None:
             keep.photo, keep.render = photo_w, render.rgb
@@ -218,8 +161,12 @@ class FrameChecker:
         why, detail = self._enhance_decision(raw, threshold)
         view = View(render, cam_w, frame.world_from_cam)
         enh = ref_id = None
-        if why in (EnhanceWhy.MODE_ALWAYS, EnhanceWhy.RAW_FAILED, EnhanceWhy.RAW_FEW_INLIERS,
-                   EnhanceWhy.RAW_NEAR_THRESHOLD):
+        if why in (
+            EnhanceWhy.MODE_ALWAYS,
+            EnhanceWhy.RAW_FAILED,
+            EnhanceWhy.RAW_FEW_INLIERS,
+            EnhanceWhy.RAW_NEAR_THRESHOLD,
+        ):
             enh, ref_id, enh_img, n_tried = self._enhanced_path(
                 frame, view, photo_w, size, scale, camera, clock
             )
@@ -237,14 +184,22 @@ class FrameChecker:
         if chosen.success and self.config.pose.enabled:
             pose = self._pose_estimate(chosen, render.depth, cam_w, frame, clock)
         method = self.config.enhance.method
+        absolute = [(raw, "raw")]
+        if enh is not None and self.enhancer.evidence is Evidence.ABSOLUTE:
+            absolute.append((enh, method))
         return _replace(
             m,
+            evidence=absolute_evidence(absolute, render.depth, cam_w, scale),
             raw=raw.measurement("raw", "render", Evidence.ABSOLUTE, camera),
-            enhanced=None if enh is None else enh.measurement(
-                "enhanced", method, self.enhancer.evidence, camera, ref_id),
-            enhance_ran=why not in (EnhanceWhy.MODE_NEVER, EnhanceWhy.RAW_DECISIVE,
-                                    EnhanceWhy.NO_REFERENCE),
-            enhance_why=why, enhance_why_detail=detail, verdict_path=path_name, pose=pose,
+            enhanced=None
+            if enh is None
+            else enh.measurement("enhanced", method, self.enhancer.evidence, camera, ref_id),
+            enhance_ran=why
+            not in (EnhanceWhy.MODE_NEVER, EnhanceWhy.RAW_DECISIVE, EnhanceWhy.NO_REFERENCE),
+            enhance_why=why,
+            enhance_why_detail=detail,
+            verdict_path=path_name,
+            pose=pose,
             auto_threshold_px=threshold if self.config.enhance.mode == "auto" else None,
         )
 
@@ -255,8 +210,14 @@ class FrameChecker:
         return prepare_photo(load_image(frame.image_file), frame.camera)
 
     def _match_path(
-        self, image: np.ndarray, photo_w: np.ndarray, mask: np.ndarray, size: tuple[int, int],
-        scale: tuple[float, float], camera: Camera, clock: _Clock,
+        self,
+        image: np.ndarray,
+        photo_w: np.ndarray,
+        mask: np.ndarray,
+        size: tuple[int, int],
+        scale: tuple[float, float],
+        camera: Camera,
+        clock: _Clock,
     ) -> PathResult:
         from pgt_check.geometry.homography import (
             corner_error,
@@ -268,8 +229,9 @@ class FrameChecker:
         matches = self.matcher.match(image, photo_w, mask0=mask)
         t_match = time.perf_counter() - t
         t = time.perf_counter()
-        res = estimate_homography(matches.kpts0, matches.kpts1, size[0], size[1],
-                                  self.config.homography)
+        res = estimate_homography(
+            matches.kpts0, matches.kpts1, size[0], size[1], self.config.homography
+        )
         t_h = time.perf_counter() - t
         clock.add("match", t_match)
         clock.add("homography", t_h)
@@ -279,9 +241,19 @@ class FrameChecker:
             err = corner_error(h, camera.width, camera.height)
         n = len(matches)
         return PathResult(
-            n, res.n_inliers, res.n_inliers / n if n else 0.0,
-            "" if res.success else res.reason.value, h, err, matches.kpts0, matches.kpts1,
-            res.inliers, matches.n_kpts0, matches.n_kpts1, t_match, t_h,
+            n,
+            res.n_inliers,
+            res.n_inliers / n if n else 0.0,
+            "" if res.success else res.reason.value,
+            h,
+            err,
+            matches.kpts0,
+            matches.kpts1,
+            res.inliers,
+            matches.n_kpts0,
+            matches.n_kpts1,
+            t_match,
+            t_h,
         )
 
     def _enhance_decision(self, raw: PathResult, threshold: float) -> tuple[EnhanceWhy, str]:
@@ -306,32 +278,42 @@ class FrameChecker:
         sx = cam_w.width / frame.camera.width
         ref_size = (max(1, round(ref_cam.width * sx)), max(1, round(ref_cam.height * sx)))
         ref_cam_w = ref_cam.scaled(ref_size[0] / ref_cam.width, ref_size[1] / ref_cam.height)
-        return ReferenceView(ref.frame_id, resize_image(ref_photo, ref_size), ref_cam_w,
-                             ref.world_from_cam)
+        return ReferenceView(
+            ref.frame_id, resize_image(ref_photo, ref_size), ref_cam_w, ref.world_from_cam
+        )
 
     def _enhanced_path(
-        self, frame: Frame, view: View, photo_w: np.ndarray, size: tuple[int, int],
-        scale: tuple[float, float], camera: Camera, clock: _Clock,
+        self,
+        frame: Frame,
+        view: View,
+        photo_w: np.ndarray,
+        size: tuple[int, int],
+        scale: tuple[float, float],
+        camera: Camera,
+        clock: _Clock,
     ) -> tuple[PathResult | None, str | None, np.ndarray | None, int]:
         """Enhance with each reference, match again; keep the result with the most inliers.
 
         Returns (result, reference id, enhanced image, number of references tried).
         """
         refs = [
-            r for r in self.references.get(frame.frame_id, ())
+            r
+            for r in self.references.get(frame.frame_id, ())
             if r.image_file is not None and Path(r.image_file).is_file()
         ]
         best: PathResult | None = None
         best_id = best_img = None
         for ref in refs:
             t = time.perf_counter()
-            out = self.enhancer.enhance(view, self._reference_view(frame, view.camera, ref),
-                                        self.renderer)
+            out = self.enhancer.enhance(
+                view, self._reference_view(frame, view.camera, ref), self.renderer
+            )
             clock.add("enhance", time.perf_counter() - t)
             # keypoints are detected where the mesh covers the render (the reference may
             # leave holes, which keep the render's own colour)
-            res = self._match_path(out.image, photo_w, view.render.coverage, size, scale, camera,
-                                   clock)
+            res = self._match_path(
+                out.image, photo_w, view.render.coverage, size, scale, camera, clock
+            )
             if best is None or res.n_inliers > best.n_inliers:
                 best, best_id, best_img = res, ref.frame_id, out.image
         return best, best_id, best_img, len(refs)
@@ -344,14 +326,22 @@ class FrameChecker:
         t = time.perf_counter()
         p = self.config.pose
         corr = estimate_pose_correction(
-            path.kpts_render, path.kpts_photo, depth, cam_w, frame.world_from_cam,
-            max_error_px=p.max_error_px, min_inliers=p.min_inliers,
+            path.kpts_render,
+            path.kpts_photo,
+            depth,
+            cam_w,
+            frame.world_from_cam,
+            max_error_px=p.max_error_px,
+            min_inliers=p.min_inliers,
         )
         clock.add("pose", time.perf_counter() - t)
         if not corr.success:
             return PoseEstimate(corr.n_inliers, corr.reason.value)
         return PoseEstimate(
-            corr.n_inliers, "", corr.dt, corr.drot_deg,
+            corr.n_inliers,
+            "",
+            corr.dt,
+            corr.drot_deg,
             tuple(tuple(map(float, r)) for r in corr.world_from_cam),
         )
 
@@ -380,8 +370,11 @@ def pick_references(
     refs = {f.frame_id: tuple(by_id[i] for i in choices[f.frame_id].frame_ids) for f in frames}
     missing = sum(not r for r in refs.values())
     if missing:
-        logger.warning("%d of %d frames have no usable reference and are checked raw only",
-                       missing, len(frames))
+        logger.warning(
+            "%d of %d frames have no usable reference and are checked raw only",
+            missing,
+            len(frames),
+        )
     return refs
 
 

@@ -5,7 +5,7 @@ the enhanced path (if one ran), the pose estimate and the timings. It is stored 
 object per line in ``records.jsonl`` (``to_json`` / ``from_json``; ``SCHEMA_VERSION`` marks the
 layout) and never holds a verdict: verdicts are computed from it at output time
 (``pgt_check.verdict``). ``row()`` flattens it into the columns of frames.csv, the report table
-and JUnit properties; ``COLUMNS`` is the one declaration of those columns.
+and JUnit properties; ``measure.columns.MEASUREMENT_COLUMNS`` is the one declaration of them.
 
 Evidence kinds (see ``docs/architecture.md`` and the README): a path is **absolute** evidence
 when the image compared with the photo depends only on the mesh and this frame's pose (the raw
@@ -16,7 +16,7 @@ places a reference photo through the reference's own pose (reprojection).
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass, field, fields, replace
 from enum import Enum
 from typing import Any
@@ -56,6 +56,10 @@ class OldRecordError(ValueError):
 
 def _num(x: Any) -> float | None:
     return None if x is None else float(x)
+
+
+def _matrix(x: Any) -> tuple[tuple[float, ...], ...] | None:
+    return None if x is None else tuple(tuple(map(float, r)) for r in x)
 
 
 @dataclass(frozen=True)
@@ -159,6 +163,48 @@ class Timings:
         return cls(**{f.name: _num(d.get(f.name)) for f in fields(cls)})
 
 
+def _g6(x: float) -> float:
+    return float(f"{float(x):.6g}")
+
+
+@dataclass(frozen=True, eq=False)
+class AbsoluteEvidence:
+    """2D-3D correspondences of one frame from absolute evidence only (the raw render, MaRINeR,
+    geometric edges), for the run-level registration / drift / calibration checks.
+
+    pts2d: (N, 2) photo pixels (original resolution, OpenCV convention); pts_cam: (N, 3) the
+    matched render points lifted with the render depth, in the checked camera's frame (world
+    point = world_from_cam @ pts_cam). ``sources``: which paths contributed.
+    """
+
+    sources: tuple[str, ...]
+    pts2d: tuple[tuple[float, float], ...]
+    pts_cam: tuple[tuple[float, float, float], ...]
+
+    def __len__(self) -> int:
+        return len(self.pts2d)
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, AbsoluteEvidence) and self.to_json() == other.to_json()
+
+    __hash__ = None  # type: ignore[assignment]
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "sources": list(self.sources),
+            "pts2d": [[round(u, 3), round(v, 3)] for u, v in self.pts2d],
+            "pts_cam": [[_g6(c) for c in p] for p in self.pts_cam],
+        }
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> AbsoluteEvidence:
+        return cls(
+            tuple(d.get("sources") or ()),
+            tuple((float(u), float(v)) for u, v in d.get("pts2d") or ()),
+            tuple(tuple(float(c) for c in p) for p in d.get("pts_cam") or ()),
+        )
+
+
 @dataclass(frozen=True)
 class FrameMeasurement:
     """Everything stage 1 measured for one frame (see the module docstring).
@@ -190,6 +236,12 @@ class FrameMeasurement:
     pose: PoseEstimate | None = None
     auto_threshold_px: float | None = None
     timings: Timings = field(default_factory=Timings)
+    #: the checked pose (4x4 rows) and the photo's pinhole intrinsics (fx, fy, cx, cy; original
+    #: pixels) with a key naming the camera: inputs of the run-level checks
+    world_from_cam: tuple[tuple[float, ...], ...] | None = None
+    intrinsics: tuple[float, float, float, float] | None = None
+    camera_id: str = ""
+    evidence: AbsoluteEvidence | None = None
 
     # -- access ---------------------------------------------------------------------------
     @property
@@ -218,7 +270,7 @@ class FrameMeasurement:
         out: dict[str, Any] = {"schema": SCHEMA_VERSION}
         for f in fields(self):
             v = getattr(self, f.name)
-            if isinstance(v, (PathMeasurement, PoseEstimate, Timings)):
+            if isinstance(v, (PathMeasurement, PoseEstimate, Timings, AbsoluteEvidence)):
                 v = v.to_json()
             elif isinstance(v, Enum):
                 v = v.value
@@ -262,11 +314,19 @@ class FrameMeasurement:
             pose=None if d.get("pose") is None else PoseEstimate.from_json(d["pose"]),
             auto_threshold_px=_num(d.get("auto_threshold_px")),
             timings=Timings.from_json(d.get("timings") or {}),
+            world_from_cam=_matrix(d.get("world_from_cam")),
+            intrinsics=None if d.get("intrinsics") is None else tuple(map(float, d["intrinsics"])),
+            camera_id=str(d.get("camera_id") or ""),
+            evidence=None
+            if d.get("evidence") is None
+            else AbsoluteEvidence.from_json(d["evidence"]),
         )
 
     # -- flat view ---------------------------------------------------------------------------
     def row(self) -> dict[str, Any]:
         """The flat columns of frames.csv / the report table (see ``COLUMNS``)."""
+        from pgt_check.measure.columns import MEASUREMENT_COLUMNS
+
         return {c.name: c.get(self) for c in MEASUREMENT_COLUMNS}
 
 
@@ -275,141 +335,22 @@ def failed_measurement(frame: Any, reason: MeasureReason, detail: str = "") -> F
 
     ``frame``: a ``pgt_check.types.Frame``.
     """
+    cam = frame.camera
     return FrameMeasurement(
         frame_id=frame.frame_id,
         timestamp=frame.timestamp,
         image_path=frame.image_path,
-        width=frame.camera.width,
-        height=frame.camera.height,
+        width=cam.width,
+        height=cam.height,
         center=tuple(float(c) for c in frame.center),
         error=reason,
         error_detail=detail,
+        world_from_cam=tuple(tuple(map(float, r)) for r in frame.world_from_cam),
+        camera_id=camera_key(cam),
     )
 
 
-# -- columns -----------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class Column:
-    """One flat column: name, what it holds (for the docs and the report), and its getter."""
-
-    name: str
-    doc: str
-    get: Callable[[FrameMeasurement], Any]
-    #: written to frames.csv (the others are in the report table data and records only)
-    csv: bool = True
-
-
-def _path_attr(path: str, attr: str) -> Callable[[FrameMeasurement], Any]:
-    def get(m: FrameMeasurement) -> Any:
-        p = getattr(m, path)
-        return None if p is None else getattr(p, attr)
-
-    return get
-
-
-def _chosen_attr(attr: str, default: Any = None) -> Callable[[FrameMeasurement], Any]:
-    def get(m: FrameMeasurement) -> Any:
-        p = m.chosen
-        return default if p is None else getattr(p, attr)
-
-    return get
-
-
-def _chosen_success_attr(attr: str) -> Callable[[FrameMeasurement], Any]:
-    def get(m: FrameMeasurement) -> Any:
-        p = m.chosen
-        return None if p is None or not p.success else getattr(p, attr)
-
-    return get
-
-
-def _timing(attr: str) -> Callable[[FrameMeasurement], Any]:
-    return lambda m: getattr(m.timings, attr)
-
-
-def _pose_attr(attr: str) -> Callable[[FrameMeasurement], Any]:
-    return lambda m: None if m.pose is None else getattr(m.pose, attr)
-
-
-def _raw_shift(attr: str) -> Callable[[FrameMeasurement], Any]:
-    return lambda m: None if m.raw is None or not m.raw.success else getattr(m.raw, attr)
-
-
-#: the measurement's flat columns, in frames.csv order (the verdict columns come from
-#: ``pgt_check.verdict``; ``report.outputs.FRAME_COLUMNS`` puts them together)
-MEASUREMENT_COLUMNS: tuple[Column, ...] = (
-    Column("frame_id", "frame id (unique within the trajectory)", lambda m: m.frame_id),
-    Column("timestamp", "timestamp as given by the trajectory", lambda m: m.timestamp),
-    Column("image_path", "photo path as given by the trajectory", lambda m: m.image_path),
-    Column("error", "why the frame could not be measured", lambda m: m.error.value, csv=False),
-    Column("error_detail", "details of the measurement error", lambda m: m.error_detail, csv=False),
-    Column("corner_error_px", "corner error of the deciding path, photo px",
-           _chosen_attr("corner_error_px")),
-    Column("n_matches", "matches of the deciding path", _chosen_attr("n_matches", 0)),
-    Column("n_inliers", "homography inliers of the deciding path", _chosen_attr("n_inliers", 0)),
-    Column("inlier_ratio", "inliers / matches of the deciding path",
-           _chosen_attr("inlier_ratio", 0.0)),
-    Column("homography_reason", "why the deciding path has no homography",
-           _chosen_attr("reason", ""), csv=False),
-    Column("coverage", "share of the render covered by the mesh", lambda m: m.coverage),
-    Column("shift_dx_px", "mean corner shift x of the deciding path, px",
-           _chosen_success_attr("shift_dx_px")),
-    Column("shift_dy_px", "mean corner shift y of the deciding path, px",
-           _chosen_success_attr("shift_dy_px")),
-    Column("zoom", "warped / original diagonal of the deciding path",
-           _chosen_success_attr("zoom")),
-    Column("n_kpts_render", "keypoints in the render (deciding path)",
-           _chosen_attr("n_kpts_render")),
-    Column("n_kpts_photo", "keypoints in the photo (deciding path)", _chosen_attr("n_kpts_photo")),
-    Column("width", "photo width, px", lambda m: m.width),
-    Column("height", "photo height, px", lambda m: m.height),
-    Column("match_width", "width matched at, px", lambda m: m.match_width),
-    Column("match_height", "height matched at, px", lambda m: m.match_height),
-    Column("shading", "how the render got its colour", lambda m: m.shading),
-    Column("corner_error_px_raw", "corner error of the raw render, px",
-           _path_attr("raw", "corner_error_px")),
-    Column("shift_dx_px_raw", "mean corner shift x of the raw render, px",
-           _raw_shift("shift_dx_px")),
-    Column("shift_dy_px_raw", "mean corner shift y of the raw render, px",
-           _raw_shift("shift_dy_px")),
-    Column("zoom_raw", "zoom of the raw render", _raw_shift("zoom")),
-    Column("n_matches_raw", "matches of the raw render", _path_attr("raw", "n_matches")),
-    Column("n_inliers_raw", "inliers of the raw render", _path_attr("raw", "n_inliers")),
-    Column("inlier_ratio_raw", "inlier ratio of the raw render",
-           _path_attr("raw", "inlier_ratio")),
-    Column("homography_reason_raw", "why the raw render has no homography",
-           lambda m: "" if m.raw is None else m.raw.reason, csv=False),
-    Column("corner_error_px_enhanced", "corner error of the enhanced render, px",
-           _path_attr("enhanced", "corner_error_px")),
-    Column("n_matches_enhanced", "matches of the enhanced render",
-           _path_attr("enhanced", "n_matches")),
-    Column("n_inliers_enhanced", "inliers of the enhanced render",
-           _path_attr("enhanced", "n_inliers")),
-    Column("inlier_ratio_enhanced", "inlier ratio of the enhanced render",
-           _path_attr("enhanced", "inlier_ratio")),
-    Column("homography_reason_enhanced", "why the enhanced render has no homography",
-           lambda m: "" if m.enhanced is None else m.enhanced.reason, csv=False),
-    Column("enhanced", "whether the enhanced path ran", lambda m: m.enhance_ran),
-    Column("enhanced_why", "why it ran or not", lambda m: m.enhanced_why),
-    Column("verdict_path", "path with more inliers (raw / enhanced)", lambda m: m.verdict_path),
-    Column("reference_id", "reference frame of the enhanced path",
-           _path_attr("enhanced", "reference_id")),
-    Column("pose_dt", "PnP camera-centre correction, scene units", _pose_attr("dt")),
-    Column("pose_drot_deg", "PnP rotation correction, deg", _pose_attr("drot_deg")),
-    Column("pose_inliers", "PnP inliers", _pose_attr("n_inliers")),
-    Column("pose_reason", "why the PnP estimate failed",
-           lambda m: "" if m.pose is None else m.pose.reason, csv=False),
-    Column("t_load_s", "time: photo loading, s", _timing("load")),
-    Column("t_render_s", "time: rendering, s", _timing("render")),
-    Column("t_match_s", "time: matching (all paths), s", _timing("match")),
-    Column("t_homography_s", "time: homographies (all paths), s", _timing("homography")),
-    Column("t_enhance_s", "time: enhancement, s", _timing("enhance")),
-    Column("t_pose_s", "time: PnP, s", _timing("pose")),
-    Column("time_s", "time: whole frame, s", _timing("total")),
-    Column("center", "camera centre (world)", lambda m: list(m.center), csv=False),
-)
-
-#: timing columns (frames.csv; left out when comparing runs)
-TIMING_COLUMNS: tuple[str, ...] = tuple(
-    c.name for c in MEASUREMENT_COLUMNS if c.name.startswith("t_") or c.name == "time_s"
-)
+def camera_key(camera: Any) -> str:
+    """A readable key that names one physical camera (model, size, parameters)."""
+    params = ",".join(f"{p:.6g}" for p in camera.params)
+    return f"{camera.model} {camera.width}x{camera.height} {params}"

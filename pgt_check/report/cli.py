@@ -94,7 +94,7 @@ def report_main(argv: Sequence[str]) -> int:
     except SystemExit as exc:
         return int(exc.code or 0)
     from pgt_check.report.outputs import write_outputs
-    from pgt_check.verdict import apply_verdicts
+    from pgt_check.verdict import judge_run
 
     try:
         out = Path(args.out_dir)
@@ -118,7 +118,8 @@ def report_main(argv: Sequence[str]) -> int:
             for k in ("trajectory_format", "shading", "setup_s", "wall_time_s")
             if k in old
         }
-        summary = write_outputs(out, apply_verdicts(records, config), config, extra)
+        judged = judge_run(records, config)
+        summary = write_outputs(out, judged.rows, config, {**extra, **judged.summary_extra()})
     except InputError as err:
         print(f"pgt-check report: error: {err}", file=sys.stderr)
         return 2

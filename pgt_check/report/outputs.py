@@ -16,8 +16,9 @@ from typing import Any
 
 from pgt_check import __version__
 from pgt_check.config import RunConfig
-from pgt_check.measure.record import MEASUREMENT_COLUMNS, TIMING_COLUMNS
+from pgt_check.measure.columns import MEASUREMENT_COLUMNS, TIMING_COLUMNS
 from pgt_check.report.files import atomic_write_text
+from pgt_check.verdict.apply import VERDICT_COLUMNS
 
 logger = logging.getLogger(__name__)
 
@@ -27,7 +28,8 @@ def _frame_columns() -> tuple[str, ...]:
     measured = [c.name for c in MEASUREMENT_COLUMNS if c.csv]
     head, rest = measured[:3], measured[3:]
     i = rest.index("corner_error_px") + 1
-    return (*head, "verdict", "reason", *rest[:i], "threshold_px", *rest[i:])
+    extra = [c for c in VERDICT_COLUMNS if c not in ("verdict", "reason", "threshold_px")]
+    return (*head, "verdict", "reason", *rest[:i], "threshold_px", *rest[i:], *extra)
 
 
 #: frames.csv columns, in order. ``corner_error_px`` is the one the verdict used.

@@ -1,10 +1,11 @@
 """Verdicts: per-frame PASS / FAIL / UNVERIFIABLE from measurements, and run-level statistics."""
 
-from pgt_check.verdict.apply import VERDICT_COLUMNS, apply_verdicts
+from pgt_check.verdict.apply import VERDICT_COLUMNS, RunJudgement, apply_verdicts, judge_run
 from pgt_check.verdict.decide import (
     Verdict,
     decide,
     gate,
+    judge,
     resolve_threshold_px,
     run_statistics,
     systematic_offset,
@@ -12,10 +13,13 @@ from pgt_check.verdict.decide import (
 
 __all__ = [
     "VERDICT_COLUMNS",
+    "RunJudgement",
+    "judge_run",
     "Verdict",
     "apply_verdicts",
     "decide",
     "gate",
+    "judge",
     "resolve_threshold_px",
     "run_statistics",
     "systematic_offset",

@@ -1,28 +1,66 @@
-"""Stage 2 over a run: verdicts for stored measurements, as flat rows for the outputs."""
+"""Stage 2 over a run: run-level checks, then verdicts for stored measurements as flat rows."""
 
 from __future__ import annotations
 
 from collections.abc import Iterable
+from dataclasses import dataclass
 from typing import Any
 
 from pgt_check.config import RunConfig
 from pgt_check.measure.record import FrameMeasurement
-from pgt_check.verdict.decide import decide
+from pgt_check.verdict.decide import judge
+from pgt_check.verdict.shared import SharedChecks, run_shared_checks
 
-#: the verdict columns every row gets beside the measurement columns
-VERDICT_COLUMNS = ("verdict", "reason", "threshold_px")
+#: the verdict columns every row gets beside the measurement columns, with their meaning
+VERDICT_COLUMNS: dict[str, str] = {
+    "verdict": "PASS / FAIL / UNVERIFIABLE",
+    "reason": "why (FAIL, UNVERIFIABLE)",
+    "threshold_px": "PASS threshold on the corner error, photo px",
+    "evidence": "what the verdict rests on: absolute, relative+registration, relative, none",
+    "raw_verdict": "what the raw render alone says",
+    "enhanced_verdict": "what the enhanced render alone says ('' if it did not run)",
+    "disagree": "raw and enhanced paths give PASS and FAIL",
+    "drift_px": "run-level drift score of this frame, px (see summary shared_errors.drift)",
+}
+
+
+@dataclass(frozen=True)
+class RunJudgement:
+    """Rows (measurement columns + ``VERDICT_COLUMNS``) and the run-level checks."""
+
+    rows: list[dict[str, Any]]
+    shared: SharedChecks | None
+
+    def summary_extra(self) -> dict[str, Any]:
+        return {} if self.shared is None else {"shared_errors": self.shared.summary()}
+
+
+def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> RunJudgement:
+    """Run-level checks on all measurements (trajectory order), then each frame's judgement.
+
+    Measurements are not changed (records.jsonl stays as measured)."""
+    ms = list(measurements)
+    shared = run_shared_checks(ms, config) if config.verdict.shared_checks and ms else None
+    rows = []
+    for m in ms:
+        j = judge(m, config.verdict, shared)
+        row = m.row()
+        row.update(
+            verdict=j.verdict.value,
+            reason=j.reason,
+            threshold_px=config.verdict.threshold_for(m.width, m.height),
+            evidence=j.evidence,
+            raw_verdict=j.raw_verdict,
+            enhanced_verdict=j.enhanced_verdict,
+            disagree=j.disagree,
+            drift_px=None if shared is None else shared.drift_px.get(m.frame_id),
+        )
+        rows.append(row)
+    return RunJudgement(rows, shared)
 
 
 def apply_verdicts(
     measurements: Iterable[FrameMeasurement], config: RunConfig
 ) -> list[dict[str, Any]]:
-    """One flat row per measurement (``FrameMeasurement.row()``) plus verdict, reason and
-    threshold_px. Measurements are not changed (records.jsonl stays as measured)."""
-    rows = []
-    for m in measurements:
-        verdict, reason = decide(m, config.verdict)
-        row = m.row()
-        row["verdict"], row["reason"] = verdict.value, reason
-        row["threshold_px"] = config.verdict.threshold_for(m.width, m.height)
-        rows.append(row)
-    return rows
+    """The rows of ``judge_run``."""
+    return judge_run(measurements, config).rows

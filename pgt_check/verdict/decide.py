@@ -5,14 +5,17 @@ from __future__ import annotations
 import math
 from collections import Counter
 from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
 from enum import Enum
 from typing import Any
 
 import numpy as np
 
 from pgt_check.config import VerdictConfig
+from pgt_check.enhance.base import Evidence
 from pgt_check.geometry.homography import auc_at_thresholds
-from pgt_check.measure.record import FrameMeasurement, MeasureReason
+from pgt_check.measure.record import FrameMeasurement, MeasureReason, PathMeasurement
+from pgt_check.verdict.shared import FAILED, NOT_CHECKED, PASSED
 
 
 class Verdict(str, Enum):
@@ -26,17 +29,14 @@ def resolve_threshold_px(config: VerdictConfig, width: int, height: int) -> floa
     return config.threshold_for(width, height)
 
 
-def decide(m: FrameMeasurement, config: VerdictConfig) -> tuple[Verdict, str]:
-    """Verdict and reason for one frame's measurement.
-
-    Order of checks: measurement error (missing image, internal error), render coverage,
-    homography failure of the deciding path, inlier count/ratio, then the threshold.
-    """
-    if m.error is not MeasureReason.NONE:
-        return Verdict.UNVERIFIABLE, m.error.value
-    if m.coverage is not None and m.coverage < config.min_coverage:
-        return Verdict.UNVERIFIABLE, MeasureReason.LOW_COVERAGE.value
-    path = m.chosen
+def path_outcome(
+    m: FrameMeasurement,
+    path: PathMeasurement | None,
+    config: VerdictConfig,
+    photo_from_render: Any = None,
+) -> tuple[Verdict, str]:
+    """Verdict and reason that one path alone gives (``photo_from_render`` overrides the path's
+    homography, e.g. after removing a calibration error)."""
     if path is None:
         return Verdict.UNVERIFIABLE, "not_measured"
     if path.reason:
@@ -46,12 +46,123 @@ def decide(m: FrameMeasurement, config: VerdictConfig) -> tuple[Verdict, str]:
     if path.inlier_ratio < config.min_inlier_ratio:
         return Verdict.UNVERIFIABLE, "low_inlier_ratio"
     err = path.corner_error_px
+    if photo_from_render is not None:
+        from pgt_check.geometry.homography import corner_error
+
+        err = corner_error(np.asarray(photo_from_render, np.float64), m.width, m.height)
     if err is None or not math.isfinite(err):
         return Verdict.UNVERIFIABLE, "non_finite_homography"
     threshold = config.threshold_for(m.width, m.height)
     if err <= threshold:
         return Verdict.PASS, ""
     return Verdict.FAIL, f"corner_error {err:.1f} px > {threshold:.1f} px"
+
+
+def decide(m: FrameMeasurement, config: VerdictConfig) -> tuple[Verdict, str]:
+    """Verdict and reason of the deciding path (the one with more inliers) alone.
+
+    Order of checks: measurement error (missing image, internal error), render coverage,
+    homography failure of the deciding path, inlier count/ratio, then the threshold. The full
+    per-frame judgement with evidence kinds and run-level checks is ``judge``.
+    """
+    if m.error is not MeasureReason.NONE:
+        return Verdict.UNVERIFIABLE, m.error.value
+    if m.coverage is not None and m.coverage < config.min_coverage:
+        return Verdict.UNVERIFIABLE, MeasureReason.LOW_COVERAGE.value
+    return path_outcome(m, m.chosen, config)
+
+
+@dataclass(frozen=True)
+class Judgement:
+    """The verdict of one frame with what it rests on.
+
+    evidence: "absolute" (a path that depends only on the mesh and this pose decided),
+    "relative+registration" (a reprojected reference decided, and the run-level registration
+    check passed), "relative" (a reprojected reference decided; nothing absolute confirms it),
+    or "none". raw_verdict / enhanced_verdict: what each path alone says ("" if it did not run).
+    """
+
+    verdict: Verdict
+    reason: str
+    evidence: str
+    raw_verdict: str
+    enhanced_verdict: str
+
+    @property
+    def disagree(self) -> bool:
+        """Raw and enhanced paths both verifiable, with different verdicts."""
+        both = {self.raw_verdict, self.enhanced_verdict}
+        return both == {Verdict.PASS.value, Verdict.FAIL.value}
+
+
+def _calibrated(m: FrameMeasurement, path: PathMeasurement | None, shared: Any) -> Any:
+    """The path's homography with the camera's estimated calibration error removed."""
+    if path is None or path.photo_from_render is None or shared is None:
+        return None
+    h_cal = shared.calibration_homographies.get(m.camera_id)
+    if h_cal is None or path.evidence is not Evidence.ABSOLUTE:
+        return None
+    return np.linalg.solve(h_cal, np.asarray(path.photo_from_render, np.float64))
+
+
+def judge(m: FrameMeasurement, config: VerdictConfig, shared: Any = None) -> Judgement:
+    """The frame's verdict from both paths and the run-level checks (``verdict.shared``).
+
+    Rules: a confident FAIL of any path (>= ``confident_inliers`` inliers) is a FAIL; otherwise
+    the deciding path's verdict stands, except that a PASS needs absolute evidence, or relative
+    evidence plus a passed registration check: a relative-only PASS becomes UNVERIFIABLE
+    (``relative_evidence_only``). A failed registration check or a flagged drift segment turns
+    the PASS of the frames it covers into FAIL.
+    """
+    base, why = decide(m, config)
+    if m.error is not MeasureReason.NONE or why == MeasureReason.LOW_COVERAGE.value:
+        return Judgement(base, why, "none", "", "")
+    remove = config.remove_calibration
+    outcomes = {}
+    for name in ("raw", "enhanced"):
+        p = getattr(m, name)
+        h = _calibrated(m, p, shared) if remove else None
+        outcomes[name] = path_outcome(m, p, config, h) if p is not None else None
+    raw_v = "" if outcomes["raw"] is None else outcomes["raw"][0].value
+    enh_v = "" if outcomes["enhanced"] is None else outcomes["enhanced"][0].value
+    chosen = m.chosen
+    base, why = outcomes[m.verdict_path] if m.verdict_path in outcomes else (base, why)
+    for name in ("raw", "enhanced"):
+        p, out = getattr(m, name), outcomes[name]
+        if out and out[0] is Verdict.FAIL and p.n_inliers >= config.confident_inliers:
+            return Judgement(Verdict.FAIL, out[1], p.evidence.value, raw_v, enh_v)
+    evidence = "none" if chosen is None else chosen.evidence.value
+    if base is not Verdict.PASS:
+        return Judgement(base, why, evidence, raw_v, enh_v)
+    reg = NOT_CHECKED if shared is None else shared.registration_status
+    if shared is not None and m.frame_id in shared.drift_flagged:
+        px = shared.drift_px.get(m.frame_id, float("nan"))
+        return Judgement(
+            Verdict.FAIL,
+            f"drift: this segment moves {px:.1f} px off the mesh",
+            evidence,
+            raw_v,
+            enh_v,
+        )
+    if reg == FAILED:
+        e = shared.registration if shared.registration["status"] == FAILED else shared.similarity
+        return Judgement(
+            Verdict.FAIL,
+            f"registration: trajectory off the mesh by "
+            f"{e['effect_px']:.1f} px ({e['angle_deg']:.2f} deg)",
+            evidence,
+            raw_v,
+            enh_v,
+        )
+    if evidence == Evidence.ABSOLUTE.value:
+        return Judgement(Verdict.PASS, "", evidence, raw_v, enh_v)
+    if raw_v == Verdict.PASS.value:  # the absolute raw path confirms the relative PASS
+        return Judgement(Verdict.PASS, "", Evidence.ABSOLUTE.value, raw_v, enh_v)
+    if reg == PASSED:
+        return Judgement(Verdict.PASS, "", "relative+registration", raw_v, enh_v)
+    return Judgement(
+        Verdict.UNVERIFIABLE, f"relative_evidence_only (registration {reg})", evidence, raw_v, enh_v
+    )
 
 
 def gate(counts: Mapping[str, int], config: VerdictConfig) -> tuple[bool, str]:
@@ -64,7 +175,10 @@ def gate(counts: Mapping[str, int], config: VerdictConfig) -> tuple[bool, str]:
     if fail > config.max_fail_fraction:
         return False, f"FAIL fraction {fail:.3f} > max {config.max_fail_fraction:.3f}"
     if unv > config.max_unverifiable_fraction:
-        return False, f"UNVERIFIABLE fraction {unv:.3f} > max {config.max_unverifiable_fraction:.3f}"
+        return (
+            False,
+            f"UNVERIFIABLE fraction {unv:.3f} > max {config.max_unverifiable_fraction:.3f}",
+        )
     return True, f"FAIL fraction {fail:.3f} <= max {config.max_fail_fraction:.3f}"
 
 
@@ -138,12 +252,11 @@ def systematic_offset(
 def run_statistics(records: list[Mapping[str, Any]], threshold_px: float) -> dict[str, Any]:
     """Run-level statistics: verdict and reason counts, error percentiles, AUC, systematic offset."""
     counts = Counter(str(r["verdict"]) for r in records)
-    reasons = Counter(str(r["reason"]) for r in records if r["verdict"] == Verdict.UNVERIFIABLE.value)
+    reasons = Counter(
+        str(r["reason"]) for r in records if r["verdict"] == Verdict.UNVERIFIABLE.value
+    )
     errs = np.array(
-        [
-            r["corner_error_px"] if r.get("corner_error_px") is not None else np.inf
-            for r in records
-        ],
+        [r["corner_error_px"] if r.get("corner_error_px") is not None else np.inf for r in records],
         dtype=np.float64,
     )
     finite = errs[np.isfinite(errs)]

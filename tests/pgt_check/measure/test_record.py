@@ -90,7 +90,9 @@ def test_row_reads_the_deciding_path_and_both_paths():
 def test_columns_are_declared_once_and_feed_frames_csv():
     names = [c.name for c in MEASUREMENT_COLUMNS]
     assert len(names) == len(set(names))
-    csv_measured = [n for n in FRAME_COLUMNS if n not in ("verdict", "reason", "threshold_px")]
+    from pgt_check.verdict import VERDICT_COLUMNS
+
+    csv_measured = [n for n in FRAME_COLUMNS if n not in VERDICT_COLUMNS]
     assert csv_measured == [c.name for c in MEASUREMENT_COLUMNS if c.csv]
     assert all(c.doc for c in MEASUREMENT_COLUMNS)
 

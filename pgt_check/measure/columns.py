@@ -1,0 +1,183 @@
+"""The flat columns of a ``FrameMeasurement`` (frames.csv, the report table, JUnit): declared
+once here, each with its meaning and how it is read from the typed record."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+FrameMeasurement = Any  # pgt_check.measure.record.FrameMeasurement (not imported: no cycle)
+
+
+@dataclass(frozen=True)
+class Column:
+    """One flat column: name, what it holds (for the docs and the report), and its getter."""
+
+    name: str
+    doc: str
+    get: Callable[[FrameMeasurement], Any]
+    #: written to frames.csv (the others are in the report table data and records only)
+    csv: bool = True
+
+
+def _path_attr(path: str, attr: str) -> Callable[[FrameMeasurement], Any]:
+    def get(m: FrameMeasurement) -> Any:
+        p = getattr(m, path)
+        return None if p is None else getattr(p, attr)
+
+    return get
+
+
+def _chosen_attr(attr: str, default: Any = None) -> Callable[[FrameMeasurement], Any]:
+    def get(m: FrameMeasurement) -> Any:
+        p = m.chosen
+        return default if p is None else getattr(p, attr)
+
+    return get
+
+
+def _chosen_success_attr(attr: str) -> Callable[[FrameMeasurement], Any]:
+    def get(m: FrameMeasurement) -> Any:
+        p = m.chosen
+        return None if p is None or not p.success else getattr(p, attr)
+
+    return get
+
+
+def _timing(attr: str) -> Callable[[FrameMeasurement], Any]:
+    return lambda m: getattr(m.timings, attr)
+
+
+def _pose_attr(attr: str) -> Callable[[FrameMeasurement], Any]:
+    return lambda m: None if m.pose is None else getattr(m.pose, attr)
+
+
+def _raw_shift(attr: str) -> Callable[[FrameMeasurement], Any]:
+    return lambda m: None if m.raw is None or not m.raw.success else getattr(m.raw, attr)
+
+
+#: the measurement's flat columns, in frames.csv order (the verdict columns come from
+#: ``pgt_check.verdict``; ``report.outputs.FRAME_COLUMNS`` puts them together)
+MEASUREMENT_COLUMNS: tuple[Column, ...] = (
+    Column("frame_id", "frame id (unique within the trajectory)", lambda m: m.frame_id),
+    Column("timestamp", "timestamp as given by the trajectory", lambda m: m.timestamp),
+    Column("image_path", "photo path as given by the trajectory", lambda m: m.image_path),
+    Column("error", "why the frame could not be measured", lambda m: m.error.value, csv=False),
+    Column("error_detail", "details of the measurement error", lambda m: m.error_detail, csv=False),
+    Column(
+        "corner_error_px",
+        "corner error of the deciding path, photo px",
+        _chosen_attr("corner_error_px"),
+    ),
+    Column("n_matches", "matches of the deciding path", _chosen_attr("n_matches", 0)),
+    Column("n_inliers", "homography inliers of the deciding path", _chosen_attr("n_inliers", 0)),
+    Column(
+        "inlier_ratio", "inliers / matches of the deciding path", _chosen_attr("inlier_ratio", 0.0)
+    ),
+    Column(
+        "homography_reason",
+        "why the deciding path has no homography",
+        _chosen_attr("reason", ""),
+        csv=False,
+    ),
+    Column("coverage", "share of the render covered by the mesh", lambda m: m.coverage),
+    Column(
+        "shift_dx_px",
+        "mean corner shift x of the deciding path, px",
+        _chosen_success_attr("shift_dx_px"),
+    ),
+    Column(
+        "shift_dy_px",
+        "mean corner shift y of the deciding path, px",
+        _chosen_success_attr("shift_dy_px"),
+    ),
+    Column("zoom", "warped / original diagonal of the deciding path", _chosen_success_attr("zoom")),
+    Column(
+        "n_kpts_render", "keypoints in the render (deciding path)", _chosen_attr("n_kpts_render")
+    ),
+    Column("n_kpts_photo", "keypoints in the photo (deciding path)", _chosen_attr("n_kpts_photo")),
+    Column("width", "photo width, px", lambda m: m.width),
+    Column("height", "photo height, px", lambda m: m.height),
+    Column("match_width", "width matched at, px", lambda m: m.match_width),
+    Column("match_height", "height matched at, px", lambda m: m.match_height),
+    Column("shading", "how the render got its colour", lambda m: m.shading),
+    Column(
+        "corner_error_px_raw",
+        "corner error of the raw render, px",
+        _path_attr("raw", "corner_error_px"),
+    ),
+    Column(
+        "shift_dx_px_raw", "mean corner shift x of the raw render, px", _raw_shift("shift_dx_px")
+    ),
+    Column(
+        "shift_dy_px_raw", "mean corner shift y of the raw render, px", _raw_shift("shift_dy_px")
+    ),
+    Column("zoom_raw", "zoom of the raw render", _raw_shift("zoom")),
+    Column("n_matches_raw", "matches of the raw render", _path_attr("raw", "n_matches")),
+    Column("n_inliers_raw", "inliers of the raw render", _path_attr("raw", "n_inliers")),
+    Column("inlier_ratio_raw", "inlier ratio of the raw render", _path_attr("raw", "inlier_ratio")),
+    Column(
+        "homography_reason_raw",
+        "why the raw render has no homography",
+        lambda m: "" if m.raw is None else m.raw.reason,
+        csv=False,
+    ),
+    Column(
+        "corner_error_px_enhanced",
+        "corner error of the enhanced render, px",
+        _path_attr("enhanced", "corner_error_px"),
+    ),
+    Column(
+        "n_matches_enhanced", "matches of the enhanced render", _path_attr("enhanced", "n_matches")
+    ),
+    Column(
+        "n_inliers_enhanced", "inliers of the enhanced render", _path_attr("enhanced", "n_inliers")
+    ),
+    Column(
+        "inlier_ratio_enhanced",
+        "inlier ratio of the enhanced render",
+        _path_attr("enhanced", "inlier_ratio"),
+    ),
+    Column(
+        "homography_reason_enhanced",
+        "why the enhanced render has no homography",
+        lambda m: "" if m.enhanced is None else m.enhanced.reason,
+        csv=False,
+    ),
+    Column("enhanced", "whether the enhanced path ran", lambda m: m.enhance_ran),
+    Column("enhanced_why", "why it ran or not", lambda m: m.enhanced_why),
+    Column("verdict_path", "path with more inliers (raw / enhanced)", lambda m: m.verdict_path),
+    Column(
+        "reference_id",
+        "reference frame of the enhanced path",
+        _path_attr("enhanced", "reference_id"),
+    ),
+    Column("pose_dt", "PnP camera-centre correction, scene units", _pose_attr("dt")),
+    Column("pose_drot_deg", "PnP rotation correction, deg", _pose_attr("drot_deg")),
+    Column("pose_inliers", "PnP inliers", _pose_attr("n_inliers")),
+    Column(
+        "pose_reason",
+        "why the PnP estimate failed",
+        lambda m: "" if m.pose is None else m.pose.reason,
+        csv=False,
+    ),
+    Column("t_load_s", "time: photo loading, s", _timing("load")),
+    Column("t_render_s", "time: rendering, s", _timing("render")),
+    Column("t_match_s", "time: matching (all paths), s", _timing("match")),
+    Column("t_homography_s", "time: homographies (all paths), s", _timing("homography")),
+    Column("t_enhance_s", "time: enhancement, s", _timing("enhance")),
+    Column("t_pose_s", "time: PnP, s", _timing("pose")),
+    Column("time_s", "time: whole frame, s", _timing("total")),
+    Column("center", "camera centre (world)", lambda m: list(m.center), csv=False),
+    Column(
+        "n_absolute_points",
+        "2D-3D correspondences this frame adds to the run-level checks",
+        lambda m: 0 if m.evidence is None else len(m.evidence),
+    ),
+)
+
+#: timing columns (frames.csv; left out when comparing runs)
+TIMING_COLUMNS: tuple[str, ...] = tuple(
+    c.name for c in MEASUREMENT_COLUMNS if c.name.startswith("t_") or c.name == "time_s"
+)

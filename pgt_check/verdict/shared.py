@@ -1,0 +1,324 @@
+"""Run-level checks of errors that many frames share: registration of the whole trajectory to
+the mesh, drift along it, and per-camera calibration (see README "What a verdict proves").
+
+They pool the absolute evidence of every frame (``FrameMeasurement.evidence``: 2D-3D
+correspondences from the raw render and other absolute paths, never from reprojection) and fit
+one small model to all of it (``pgt_check.geometry.shared_errors``). Each check gets a status:
+
+* ``passed``: measured, and the shared error is below the threshold with confidence (the upper
+  bound of its 95 % interval of image displacement);
+* ``failed``: above the threshold with confidence (the lower bound exceeds it);
+* ``inconclusive``: measured, but the interval straddles the threshold;
+* ``not_checked``: too little absolute evidence (few frames or points);
+* for calibration also ``finding``: a significant shared camera-frame error that stays below the
+  per-frame threshold (reported, frames still judged; ``--remove-calibration`` judges them after
+  removing it).
+
+The threshold (``VerdictConfig.shared_threshold_px``; default a quarter of the per-frame
+threshold) is lower than the per-frame one because pooled evidence is far more precise, and
+errors every frame shares matter more.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from pgt_check.config import RunConfig
+from pgt_check.measure.record import FrameMeasurement
+
+logger = logging.getLogger(__name__)
+
+PASSED, FAILED, INCONCLUSIVE, NOT_CHECKED, FINDING = (
+    "passed",
+    "failed",
+    "inconclusive",
+    "not_checked",
+    "finding",
+)
+
+
+@dataclass(frozen=True)
+class SharedChecks:
+    """Results of the run-level checks (``summary()`` is the summary.json section).
+
+    ``drift_px`` / ``drift_flagged``: per frame id, the drift score and whether the frame lies in
+    a flagged segment. ``calibration_homographies``: camera id -> (3, 3) photo_from_render of the
+    estimated calibration error (for ``--remove-calibration``).
+    """
+
+    threshold_px: float
+    registration: dict[str, Any]
+    similarity: dict[str, Any]
+    drift: dict[str, Any]
+    calibration: dict[str, dict[str, Any]]
+    drift_px: dict[str, float] = field(default_factory=dict)
+    drift_flagged: frozenset[str] = frozenset()
+    calibration_homographies: dict[str, np.ndarray] = field(default_factory=dict)
+
+    @property
+    def registration_status(self) -> str:
+        """The worse of the rigid and the similarity check."""
+        order = (FAILED, INCONCLUSIVE, NOT_CHECKED, PASSED)
+        sts = {self.registration.get("status"), self.similarity.get("status")}
+        for s in order:
+            if s in sts:
+                return s
+        return NOT_CHECKED
+
+    def summary(self) -> dict[str, Any]:
+        return {
+            "threshold_px": self.threshold_px,
+            "registration": self.registration,
+            "similarity": self.similarity,
+            "drift": self.drift,
+            "calibration": self.calibration,
+        }
+
+
+def shared_threshold(measurements: Sequence[FrameMeasurement], config: RunConfig) -> float:
+    """The shared-error threshold in photo pixels (median over the frames' image sizes)."""
+    v = config.verdict
+    if v.shared_threshold_px is not None:
+        return float(v.shared_threshold_px)
+    if not measurements:
+        return float("nan")
+    per_frame = [v.threshold_for(m.width, m.height) for m in measurements]
+    return float(v.shared_threshold_rel * np.median(per_frame))
+
+
+def frame_evidence(measurements: Sequence[FrameMeasurement]) -> list[Any]:
+    """The frames that carry absolute evidence, as ``FrameEvidence`` (index = trajectory order)."""
+    from pgt_check.geometry.shared_errors import FrameEvidence
+
+    out = []
+    for i, m in enumerate(measurements):
+        if m.evidence is None or m.world_from_cam is None or m.intrinsics is None:
+            continue
+        wfc = np.asarray(m.world_from_cam, np.float64)
+        pts_cam = np.asarray(m.evidence.pts_cam, np.float64).reshape(-1, 3)
+        fx, fy, cx, cy = m.intrinsics
+        out.append(
+            FrameEvidence(
+                frame_id=m.frame_id,
+                index=i,
+                camera_id=m.camera_id,
+                world_from_cam=wfc,
+                K=np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]], np.float64),
+                width=m.width,
+                height=m.height,
+                pts2d=np.asarray(m.evidence.pts2d, np.float64).reshape(-1, 2),
+                pts3d=pts_cam @ wfc[:3, :3].T + wfc[:3, 3],
+            )
+        )
+    return out
+
+
+def _ci(x: Any) -> list[float] | None:
+    if x is None:
+        return None
+    a = [float(v) for v in np.asarray(x, np.float64).reshape(-1)]
+    return a if all(math.isfinite(v) for v in a) else None
+
+
+def _f(x: Any) -> float | None:
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
+def _status(success: bool, effect_ci: Any, effect: float, threshold: float) -> str:
+    if not success:
+        return NOT_CHECKED
+    lo, hi = effect_ci if _ci(effect_ci) else (effect, effect)
+    if lo > threshold:
+        return FAILED
+    if hi <= threshold:
+        return PASSED
+    return INCONCLUSIVE
+
+
+def _registration_entry(est: Any, threshold: float, kind: str) -> dict[str, Any]:
+    status = _status(est.success, est.effect_px_ci, est.effect_px, threshold)
+    entry: dict[str, Any] = {
+        "status": status,
+        "reason": est.reason,
+        "kind": kind,
+        "angle_deg": _f(est.angle_deg),
+        "angle_deg_ci": _ci(est.angle_deg_ci),
+        "translation": _f(est.translation),
+        "translation_ci": _ci(est.translation_ci),
+        "translation_rel_depth": _f(est.translation_frac),
+        "translation_rel_depth_ci": _ci(est.translation_frac_ci),
+        "scale": _f(est.scale),
+        "scale_ci": _ci(est.scale_ci),
+        "effect_px": _f(est.effect_px),
+        "effect_px_ci": _ci(est.effect_px_ci),
+        "n_frames": est.n_frames,
+        "n_points": est.n_points,
+        "n_inliers": est.n_inliers,
+        "ambiguous_with_calibration": bool(est.ambiguous_with_calibration),
+        "corrected_world_from_world": (
+            None
+            if est.corrected_world_from_world is None
+            else np.asarray(est.corrected_world_from_world).tolist()
+        ),
+    }
+    entry["message"] = _registration_message(entry, threshold)
+    return entry
+
+
+def _registration_message(e: dict[str, Any], threshold: float) -> str:
+    what = "similarity" if e["kind"] == "similarity" else "rigid registration"
+    if e["status"] == NOT_CHECKED:
+        return (
+            f"{what} of the trajectory to the mesh not checked: too little absolute "
+            f"evidence ({e['reason'] or 'no frames'}; {e['n_frames']} frames)"
+        )
+    lo, hi = e["effect_px_ci"] or (e["effect_px"], e["effect_px"])
+    scale = f", scale {e['scale']:.4f}" if e["kind"] == "similarity" else ""
+    rel = e["translation_rel_depth"]
+    nums = (
+        f"{e['angle_deg']:.2f} deg, {e['translation']:.4g} scene units"
+        + (f" ({100 * rel:.1f} % of the scene depth)" if rel is not None else "")
+        + f"{scale}; moves the images by {e['effect_px']:.1f} px (95 % {lo:.1f}-{hi:.1f}) "
+        f"over {e['n_frames']} frames"
+    )
+    verdict = {
+        PASSED: f"passed: below {threshold:.1f} px",
+        FAILED: f"FAILED: the trajectory is misregistered to the mesh (above {threshold:.1f} px)",
+        INCONCLUSIVE: f"inconclusive: the interval straddles {threshold:.1f} px",
+    }[e["status"]]
+    amb = (
+        " (not separable from a calibration error with these views)"
+        if e["ambiguous_with_calibration"]
+        else ""
+    )
+    return f"{what} {verdict}: correction {nums}{amb}"
+
+
+def _calibration_entry(est: Any, shared_thr: float, frame_thr: float) -> dict[str, Any]:
+    status = _status(est.success, est.effect_px_ci, est.effect_px, shared_thr)
+    if status == FAILED:
+        lo = (_ci(est.effect_px_ci) or [est.effect_px])[0]
+        status = FAILED if lo > frame_thr else FINDING
+    entry = {
+        "status": status,
+        "reason": est.reason,
+        "effect_px": _f(est.effect_px),
+        "effect_px_ci": _ci(est.effect_px_ci),
+        "principal_point_shift_px": _ci(est.principal_point_shift_px),
+        "rotation_deg": _f(est.equivalent_rotation_deg),
+        "rotation_deg_ci": _ci(est.equivalent_rotation_deg_ci),
+        "roll_deg": _f(est.roll_deg),
+        "focal_scale": _f(est.focal_scale),
+        "focal_scale_ci": _ci(est.focal_scale_ci),
+        "n_frames": est.n_frames,
+        "separable_from_registration": bool(est.separable),
+    }
+    if status == NOT_CHECKED:
+        entry["message"] = f"calibration not checked: no absolute evidence ({est.reason})"
+        return entry
+    pp = entry["principal_point_shift_px"] or [float("nan")] * 2
+    entry["message"] = (
+        f"calibration {status}: every frame of this camera is displaced by "
+        f"{est.effect_px:.1f} px: principal point off by ({pp[0]:+.1f}, {pp[1]:+.1f}) px or a "
+        f"camera-to-rig rotation of {est.equivalent_rotation_deg:.2f} deg "
+        f"(roll {est.roll_deg:+.2f} deg), focal length x{est.focal_scale:.4f}"
+        + ("" if est.separable else "; not separable from registration with these views")
+    )
+    return entry
+
+
+def _calibration_homography(est: Any, intrinsics: tuple[float, ...]) -> np.ndarray | None:
+    """photo_from_render of a calibration error: K_zoom @ R @ K^-1 (see shared_errors)."""
+    if not est.success or est.rotation is None or not math.isfinite(est.focal_scale):
+        return None
+    fx, fy, cx, cy = intrinsics
+    k = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]], np.float64)
+    kz = k.copy()
+    kz[0, 0] *= est.focal_scale
+    kz[1, 1] *= est.focal_scale
+    return kz @ np.asarray(est.rotation, np.float64) @ np.linalg.inv(k)
+
+
+def _drift_entry(est: Any, ids: list[str], threshold: float) -> tuple[dict, dict, frozenset]:
+    if not est.success:
+        return (
+            {
+                "status": NOT_CHECKED,
+                "reason": est.reason,
+                "message": f"drift not checked ({est.reason})",
+            },
+            {},
+            frozenset(),
+        )
+    score = {fid: float(s) for fid, s in zip(est.frame_ids, est.frame_score_px, strict=True)}
+    low = {fid: float(s) for fid, s in zip(est.frame_ids, est.frame_score_low_px, strict=True)}
+    flagged = frozenset(fid for fid, f in zip(est.frame_ids, est.frame_flagged, strict=True) if f)
+    segments = [
+        [ids[a] if a < len(ids) else a, ids[b] if b < len(ids) else b] for a, b in est.segments
+    ]
+    status = FAILED if flagged else PASSED
+    entry = {
+        "status": status,
+        "reason": est.reason,
+        "segments": segments,
+        "n_windows": len(est.windows),
+        "per_frame": [
+            {
+                "frame_id": fid,
+                "index": int(i),
+                "effect_px": _f(score[fid]),
+                "lo_px": _f(low[fid]),
+                "flagged": fid in flagged,
+            }
+            for fid, i in zip(est.frame_ids, est.frame_index, strict=True)
+        ],
+        "message": (
+            f"drift FAILED: {len(segments)} segment(s) move away from the mesh by more than "
+            f"{threshold:.1f} px: " + ", ".join(f"{a} .. {b}" for a, b in segments)
+            if flagged
+            else f"drift passed: no window moves by more than {threshold:.1f} px"
+        ),
+    }
+    return entry, score, flagged
+
+
+def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfig) -> SharedChecks:
+    """All run-level checks on the measurements (in trajectory order)."""
+    from pgt_check.geometry.shared_errors import (
+        estimate_calibration,
+        estimate_drift,
+        estimate_registration,
+    )
+
+    thr = shared_threshold(measurements, config)
+    frame_thr = (
+        float(np.median([config.verdict.threshold_for(m.width, m.height) for m in measurements]))
+        if measurements
+        else thr
+    )
+    ev = frame_evidence(measurements)
+    reg = _registration_entry(estimate_registration(ev), thr, "rigid")
+    sim = _registration_entry(estimate_registration(ev, similarity=True), thr, "similarity")
+    ids = [e.frame_id for e in ev]
+    drift, drift_px, flagged = _drift_entry(estimate_drift(ev, threshold_px=thr), ids, thr)
+    calib, homs = {}, {}
+    intrinsics = {m.camera_id: m.intrinsics for m in measurements if m.intrinsics}
+    for cam_id, est in estimate_calibration(ev).items():
+        calib[cam_id] = _calibration_entry(est, thr, frame_thr)
+        h = _calibration_homography(est, intrinsics[cam_id]) if cam_id in intrinsics else None
+        if h is not None:
+            homs[cam_id] = h
+    for cam_id in sorted({m.camera_id for m in measurements} - set(calib)):
+        calib[cam_id] = {
+            "status": NOT_CHECKED,
+            "reason": "no_absolute_evidence",
+            "message": "calibration not checked: no absolute evidence",
+        }
+    return SharedChecks(thr, reg, sim, drift, calib, drift_px, flagged, homs)
