@@ -1,0 +1,950 @@
+"""Geometry-edge evidence: align the render's geometric edges with the photo's edges.
+
+On textureless scenes feature matching finds nothing, yet silhouettes and creases of the mesh
+line up with the photo's edges when the pose is right. This module estimates the 2D motion
+``photo_from_render`` (3x3, render pixels -> photo pixels, OpenCV pixel convention) that aligns
+them, and scores it like the feature path (corner error, support, ambiguity).
+
+```python
+re = geometric_edges(render.depth, camera.K)        # silhouettes + creases, from depth only
+pe = photo_edges(photo_rgb)                          # Canny + orientation + distance transforms
+al = align_edges(re, pe)                             # EdgeAlignment(success, reason, ...)
+al.corner_error, al.support, al.ambiguous, al.matches.render_points, al.matches.depth
+```
+
+Steps of ``align_edges``: (a) exhaustive search over 2D shifts (+-``search_radius`` x image
+diagonal) of an oriented, truncated chamfer score on a coarse grid, with a second, spatially
+separated optimum for the ambiguity test, refined at 1 px; (b) point-to-line iterative closest
+edge (oriented correspondences from per-orientation-bin distance transforms with labels, Tukey
+IRLS, Levenberg damping) from shift through similarity and affine to the requested model.
+Pure numpy / OpenCV / scipy.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from dataclasses import dataclass, field
+from enum import Enum
+from functools import cached_property
+
+import numpy as np
+
+from pgt_check.geometry.homography import check_homography, corner_error
+from pgt_check.types import check_shape
+
+logger = logging.getLogger(__name__)
+
+#: kinds of render edge points (``RenderEdges.kind``)
+KIND_OCCLUSION = 0  # depth discontinuity between two surfaces
+KIND_BORDER = 1  # mesh / background border
+KIND_CREASE = 2  # normal discontinuity on one surface
+
+MODELS = ("shift", "similarity", "affine", "homography")
+_N_PARAMS = {"shift": 2, "similarity": 4, "affine": 6, "homography": 8}
+
+
+class EdgeReason(str, Enum):
+    """Why an edge alignment is not usable (machine-readable, closed set)."""
+
+    TOO_FEW_EDGES = "too_few_edges"
+    TOO_FEW_PHOTO_EDGES = "too_few_photo_edges"
+    NO_OVERLAP = "no_overlap"
+    LOW_SUPPORT = "low_support"
+    AMBIGUOUS = "ambiguous"
+    ILL_CONDITIONED = "ill_conditioned_homography"
+
+
+# --------------------------------------------------------------------------------------------
+# configs and results
+
+
+@dataclass(frozen=True)
+class RenderEdgeConfig:
+    """Settings of ``geometric_edges`` (pixels of the render)."""
+
+    #: occlusion edge: inverse depth mis-predicted (by planar extrapolation from both sides) by
+    #: more than this fraction of the near inverse depth
+    depth_jump_rel: float = 0.04
+    #: crease: angle between the normals on both sides of a pixel above this (degrees)
+    crease_angle_deg: float = 28.0
+    #: baseline (px) of the finite differences for normals; 2 smooths faceted / noisy meshes
+    normal_step_px: int = 2
+    #: no creases this close (px) to an occlusion edge or the background (normals unreliable)
+    crease_margin_px: int = 2
+    include_borders: bool = True
+    include_creases: bool = True
+    #: keep at most this many points (seeded random subsample); None = all
+    max_points: int | None = 4000
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class PhotoEdgeConfig:
+    """Settings of ``photo_edges``."""
+
+    blur_sigma: float = 1.0
+    #: Canny high threshold = max(this percentile of the gradient magnitude,
+    #: ``median_factor`` x median, ``min_gradient`` (grey levels per pixel))
+    high_percentile: float = 90.0
+    median_factor: float = 3.0
+    min_gradient: float = 6.0
+    low_ratio: float = 0.4
+    #: orientation bins over [0, pi); a render edge matches photo edges of its bin +- 1
+    n_bins: int = 8
+
+
+@dataclass(frozen=True)
+class EdgeAlignConfig:
+    """Settings of ``align_edges`` (pixels of the working images)."""
+
+    #: chamfer truncation / inlier distance (px); None = 0.0075 x image diagonal, at least 3
+    tau_px: float | None = None
+    #: shift search range as a fraction of the image diagonal
+    search_radius: float = 0.1
+    #: coarse shift grid step (px); None = 0.005 x diagonal, at least 2
+    coarse_step_px: float | None = None
+    coarse_points: int = 600
+    fine_points: int = 2000
+    #: a shift must keep at least this share of the render edges inside the photo
+    min_inside: float = 0.5
+    model: str = "homography"
+    iterations: int = 30
+    #: Levenberg damping, relative to the mean diagonal of the normal equations
+    damping: float = 1e-3
+    #: Tukey scale of the last refinement stage: max(min_scale_px, final_scale x tau)
+    final_scale: float = 0.35
+    min_scale_px: float = 1.5
+    #: second optimum (> ``ambiguity_separation`` x tau away, separated by a valley) scoring
+    #: at least this share of the best -> ambiguous
+    ambiguity_ratio: float = 0.85
+    ambiguity_separation: float = 3.0
+    min_edges: int = 50
+    min_photo_edges: int = 50
+    min_support: float = 0.3
+
+
+@dataclass(frozen=True, eq=False)
+class RenderEdges:
+    """Geometric edge points of a render.
+
+    points: (N, 2) float64 pixel coordinates (x, y) on the edge (midpoints between the two pixels
+    of an occlusion / border pair; pixel centres for creases). normals: (N, 2) float64 unit edge
+    normal (direction across the edge, sign arbitrary). depth: (N,) float64 metric depth of the
+    surface the edge belongs to (the near side for occlusions). kind: (N,) uint8, KIND_*.
+    n_detected: number of points before subsampling.
+    """
+
+    points: np.ndarray
+    normals: np.ndarray
+    depth: np.ndarray
+    kind: np.ndarray
+    width: int
+    height: int
+    n_detected: int
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    @property
+    def angles(self) -> np.ndarray:
+        """(N,) normal orientation in [0, pi)."""
+        return np.mod(np.arctan2(self.normals[:, 1], self.normals[:, 0]), np.pi)
+
+
+@dataclass(frozen=True, eq=False)
+class PhotoEdges:
+    """Edges of a photo and the maps for (oriented) chamfer matching.
+
+    magnitude: (H, W) float32 gradient magnitude (grey levels 0-255 per pixel, Sobel / 8).
+    orientation: (H, W) float32 gradient (edge normal) direction in [0, pi).
+    edges: (H, W) bool Canny edges.
+    points: (E, 2) float64 sub-pixel edge positions (x, y); normals: (E, 2) unit edge normals;
+    pixels: (E, 2) int32 (x, y) of the Canny pixel; bins: (E,) orientation bin.
+    oriented_dist: (B, H, W) float32 distance to the nearest edge whose orientation bin is within
+    +-1 of b; oriented_nearest: (B, H, W) int32 index into ``points`` of that edge (-1: none).
+    ``dist`` / ``nearest`` (unoriented) are computed on first use.
+    """
+
+    magnitude: np.ndarray
+    orientation: np.ndarray
+    edges: np.ndarray
+    points: np.ndarray
+    normals: np.ndarray
+    pixels: np.ndarray
+    bins: np.ndarray
+    oriented_dist: np.ndarray
+    oriented_nearest: np.ndarray
+    thresholds: tuple[float, float]
+
+    @property
+    def width(self) -> int:
+        return int(self.edges.shape[1])
+
+    @property
+    def height(self) -> int:
+        return int(self.edges.shape[0])
+
+    @property
+    def n_bins(self) -> int:
+        return int(self.oriented_dist.shape[0])
+
+    def __len__(self) -> int:
+        return len(self.points)
+
+    @cached_property
+    def _unoriented(self) -> tuple[np.ndarray, np.ndarray]:
+        return _distance_with_nearest(self.edges, _row_major_index(self.pixels, self.width))
+
+    @property
+    def dist(self) -> np.ndarray:
+        """(H, W) float32 distance (px) to the nearest edge pixel, any orientation."""
+        return self._unoriented[0]
+
+    @property
+    def nearest(self) -> np.ndarray:
+        """(H, W) int32 index into ``points`` of the nearest edge (-1 if there is none)."""
+        return self._unoriented[1]
+
+
+@dataclass(frozen=True, eq=False)
+class EdgeMatches:
+    """Render edge points matched to photo edges after alignment (for 2D-3D evidence).
+
+    render_points: (M, 2) render pixels; depth: (M,) their render depth (lift with K^-1);
+    photo_points: (M, 2) the aligned point ``photo_from_render @ p`` moved onto the matched
+    photo edge line (foot of the perpendicular): the photo observation, exact across the edge
+    and only as good as the homography along it; photo_normals: (M, 2) the photo edge normal, for
+    point-to-line residuals; residuals: (M,) signed point-to-line distance (px) before the move.
+    """
+
+    render_points: np.ndarray
+    photo_points: np.ndarray
+    photo_normals: np.ndarray
+    depth: np.ndarray
+    residuals: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.render_points)
+
+
+def _no_matches() -> EdgeMatches:
+    z2 = np.zeros((0, 2))
+    return EdgeMatches(z2, z2.copy(), z2.copy(), np.zeros(0), np.zeros(0))
+
+
+@dataclass(frozen=True, eq=False)
+class EdgeAlignment:
+    """Result of ``align_edges``.
+
+    ``photo_from_render`` / ``corner_error`` are the measured alignment whenever one was computed
+    (also when ``success`` is False for "ambiguous" or "low_support", for diagnostics); they are
+    None / inf when nothing could be computed. Callers must check ``success``.
+    shift: (dx, dy) best integer-grid shift of the search; second_shift / second_score: the
+    separated runner-up (None if there is none); ambiguity: second_score / score (0 if none).
+    support: share of render edge points within tau of a compatible photo edge after alignment;
+    support_identity: the same at the identity. residual_px: median |point-to-line| distance of
+    the matched points. timings: seconds per step.
+    """
+
+    success: bool
+    reason: EdgeReason | None
+    photo_from_render: np.ndarray | None
+    corner_error: float
+    support: float
+    support_identity: float
+    residual_px: float
+    n_edges: int
+    n_photo_edges: int
+    score: float
+    shift: tuple[float, float] | None
+    second_shift: tuple[float, float] | None
+    second_score: float
+    ambiguity: float
+    ambiguous: bool
+    tau_px: float
+    model: str
+    matches: EdgeMatches = field(default_factory=_no_matches)
+    timings: dict[str, float] = field(default_factory=dict)
+
+
+# --------------------------------------------------------------------------------------------
+# render edges
+
+
+def _structure_orientation(points: np.ndarray, width: int, height: int) -> np.ndarray:
+    """(N, 2) unit normals of a thin edge set from the structure tensor of its rasterisation."""
+    import cv2
+
+    xi = np.clip(np.floor(points[:, 0] + 0.5).astype(np.int64), 0, width - 1)
+    yi = np.clip(np.floor(points[:, 1] + 0.5).astype(np.int64), 0, height - 1)
+    img = np.zeros((height, width), dtype=np.float32)
+    img[yi, xi] = 1.0
+    img = cv2.GaussianBlur(img, (0, 0), 1.0)
+    gx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3)
+    gy = cv2.Sobel(img, cv2.CV_32F, 0, 1, ksize=3)
+    jxx = cv2.GaussianBlur(gx * gx, (0, 0), 1.5)
+    jxy = cv2.GaussianBlur(gx * gy, (0, 0), 1.5)
+    jyy = cv2.GaussianBlur(gy * gy, (0, 0), 1.5)
+    theta = 0.5 * np.arctan2(2.0 * jxy[yi, xi], jxx[yi, xi] - jyy[yi, xi])
+    return np.stack([np.cos(theta), np.sin(theta)], axis=1).astype(np.float64)
+
+
+def _occlusion_pairs(inv: np.ndarray, valid: np.ndarray, rel: float) -> tuple[np.ndarray, ...]:
+    """Occlusion and border pairs along axis 1 of ``inv`` (inverse depth, 0 = no surface).
+
+    Returns (occluding, border) bool masks of shape (H, W-1) for pairs (x, x+1). A pair is an
+    occlusion when both pixels are covered and planar extrapolation of inverse depth (exact on
+    planes) from each side mis-predicts the other side by more than ``rel`` x near inverse depth.
+    """
+    a, b = inv[:, :-1], inv[:, 1:]
+    va, vb = valid[:, :-1], valid[:, 1:]
+    both = va & vb
+    near = np.maximum(a, b)
+    jump = np.abs(a - b)
+    # prediction of b from (x-1, x) and of a from (x+1, x+2)
+    err_left = np.full(a.shape, np.inf, dtype=np.float32)
+    err_right = np.full(a.shape, np.inf, dtype=np.float32)
+    ok_l = both[:, 1:] & va[:, :-1]  # pixels x-1, x, x+1 valid (pairs 1..)
+    err_left[:, 1:] = np.where(ok_l, np.abs(b[:, 1:] - (2 * a[:, 1:] - a[:, :-1])), np.inf)
+    ok_r = both[:, :-1] & vb[:, 1:]  # pixels x, x+1, x+2 valid (pairs ..-1)
+    err_right[:, :-1] = np.where(ok_r, np.abs(a[:, :-1] - (2 * b[:, :-1] - b[:, 1:])), np.inf)
+    err = np.minimum(err_left, err_right)
+    err = np.where(np.isinf(err), jump, err)  # no extrapolation possible: the plain jump
+    with np.errstate(divide="ignore", invalid="ignore"):
+        occluding = both & (err > rel * near) & (jump > 0.5 * rel * near)
+    border = va ^ vb
+    return occluding, border
+
+
+def _pair_points(mask: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Midpoints (x, y) of the pairs in ``mask`` ((H, W-1) for axis 1, (H-1, W) for axis 0)."""
+    r, c = np.nonzero(mask)
+    if axis == 1:
+        pts = np.stack([c + 0.5, r.astype(np.float64)], axis=1)
+        return pts, (r, c), (r, c + 1)
+    pts = np.stack([c.astype(np.float64), r + 0.5], axis=1)
+    return pts, (r, c), (r + 1, c)
+
+
+def _normals(points3d: np.ndarray, usable: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """Unit normals (H, W, 3) from central differences with baseline ``k`` and their validity."""
+    h, w, _ = points3d.shape
+    n = np.zeros((h, w, 3), dtype=np.float32)
+    ok = np.zeros((h, w), dtype=bool)
+    if h <= 2 * k or w <= 2 * k:
+        return n, ok
+    dx = points3d[k:-k, 2 * k :] - points3d[k:-k, : -2 * k]
+    dy = points3d[2 * k :, k:-k] - points3d[: -2 * k, k:-k]
+    c = np.cross(dx, dy)
+    norm = np.linalg.norm(c, axis=2)
+    inner = (
+        usable[k:-k, k:-k]
+        & usable[k:-k, 2 * k :]
+        & usable[k:-k, : -2 * k]
+        & usable[2 * k :, k:-k]
+        & usable[: -2 * k, k:-k]
+        & (norm > 0)
+    )
+    with np.errstate(divide="ignore", invalid="ignore"):
+        n[k:-k, k:-k] = np.where(inner[..., None], c / norm[..., None], 0.0)
+    ok[k:-k, k:-k] = inner
+    return n, ok
+
+
+def _crease_pixels(
+    normals: np.ndarray, ok: np.ndarray, cos_max: float, k: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """(rows, cols) of crease pixels: normals at -+k across differ by more than the threshold,
+    non-maximum suppressed along the direction of the larger change."""
+    h, w = ok.shape
+    score = np.zeros((2, h, w), dtype=np.float32)  # 1 - cos, horizontal / vertical
+    valid = np.zeros((2, h, w), dtype=bool)
+    if w > 2 * k:
+        d = np.sum(normals[:, : -2 * k] * normals[:, 2 * k :], axis=2)
+        v = ok[:, : -2 * k] & ok[:, 2 * k :]
+        score[0, :, k:-k] = np.where(v, 1.0 - d, 0.0)
+        valid[0, :, k:-k] = v
+    if h > 2 * k:
+        d = np.sum(normals[: -2 * k] * normals[2 * k :], axis=2)
+        v = ok[: -2 * k] & ok[2 * k :]
+        score[1, k:-k, :] = np.where(v, 1.0 - d, 0.0)
+        valid[1, k:-k, :] = v
+    s = score.max(axis=0)
+    horizontal = score[0] >= score[1]
+    thr = 1.0 - cos_max
+    cand = (s > thr) & valid.any(axis=0)
+    pad = np.pad(s, 1)
+    left, right = pad[1:-1, :-2], pad[1:-1, 2:]
+    up, down = pad[:-2, 1:-1], pad[2:, 1:-1]
+    keep_h = horizontal & (s >= left) & (s > right)
+    keep_v = ~horizontal & (s >= up) & (s > down)
+    return np.nonzero(cand & (keep_h | keep_v))
+
+
+def geometric_edges(
+    depth: np.ndarray, camera_K: np.ndarray, config: RenderEdgeConfig = RenderEdgeConfig()
+) -> RenderEdges:
+    """Silhouettes, mesh borders and creases of a render, from its depth only.
+
+    depth: (H, W) metric z (0 or non-finite = no surface); camera_K: (3, 3) intrinsics of the
+    render (OpenCV pixel convention). Occlusion edges: inverse-depth discontinuities (planar
+    extrapolation from both sides fails by ``depth_jump_rel``); borders: covered / uncovered
+    pairs; creases: angle between back-projected normals across a pixel above
+    ``crease_angle_deg``, non-maximum suppressed to one pixel. The shaded colour is not used.
+    """
+    import cv2  # noqa: F401 (fail early if OpenCV is missing)
+
+    depth = np.asarray(depth)
+    camera_K = np.asarray(camera_K, dtype=np.float64)
+    if depth.ndim != 2:
+        raise ValueError(f"depth: expected shape (H, W), got {depth.shape}")
+    check_shape("camera_K", camera_K, (3, 3))
+    h, w = depth.shape
+    z = depth.astype(np.float32)
+    valid = np.isfinite(z) & (z > 0)
+    z = np.where(valid, z, 0.0).astype(np.float32)
+    with np.errstate(divide="ignore"):
+        inv = np.where(valid, 1.0 / np.where(valid, z, 1.0), 0.0).astype(np.float32)
+
+    pts, dep, kinds = [], [], []
+    occ_near = np.zeros((h, w), dtype=bool)  # pixels next to an occlusion or border
+    for axis in (1, 0):
+        occ, border = _occlusion_pairs(inv if axis == 1 else inv.T, valid if axis == 1 else valid.T,
+                                       config.depth_jump_rel)
+        if axis == 0:
+            occ, border = occ.T, border.T
+        for mask, kind in ((occ, KIND_OCCLUSION), (border, KIND_BORDER)):
+            p, (ra, ca), (rb, cb) = _pair_points(mask, axis)
+            occ_near[ra, ca] = True
+            occ_near[rb, cb] = True
+            if kind == KIND_BORDER and not config.include_borders:
+                continue
+            za, zb = z[ra, ca], z[rb, cb]
+            if kind == KIND_OCCLUSION:
+                d = np.minimum(za, zb)
+            else:
+                d = np.maximum(za, zb)  # the covered side
+            pts.append(p)
+            dep.append(d.astype(np.float64))
+            kinds.append(np.full(len(p), kind, dtype=np.uint8))
+
+    if config.include_creases and config.crease_angle_deg < 180:
+        k = max(1, int(config.normal_step_px))
+        kinv = np.linalg.inv(camera_K)
+        xs = np.arange(w, dtype=np.float32)
+        ys = np.arange(h, dtype=np.float32)
+        rx = (kinv[0, 0] * xs[None, :] + kinv[0, 1] * ys[:, None] + kinv[0, 2]).astype(np.float32)
+        ry = np.broadcast_to((kinv[1, 1] * ys[:, None] + kinv[1, 2]).astype(np.float32), (h, w))
+        p3 = np.stack([rx * z, ry * z, z], axis=2)
+        margin = max(0, int(config.crease_margin_px))
+        blocked = occ_near | ~valid
+        if margin:
+            import cv2
+
+            kern = np.ones((2 * margin + 1, 2 * margin + 1), np.uint8)
+            blocked = cv2.dilate(blocked.astype(np.uint8), kern).astype(bool)
+        usable = valid & ~occ_near
+        n, ok = _normals(p3, usable, k)
+        rows, cols = _crease_pixels(n, ok, math.cos(math.radians(config.crease_angle_deg)), k)
+        keep = ~blocked[rows, cols]
+        rows, cols = rows[keep], cols[keep]
+        pts.append(np.stack([cols, rows], axis=1).astype(np.float64))
+        dep.append(z[rows, cols].astype(np.float64))
+        kinds.append(np.full(len(rows), KIND_CREASE, dtype=np.uint8))
+
+    points = np.concatenate(pts) if pts else np.zeros((0, 2))
+    depths = np.concatenate(dep) if dep else np.zeros(0)
+    kind = np.concatenate(kinds) if kinds else np.zeros(0, dtype=np.uint8)
+    # one point per pixel (horizontal and vertical pairs of a staircase round to distinct pixels
+    # mostly; exact duplicates of the rounded position are dropped, occlusions first)
+    if len(points):
+        key = np.floor(points[:, 1] + 0.5).astype(np.int64) * (w + 1) + np.floor(
+            points[:, 0] + 0.5
+        ).astype(np.int64)
+        _, first = np.unique(key, return_index=True)
+        first.sort()
+        points, depths, kind = points[first], depths[first], kind[first]
+    n_detected = len(points)
+    normals = (
+        _structure_orientation(points, w, h) if len(points) else np.zeros((0, 2), dtype=np.float64)
+    )
+    if config.max_points is not None and n_detected > config.max_points:
+        rng = np.random.default_rng(config.seed)
+        sel = np.sort(rng.choice(n_detected, size=config.max_points, replace=False))
+        points, depths, kind, normals = points[sel], depths[sel], kind[sel], normals[sel]
+    logger.debug("render edges: %d detected, %d kept", n_detected, len(points))
+    return RenderEdges(points, normals, depths, kind, w, h, n_detected)
+
+
+# --------------------------------------------------------------------------------------------
+# photo edges
+
+
+def _row_major_index(pixels: np.ndarray, width: int) -> np.ndarray:
+    return pixels[:, 1].astype(np.int64) * width + pixels[:, 0].astype(np.int64)
+
+
+def _distance_with_nearest(
+    mask: np.ndarray, all_index: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Distance to the nearest True pixel of ``mask`` and its index into the photo edge list.
+
+    all_index: (E,) row-major pixel index of every photo edge point (sorted ascending).
+    """
+    import cv2
+
+    h, w = mask.shape
+    if not mask.any():
+        return np.full((h, w), np.inf, dtype=np.float32), np.full((h, w), -1, dtype=np.int32)
+    src = np.where(mask, 0, 255).astype(np.uint8)
+    dist, labels = cv2.distanceTransformWithLabels(
+        src, cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL
+    )
+    # labels number the zero pixels in row-major order from 1
+    zero_index = np.flatnonzero(mask.ravel())
+    edge_of_zero = np.searchsorted(all_index, zero_index).astype(np.int32)
+    nearest = edge_of_zero[labels - 1]
+    return dist.astype(np.float32), nearest
+
+
+def photo_edges(photo_rgb: np.ndarray, config: PhotoEdgeConfig = PhotoEdgeConfig()) -> PhotoEdges:
+    """Canny edges of a photo with sub-pixel positions, orientations and chamfer maps.
+
+    photo_rgb: (H, W, 3) float RGB in [0, 1] (or (H, W) grey). Canny thresholds adapt to the
+    image: high = max(``high_percentile`` of the gradient magnitude, ``median_factor`` x its
+    median, ``min_gradient``), low = ``low_ratio`` x high.
+    """
+    import cv2
+
+    img = np.asarray(photo_rgb, dtype=np.float32)
+    if img.ndim == 3:
+        check_shape("photo_rgb", img, (None, None, 3))
+        gray = cv2.cvtColor(img, cv2.COLOR_RGB2GRAY)
+    elif img.ndim == 2:
+        gray = img
+    else:
+        raise ValueError(f"photo_rgb: expected shape (H, W, 3), got {img.shape}")
+    h, w = gray.shape
+    gray = gray * 255.0
+    if config.blur_sigma > 0:
+        gray = cv2.GaussianBlur(gray, (0, 0), config.blur_sigma)
+    gx = cv2.Sobel(gray, cv2.CV_32F, 1, 0, ksize=3)
+    gy = cv2.Sobel(gray, cv2.CV_32F, 0, 1, ksize=3)
+    mag = cv2.magnitude(gx, gy)  # Sobel units (8 x grey levels per pixel)
+    per_px = mag / 8.0
+    hi = max(
+        float(np.percentile(per_px, config.high_percentile)),
+        config.median_factor * float(np.median(per_px)),
+        config.min_gradient,
+    )
+    lo = config.low_ratio * hi
+    # OpenCV Canny on given derivatives (int16): keep full range by scaling to fit
+    scale = min(1.0, 30000.0 / max(float(mag.max()), 1e-6))
+    dx = np.round(gx * scale).astype(np.int16)
+    dy = np.round(gy * scale).astype(np.int16)
+    edges = cv2.Canny(dx, dy, lo * 8.0 * scale, hi * 8.0 * scale, L2gradient=True) > 0
+    theta = np.mod(np.arctan2(gy, gx), np.pi).astype(np.float32)
+
+    rows, cols = np.nonzero(edges)  # row-major order
+    pixels = np.stack([cols, rows], axis=1).astype(np.int32)
+    th = theta[rows, cols].astype(np.float64)
+    normals = np.stack([np.cos(th), np.sin(th)], axis=1)
+    # sub-pixel: parabola through the magnitude at -1, 0, +1 along the quantised normal
+    q = np.floor(th / (np.pi / 4) + 0.5).astype(np.int64) % 4  # 0: x, 1: diag, 2: y, 3: anti
+    steps = np.array([[1, 0], [1, 1], [0, 1], [-1, 1]])[q]
+    xp = np.clip(cols + steps[:, 0], 0, w - 1)
+    yp = np.clip(rows + steps[:, 1], 0, h - 1)
+    xm = np.clip(cols - steps[:, 0], 0, w - 1)
+    ym = np.clip(rows - steps[:, 1], 0, h - 1)
+    m0 = mag[rows, cols].astype(np.float64)
+    mp = mag[yp, xp].astype(np.float64)
+    mm = mag[ym, xm].astype(np.float64)
+    den = mm - 2 * m0 + mp
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(den < 0, 0.5 * (mm - mp) / den, 0.0)
+    t = np.clip(np.nan_to_num(t), -0.5, 0.5)
+    points = np.stack([cols + t * steps[:, 0], rows + t * steps[:, 1]], axis=1).astype(np.float64)
+
+    n_bins = int(config.n_bins)
+    if n_bins < 3:
+        raise ValueError(f"n_bins must be >= 3, got {n_bins}")
+    bins = np.floor(th / (np.pi / n_bins) + 0.5).astype(np.int64) % n_bins
+    all_index = _row_major_index(pixels, w)
+    odist = np.empty((n_bins, h, w), dtype=np.float32)
+    onear = np.empty((n_bins, h, w), dtype=np.int32)
+    bin_map = np.full((h, w), -1, dtype=np.int64)
+    bin_map[rows, cols] = bins
+    for b in range(n_bins):
+        compat = (bin_map == b) | (bin_map == (b - 1) % n_bins) | (bin_map == (b + 1) % n_bins)
+        odist[b], onear[b] = _distance_with_nearest(compat, all_index)
+    logger.debug("photo edges: %d pixels, canny thresholds %.1f / %.1f", len(points), lo, hi)
+    return PhotoEdges(
+        magnitude=per_px,
+        orientation=theta,
+        edges=edges,
+        points=points,
+        normals=normals,
+        pixels=pixels,
+        bins=bins.astype(np.int32),
+        oriented_dist=odist,
+        oriented_nearest=onear,
+        thresholds=(lo, hi),
+    )
+
+
+# --------------------------------------------------------------------------------------------
+# alignment
+
+
+def _bins_of(normals: np.ndarray, n_bins: int) -> np.ndarray:
+    ang = np.mod(np.arctan2(normals[:, 1], normals[:, 0]), np.pi)
+    return (np.floor(ang / (np.pi / n_bins) + 0.5).astype(np.int64) % n_bins).astype(np.int64)
+
+
+def _shift_scores(
+    pts: np.ndarray,
+    bins: np.ndarray,
+    shifts: np.ndarray,
+    pe: PhotoEdges,
+    tau: float,
+    min_inside: float,
+) -> np.ndarray:
+    """Oriented truncated chamfer score (mean of 1 - min(d, tau) / tau over the points that land
+    in the photo; 0 where fewer than ``min_inside`` land) for each shift (S, 2)."""
+    h, w = pe.height, pe.width
+    flat = pe.oriented_dist.reshape(-1)
+    out = np.empty(len(shifts), dtype=np.float64)
+    base = bins * (h * w)
+    chunk = max(1, 400_000 // max(1, len(pts)))
+    for s0 in range(0, len(shifts), chunk):
+        sh = shifts[s0 : s0 + chunk]
+        x = np.floor(pts[None, :, 0] + sh[:, None, 0] + 0.5).astype(np.int64)
+        y = np.floor(pts[None, :, 1] + sh[:, None, 1] + 0.5).astype(np.int64)
+        inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
+        idx = base[None, :] + np.clip(y, 0, h - 1) * w + np.clip(x, 0, w - 1)
+        d = np.minimum(flat[idx], tau)
+        s = np.where(inside, 1.0 - d / tau, 0.0).sum(axis=1)
+        n_in = inside.sum(axis=1)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            sc = np.where(n_in >= min_inside * len(pts), s / np.maximum(n_in, 1), 0.0)
+        out[s0 : s0 + chunk] = sc
+    return out
+
+
+def _subset(n: int, k: int) -> np.ndarray:
+    """Evenly spread indices of at most k out of n (deterministic)."""
+    if n <= k:
+        return np.arange(n)
+    return np.unique(np.linspace(0, n - 1, k).round().astype(np.int64))
+
+
+def _separated_runner_up(
+    grid: np.ndarray, xs: np.ndarray, ys: np.ndarray, best: tuple[int, int], min_dist: float
+) -> tuple[int, int] | None:
+    """Best local maximum of ``grid`` farther than ``min_dist`` from ``best`` and separated from
+    it by a valley (the score along the straight path dips below both)."""
+    from scipy.ndimage import maximum_filter
+
+    peaks = (grid == maximum_filter(grid, size=3, mode="nearest")) & (grid > 0)
+    iy, ix = np.nonzero(peaks)
+    if len(iy) == 0:
+        return None
+    by, bx = best
+    dist = np.hypot(xs[ix] - xs[bx], ys[iy] - ys[by])
+    order = np.argsort(-grid[iy, ix])
+    for j in order:
+        if dist[j] <= min_dist:
+            continue
+        # valley test along the segment
+        t = np.linspace(0.0, 1.0, 2 + int(np.ceil(max(abs(ix[j] - bx), abs(iy[j] - by)))))
+        sx = np.round(bx + t * (ix[j] - bx)).astype(int)
+        sy = np.round(by + t * (iy[j] - by)).astype(int)
+        path_min = float(grid[sy, sx].min())
+        second = float(grid[iy[j], ix[j]])
+        if path_min < 0.9 * second:
+            return int(iy[j]), int(ix[j])
+    return None
+
+
+def _fine_search(
+    pts: np.ndarray, bins: np.ndarray, centre: np.ndarray, radius: int, pe, tau, min_inside
+) -> tuple[np.ndarray, float]:
+    r = np.arange(-radius, radius + 1, dtype=np.float64)
+    gx, gy = np.meshgrid(centre[0] + r, centre[1] + r)
+    shifts = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    sc = _shift_scores(pts, bins, shifts, pe, tau, min_inside)
+    i = int(np.argmax(sc))
+    return shifts[i], float(sc[i])
+
+
+def _normaliser(width: int, height: int) -> np.ndarray:
+    """T mapping pixels to normalised coordinates (centre 0, half-diagonal 1)."""
+    s = 2.0 / math.hypot(width, height)
+    return np.array([[s, 0, -s * (width - 1) / 2], [0, s, -s * (height - 1) / 2], [0, 0, 1.0]])
+
+
+def _apply(h: np.ndarray, pts: np.ndarray) -> np.ndarray:
+    ph = pts @ h[:2, :2].T + h[:2, 2]
+    wz = pts @ h[2, :2] + h[2, 2]
+    return ph / wz[:, None]
+
+
+def _correspond(
+    q: np.ndarray, bins: np.ndarray, pe: PhotoEdges, max_dist: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """For aligned points q (N, 2): (valid mask, photo edge index) of the nearest compatible edge
+    within ``max_dist`` px."""
+    h, w = pe.height, pe.width
+    x = np.floor(q[:, 0] + 0.5).astype(np.int64)
+    y = np.floor(q[:, 1] + 0.5).astype(np.int64)
+    inside = (x >= 0) & (x < w) & (y >= 0) & (y < h) & np.all(np.isfinite(q), axis=1)
+    xc, yc = np.clip(x, 0, w - 1), np.clip(y, 0, h - 1)
+    d = pe.oriented_dist[bins, yc, xc]
+    e = pe.oriented_nearest[bins, yc, xc]
+    ok = inside & (d <= max_dist) & (e >= 0)
+    return ok, e
+
+
+def _jacobian(u: np.ndarray, v: np.ndarray, n: np.ndarray, model: str) -> np.ndarray:
+    """d(n . q) / d(params) for q = pi((I + A) y), y = (u, v, 1), in normalised coordinates."""
+    nx, ny = n[:, 0], n[:, 1]
+    if model == "shift":
+        return np.stack([nx, ny], axis=1)
+    if model == "similarity":  # a1 = a5 = s, a2 = -a4 = -r
+        return np.stack([nx * u + ny * v, -nx * v + ny * u, nx, ny], axis=1)
+    cols = [nx * u, nx * v, nx, ny * u, ny * v, ny]
+    if model == "homography":
+        cols += [-(nx * u + ny * v) * u, -(nx * u + ny * v) * v]
+    return np.stack(cols, axis=1)
+
+
+def _update_matrix(delta: np.ndarray, model: str) -> np.ndarray:
+    a = np.zeros((3, 3))
+    if model == "shift":
+        a[0, 2], a[1, 2] = delta
+    elif model == "similarity":
+        s, r, tx, ty = delta
+        a[:2, :] = [[s, -r, tx], [r, s, ty]]
+    else:
+        a[0, :], a[1, :] = delta[0:3], delta[3:6]
+        if model == "homography":
+            a[2, :2] = delta[6:8]
+    return np.eye(3) + a
+
+
+def _refine(
+    re: RenderEdges,
+    pe: PhotoEdges,
+    bins: np.ndarray,
+    shift: np.ndarray,
+    tau: float,
+    config: EdgeAlignConfig,
+) -> np.ndarray:
+    """Point-to-line IRLS (Tukey) from ``shift``; returns photo_from_render (pixels)."""
+    t = _normaliser(re.width, re.height)
+    t_inv = np.linalg.inv(t)
+    hn = t @ np.array([[1, 0, shift[0]], [0, 1, shift[1]], [0, 0, 1.0]]) @ t_inv
+    pn = re.points @ t[:2, :2].T + t[:2, 2]
+    scale = t[0, 0]
+    final = MODELS.index(config.model)
+    stages = [m for m in MODELS if MODELS.index(m) <= final]
+    iters = max(1, int(config.iterations))
+    per_stage = max(2, iters // len(stages))
+    c_min = min(tau, max(config.min_scale_px, tau * config.final_scale))
+    for stage_i, model in enumerate(stages):
+        n_it = per_stage if stage_i < len(stages) - 1 else max(2, iters - per_stage * stage_i)
+        # Tukey scale anneals from tau (first stage) to c_min (last stage)
+        frac = stage_i / max(1, len(stages) - 1)
+        c = tau + (c_min - tau) * frac
+        for _ in range(n_it):
+            qn = _apply(hn, pn)
+            q = (qn - t[:2, 2]) / scale
+            ok, e = _correspond(q, bins, pe, tau)
+            if ok.sum() < _N_PARAMS[model] * 3:
+                return t_inv @ hn @ t
+            nrm = pe.normals[e[ok]]
+            r = np.sum(nrm * (q[ok] - pe.points[e[ok]]), axis=1)  # px
+            wgt = np.where(np.abs(r) < c, (1 - (r / c) ** 2) ** 2, 0.0)
+            jac = _jacobian(qn[ok, 0], qn[ok, 1], nrm, model) / scale  # px per param
+            jw = jac * wgt[:, None]
+            a = jw.T @ jac
+            g = jw.T @ r
+            lam = config.damping * float(np.trace(a)) / len(a) + 1e-12
+            try:
+                delta = -np.linalg.solve(a + lam * np.eye(len(a)), g)
+            except np.linalg.LinAlgError:
+                return t_inv @ hn @ t
+            hn = _update_matrix(delta, model) @ hn
+            hn = hn / hn[2, 2]
+            if np.max(np.abs(delta)) / scale < 1e-3:  # < ~0.001 px at the corners
+                break
+    return t_inv @ hn @ t
+
+
+def _support(
+    pts: np.ndarray, bins: np.ndarray, h: np.ndarray, pe: PhotoEdges, tau: float
+) -> float:
+    if len(pts) == 0:
+        return 0.0
+    ok, _ = _correspond(_apply(h, pts), bins, pe, tau)
+    return float(ok.mean())
+
+
+def auto_tau(width: int, height: int) -> float:
+    """Default chamfer truncation (px) for a working image of this size."""
+    return max(3.0, 0.0075 * math.hypot(width, height))
+
+
+def align_edges(
+    render_edges: RenderEdges,
+    photo_edges: PhotoEdges,
+    config: EdgeAlignConfig = EdgeAlignConfig(),
+) -> EdgeAlignment:
+    """Estimate ``photo_from_render`` aligning the render's geometric edges with the photo's.
+
+    Render and photo must have the same size (the working resolution). Never raises for bad
+    data: failures come back with ``success=False`` and an ``EdgeReason``.
+    """
+    import time
+
+    re, pe = render_edges, photo_edges
+    if config.model not in MODELS:
+        raise ValueError(f"model must be one of {', '.join(MODELS)}, got {config.model!r}")
+    if (re.width, re.height) != (pe.width, pe.height):
+        raise ValueError(
+            f"render edges are {re.width}x{re.height} but photo edges {pe.width}x{pe.height}"
+        )
+    w, h = re.width, re.height
+    diag = math.hypot(w, h)
+    tau = float(config.tau_px) if config.tau_px is not None else auto_tau(w, h)
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+
+    def fail(reason: EdgeReason, **kw) -> EdgeAlignment:
+        base = dict(
+            success=False,
+            reason=reason,
+            photo_from_render=None,
+            corner_error=float("inf"),
+            support=0.0,
+            support_identity=0.0,
+            residual_px=float("nan"),
+            n_edges=len(re),
+            n_photo_edges=len(pe),
+            score=0.0,
+            shift=None,
+            second_shift=None,
+            second_score=0.0,
+            ambiguity=0.0,
+            ambiguous=False,
+            tau_px=tau,
+            model=config.model,
+            timings=timings,
+        )
+        base.update(kw)
+        return EdgeAlignment(**base)
+
+    bins = _bins_of(re.normals, pe.n_bins) if len(re) else np.zeros(0, dtype=np.int64)
+    support_id = _support(re.points, bins, np.eye(3), pe, tau) if len(pe) else 0.0
+    if len(re) < config.min_edges:
+        return fail(EdgeReason.TOO_FEW_EDGES, support_identity=support_id)
+    if len(pe) < config.min_photo_edges:
+        return fail(EdgeReason.TOO_FEW_PHOTO_EDGES)
+
+    # (a) coarse exhaustive shift search
+    step = (
+        float(config.coarse_step_px)
+        if config.coarse_step_px is not None
+        else max(2.0, round(0.005 * diag))
+    )
+    radius = config.search_radius * diag
+    n_side = int(math.floor(radius / step))
+    offs = np.arange(-n_side, n_side + 1) * step
+    gx, gy = np.meshgrid(offs, offs)
+    shifts = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    sub_c = _subset(len(re), config.coarse_points)
+    tau_c = max(tau, 1.5 * step)
+    sc = _shift_scores(
+        re.points[sub_c], bins[sub_c], shifts, pe, tau_c, config.min_inside
+    ).reshape(gx.shape)
+    timings["coarse"] = time.perf_counter() - t0
+    if not np.any(sc > 0):
+        return fail(EdgeReason.NO_OVERLAP, support_identity=support_id)
+    by, bx = np.unravel_index(int(np.argmax(sc)), sc.shape)
+    runner = _separated_runner_up(
+        sc, offs, offs, (int(by), int(bx)), config.ambiguity_separation * tau
+    )
+
+    # fine 1-px search around the best and the runner-up
+    t1 = time.perf_counter()
+    sub_f = _subset(len(re), config.fine_points)
+    pf, bf = re.points[sub_f], bins[sub_f]
+    r_f = int(math.ceil(step))
+    best_shift, best_score = _fine_search(
+        pf, bf, np.array([offs[bx], offs[by]]), r_f, pe, tau, config.min_inside
+    )
+    second_shift, second_score = None, 0.0
+    if runner is not None:
+        s2, sc2 = _fine_search(
+            pf, bf, np.array([offs[runner[1]], offs[runner[0]]]), r_f, pe, tau, config.min_inside
+        )
+        if sc2 > best_score:  # the fine search can swap them
+            s2, sc2, best_shift, best_score = best_shift, best_score, s2, sc2
+        if np.hypot(*(s2 - best_shift)) > config.ambiguity_separation * tau:
+            second_shift, second_score = s2, sc2
+    ambiguity = second_score / best_score if best_score > 0 else 0.0
+    ambiguous = second_shift is not None and ambiguity >= config.ambiguity_ratio
+    timings["fine"] = time.perf_counter() - t1
+
+    # (b) refinement
+    t2 = time.perf_counter()
+    hmat = _refine(re, pe, bins, best_shift, tau, config)
+    timings["refine"] = time.perf_counter() - t2
+
+    # evaluation
+    q = _apply(hmat, re.points)
+    ok, e = _correspond(q, bins, pe, tau)
+    support = float(ok.mean())
+    nrm = pe.normals[e[ok]]
+    res = np.sum(nrm * (q[ok] - pe.points[e[ok]]), axis=1)
+    matches = EdgeMatches(
+        render_points=re.points[ok].copy(),
+        photo_points=q[ok] - res[:, None] * nrm,
+        photo_normals=nrm,
+        depth=re.depth[ok].copy(),
+        residuals=res,
+    )
+    err = corner_error(hmat, w, h)
+    timings["total"] = time.perf_counter() - t0
+    out = dict(
+        photo_from_render=hmat,
+        corner_error=err,
+        support=support,
+        support_identity=support_id,
+        residual_px=float(np.median(np.abs(res))) if len(res) else float("nan"),
+        score=best_score,
+        shift=(float(best_shift[0]), float(best_shift[1])),
+        second_shift=None
+        if second_shift is None
+        else (float(second_shift[0]), float(second_shift[1])),
+        second_score=second_score,
+        ambiguity=ambiguity,
+        ambiguous=ambiguous,
+        matches=matches,
+    )
+    if check_homography(hmat, w, h) is not None:
+        return fail(EdgeReason.ILL_CONDITIONED, **out)
+    if ambiguous:
+        return fail(EdgeReason.AMBIGUOUS, **out)
+    if support < config.min_support:
+        return fail(EdgeReason.LOW_SUPPORT, **out)
+    logger.debug(
+        "edge alignment: corner error %.2f px, support %.2f (identity %.2f), ambiguity %.2f",
+        err,
+        support,
+        support_id,
+        ambiguity,
+    )
+    return EdgeAlignment(success=True, reason=None, model=config.model, tau_px=tau,
+                         n_edges=len(re), n_photo_edges=len(pe), timings=timings, **out)
