@@ -30,7 +30,7 @@ from functools import cached_property
 
 import numpy as np
 
-from pgt_check.geometry.homography import check_homography, corner_error
+from pgt_check.geometry.homography import check_homography, corner_error, image_corners
 from pgt_check.types import check_shape
 
 logger = logging.getLogger(__name__)
@@ -104,19 +104,23 @@ class EdgeAlignConfig:
     search_radius: float = 0.1
     #: coarse shift grid step (px); None = 0.005 x diagonal, at least 2
     coarse_step_px: float | None = None
-    coarse_points: int = 600
+    coarse_points: int = 500
     fine_points: int = 2000
+    refine_points: int = 2000
     #: a shift must keep at least this share of the render edges inside the photo
     min_inside: float = 0.5
     model: str = "homography"
-    iterations: int = 30
+    #: refinement iterations in all (split over the stages shift -> ... -> model)
+    iterations: int = 24
+    #: a stage stops when an update moves no image corner by more than this (px)
+    converged_px: float = 0.02
     #: Levenberg damping, relative to the mean diagonal of the normal equations
     damping: float = 1e-3
     #: Tukey scale of the last refinement stage: max(min_scale_px, final_scale x tau)
     final_scale: float = 0.35
     min_scale_px: float = 1.5
-    #: second optimum (> ``ambiguity_separation`` x tau away, separated by a valley) scoring
-    #: at least this share of the best -> ambiguous
+    #: second optimum (> ``ambiguity_separation`` x tau away, separated by a valley) whose score
+    #: above the median shift score is at least this share of the best's -> ambiguous
     ambiguity_ratio: float = 0.85
     ambiguity_separation: float = 3.0
     min_edges: int = 50
@@ -156,25 +160,29 @@ class RenderEdges:
 class PhotoEdges:
     """Edges of a photo and the maps for (oriented) chamfer matching.
 
-    magnitude: (H, W) float32 gradient magnitude (grey levels 0-255 per pixel, Sobel / 8).
-    orientation: (H, W) float32 gradient (edge normal) direction in [0, pi).
+    magnitude: (H, W) float32 gradient magnitude (grey levels 0-255 per pixel, Sobel / 8);
+    grad_x, grad_y: (H, W) float32 Sobel derivatives of the blurred grey image (x 8);
+    ``orientation`` (computed on first use): gradient (edge normal) direction in [0, pi).
     edges: (H, W) bool Canny edges.
     points: (E, 2) float64 sub-pixel edge positions (x, y); normals: (E, 2) unit edge normals;
     pixels: (E, 2) int32 (x, y) of the Canny pixel; bins: (E,) orientation bin.
     oriented_dist: (B, H, W) float32 distance to the nearest edge whose orientation bin is within
-    +-1 of b; oriented_nearest: (B, H, W) int32 index into ``points`` of that edge (-1: none).
-    ``dist`` / ``nearest`` (unoriented) are computed on first use.
+    +-1 of b (inf if there is none); oriented_labels: (B, H, W) int32 OpenCV label of that edge
+    pixel, resolved by ``compatible_nearest`` / ``oriented_nearest``; label_edges: per bin, edge
+    index of each label - 1. ``dist`` / ``nearest`` (unoriented) are computed on first use.
     """
 
     magnitude: np.ndarray
-    orientation: np.ndarray
+    grad_x: np.ndarray
+    grad_y: np.ndarray
     edges: np.ndarray
     points: np.ndarray
     normals: np.ndarray
     pixels: np.ndarray
     bins: np.ndarray
     oriented_dist: np.ndarray
-    oriented_nearest: np.ndarray
+    oriented_labels: np.ndarray
+    label_edges: tuple[np.ndarray, ...]
     thresholds: tuple[float, float]
 
     @property
@@ -193,8 +201,47 @@ class PhotoEdges:
         return len(self.points)
 
     @cached_property
+    def orientation(self) -> np.ndarray:
+        """(H, W) float32 gradient (edge normal) direction in [0, pi)."""
+        return np.mod(np.arctan2(self.grad_y, self.grad_x), np.pi).astype(np.float32)
+
+    @cached_property
+    def _label_lut(self) -> tuple[np.ndarray, np.ndarray]:
+        sizes = [len(x) for x in self.label_edges]
+        offsets = np.concatenate([[0], np.cumsum(sizes)]).astype(np.int64)
+        lut = np.concatenate([*self.label_edges, np.zeros(0, np.int32)]).astype(np.int32)
+        return lut, offsets
+
+    def compatible_nearest(
+        self, bins: np.ndarray, x: np.ndarray, y: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """(distance, edge index) of the nearest edge compatible with orientation ``bins`` at
+        integer pixels (x, y) (all (N,), inside the image); index -1 where there is none."""
+        d = self.oriented_dist[bins, y, x]
+        lab = self.oriented_labels[bins, y, x].astype(np.int64)
+        lut, offsets = self._label_lut
+        ok = (lab > 0) & np.isfinite(d)
+        e = np.full(len(d), -1, dtype=np.int64)
+        e[ok] = lut[offsets[bins[ok]] + lab[ok] - 1]
+        return d, e
+
+    @cached_property
+    def oriented_nearest(self) -> np.ndarray:
+        """(B, H, W) int32 index into ``points`` of the nearest compatible edge (-1: none)."""
+        out = np.full(self.oriented_labels.shape, -1, dtype=np.int32)
+        for b, edges_b in enumerate(self.label_edges):
+            if len(edges_b):
+                lab = self.oriented_labels[b]
+                out[b] = np.where(lab > 0, edges_b[np.maximum(lab, 1) - 1], -1)
+        return out
+
+    @cached_property
     def _unoriented(self) -> tuple[np.ndarray, np.ndarray]:
-        return _distance_with_nearest(self.edges, _row_major_index(self.pixels, self.width))
+        dist, labels, order = _distance_with_labels(self.edges)
+        if not len(order):
+            return dist, np.full(dist.shape, -1, dtype=np.int32)
+        edge_of = np.searchsorted(_row_major_index(self.pixels, self.width), order)
+        return dist, np.where(labels > 0, edge_of[np.maximum(labels, 1) - 1], -1).astype(np.int32)
 
     @property
     def dist(self) -> np.ndarray:
@@ -241,7 +288,8 @@ class EdgeAlignment:
     (also when ``success`` is False for "ambiguous" or "low_support", for diagnostics); they are
     None / inf when nothing could be computed. Callers must check ``success``.
     shift: (dx, dy) best integer-grid shift of the search; second_shift / second_score: the
-    separated runner-up (None if there is none); ambiguity: second_score / score (0 if none).
+    separated runner-up (None if there is none); baseline_score: median score over all searched
+    shifts; ambiguity: (second_score - baseline) / (score - baseline), 0 if there is no runner-up.
     support: share of render edge points within tau of a compatible photo edge after alignment;
     support_identity: the same at the identity. residual_px: median |point-to-line| distance of
     the matched points. timings: seconds per step.
@@ -257,6 +305,7 @@ class EdgeAlignment:
     n_edges: int
     n_photo_edges: int
     score: float
+    baseline_score: float
     shift: tuple[float, float] | None
     second_shift: tuple[float, float] | None
     second_score: float
@@ -290,35 +339,34 @@ def _structure_orientation(points: np.ndarray, width: int, height: int) -> np.nd
     return np.stack([np.cos(theta), np.sin(theta)], axis=1).astype(np.float64)
 
 
-def _occlusion_pairs(inv: np.ndarray, valid: np.ndarray, rel: float) -> tuple[np.ndarray, ...]:
-    """Occlusion and border pairs along axis 1 of ``inv`` (inverse depth, 0 = no surface).
+def _occlusion_pairs(inv: np.ndarray, valid: np.ndarray, rel: float, axis: int):
+    """Occlusion and border pairs of neighbours along ``axis`` (inverse depth, 0 = no surface).
 
-    Returns (occluding, border) bool masks of shape (H, W-1) for pairs (x, x+1). A pair is an
-    occlusion when both pixels are covered and planar extrapolation of inverse depth (exact on
-    planes) from each side mis-predicts the other side by more than ``rel`` x near inverse depth.
+    Returns (occluding, border) bool masks for the pairs (i, i+1) along ``axis``: (H, W-1) for
+    axis 1, (H-1, W) for axis 0. A pair is an occlusion when both pixels are covered and planar
+    extrapolation of inverse depth (exact on planes) from either side mis-predicts the other
+    side by more than ``rel`` x the near inverse depth (the better of the two sides counts; an
+    uncovered outer neighbour extrapolates badly and so defers to the other side).
     """
-    a, b = inv[:, :-1], inv[:, 1:]
-    va, vb = valid[:, :-1], valid[:, 1:]
-    both = va & vb
-    near = np.maximum(a, b)
+    pad = ((0, 0), (1, 1)) if axis == 1 else ((1, 1), (0, 0))
+    p = np.pad(inv, pad)
+
+    def sl(start: int, stop: int | None) -> np.ndarray:
+        return p[:, start:stop] if axis == 1 else p[start:stop, :]
+
+    a_prev, a, b, b_next = sl(0, -3), sl(1, -2), sl(2, -1), sl(3, None)
     jump = np.abs(a - b)
-    # prediction of b from (x-1, x) and of a from (x+1, x+2)
-    err_left = np.full(a.shape, np.inf, dtype=np.float32)
-    err_right = np.full(a.shape, np.inf, dtype=np.float32)
-    ok_l = both[:, 1:] & va[:, :-1]  # pixels x-1, x, x+1 valid (pairs 1..)
-    err_left[:, 1:] = np.where(ok_l, np.abs(b[:, 1:] - (2 * a[:, 1:] - a[:, :-1])), np.inf)
-    ok_r = both[:, :-1] & vb[:, 1:]  # pixels x, x+1, x+2 valid (pairs ..-1)
-    err_right[:, :-1] = np.where(ok_r, np.abs(a[:, :-1] - (2 * b[:, :-1] - b[:, 1:])), np.inf)
-    err = np.minimum(err_left, err_right)
-    err = np.where(np.isinf(err), jump, err)  # no extrapolation possible: the plain jump
-    with np.errstate(divide="ignore", invalid="ignore"):
-        occluding = both & (err > rel * near) & (jump > 0.5 * rel * near)
-    border = va ^ vb
-    return occluding, border
+    near = np.maximum(a, b)
+    err = np.minimum(np.abs(b - 2 * a + a_prev), np.abs(a - 2 * b + b_next))
+    va = valid[:, :-1] if axis == 1 else valid[:-1, :]
+    vb = valid[:, 1:] if axis == 1 else valid[1:, :]
+    thr = rel * near
+    occluding = va & vb & (err > thr) & (jump > 0.5 * thr)
+    return occluding, va ^ vb
 
 
-def _pair_points(mask: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Midpoints (x, y) of the pairs in ``mask`` ((H, W-1) for axis 1, (H-1, W) for axis 0)."""
+def _pair_points(mask: np.ndarray, axis: int) -> tuple[np.ndarray, tuple, tuple]:
+    """Midpoints (x, y) of the pairs in ``mask`` and the (rows, cols) of both pixels."""
     r, c = np.nonzero(mask)
     if axis == 1:
         pts = np.stack([c + 0.5, r.astype(np.float64)], axis=1)
@@ -327,17 +375,21 @@ def _pair_points(mask: np.ndarray, axis: int) -> tuple[np.ndarray, np.ndarray, n
     return pts, (r, c), (r + 1, c)
 
 
-def _normals(points3d: np.ndarray, usable: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
-    """Unit normals (H, W, 3) from central differences with baseline ``k`` and their validity."""
-    h, w, _ = points3d.shape
-    n = np.zeros((h, w, 3), dtype=np.float32)
-    ok = np.zeros((h, w), dtype=bool)
+def _normals(
+    xyz: tuple[np.ndarray, np.ndarray, np.ndarray], usable: np.ndarray, k: int
+) -> tuple[tuple[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
+    """Unit normals (three (H, W) float32 components) from central differences with baseline
+    ``k`` of the back-projected points, and where they are valid."""
+    h, w = usable.shape
     if h <= 2 * k or w <= 2 * k:
-        return n, ok
-    dx = points3d[k:-k, 2 * k :] - points3d[k:-k, : -2 * k]
-    dy = points3d[2 * k :, k:-k] - points3d[: -2 * k, k:-k]
-    c = np.cross(dx, dy)
-    norm = np.linalg.norm(c, axis=2)
+        zero = np.zeros((h, w), dtype=np.float32)
+        return (zero, zero, zero), np.zeros((h, w), dtype=bool)
+    dx = [c[k:-k, 2 * k :] - c[k:-k, : -2 * k] for c in xyz]
+    dy = [c[2 * k :, k:-k] - c[: -2 * k, k:-k] for c in xyz]
+    c0 = dx[1] * dy[2] - dx[2] * dy[1]
+    c1 = dx[2] * dy[0] - dx[0] * dy[2]
+    c2 = dx[0] * dy[1] - dx[1] * dy[0]
+    norm = np.sqrt(c0 * c0 + c1 * c1 + c2 * c2)
     inner = (
         usable[k:-k, k:-k]
         & usable[k:-k, 2 * k :]
@@ -346,39 +398,39 @@ def _normals(points3d: np.ndarray, usable: np.ndarray, k: int) -> tuple[np.ndarr
         & usable[: -2 * k, k:-k]
         & (norm > 0)
     )
-    with np.errstate(divide="ignore", invalid="ignore"):
-        n[k:-k, k:-k] = np.where(inner[..., None], c / norm[..., None], 0.0)
+    inv_norm = np.where(inner, 1.0 / np.where(inner, norm, 1.0), 0.0).astype(np.float32)
+    out = []
+    for c in (c0, c1, c2):
+        full = np.zeros((h, w), dtype=np.float32)
+        full[k:-k, k:-k] = c * inv_norm
+        out.append(full)
+    ok = np.zeros((h, w), dtype=bool)
     ok[k:-k, k:-k] = inner
-    return n, ok
+    return (out[0], out[1], out[2]), ok
 
 
 def _crease_pixels(
-    normals: np.ndarray, ok: np.ndarray, cos_max: float, k: int
+    n: tuple[np.ndarray, np.ndarray, np.ndarray], ok: np.ndarray, cos_max: float, k: int
 ) -> tuple[np.ndarray, np.ndarray]:
-    """(rows, cols) of crease pixels: normals at -+k across differ by more than the threshold,
-    non-maximum suppressed along the direction of the larger change."""
+    """(rows, cols) of crease pixels: the normals k px before and after a pixel differ by more
+    than the threshold; non-maximum suppressed along the direction of the larger change."""
     h, w = ok.shape
-    score = np.zeros((2, h, w), dtype=np.float32)  # 1 - cos, horizontal / vertical
-    valid = np.zeros((2, h, w), dtype=bool)
+    sh = np.zeros((h, w), dtype=np.float32)  # 1 - cos across the pixel, horizontally
+    sv = np.zeros((h, w), dtype=np.float32)  # and vertically
     if w > 2 * k:
-        d = np.sum(normals[:, : -2 * k] * normals[:, 2 * k :], axis=2)
-        v = ok[:, : -2 * k] & ok[:, 2 * k :]
-        score[0, :, k:-k] = np.where(v, 1.0 - d, 0.0)
-        valid[0, :, k:-k] = v
+        a, b = slice(None, -2 * k), slice(2 * k, None)
+        d = n[0][:, a] * n[0][:, b] + n[1][:, a] * n[1][:, b] + n[2][:, a] * n[2][:, b]
+        sh[:, k:-k] = np.where(ok[:, a] & ok[:, b], 1.0 - d, 0.0)
     if h > 2 * k:
-        d = np.sum(normals[: -2 * k] * normals[2 * k :], axis=2)
-        v = ok[: -2 * k] & ok[2 * k :]
-        score[1, k:-k, :] = np.where(v, 1.0 - d, 0.0)
-        valid[1, k:-k, :] = v
-    s = score.max(axis=0)
-    horizontal = score[0] >= score[1]
-    thr = 1.0 - cos_max
-    cand = (s > thr) & valid.any(axis=0)
+        a, b = slice(None, -2 * k), slice(2 * k, None)
+        d = n[0][a] * n[0][b] + n[1][a] * n[1][b] + n[2][a] * n[2][b]
+        sv[k:-k, :] = np.where(ok[a] & ok[b], 1.0 - d, 0.0)
+    s = np.maximum(sh, sv)
+    cand = s > (1.0 - cos_max)
     pad = np.pad(s, 1)
-    left, right = pad[1:-1, :-2], pad[1:-1, 2:]
-    up, down = pad[:-2, 1:-1], pad[2:, 1:-1]
-    keep_h = horizontal & (s >= left) & (s > right)
-    keep_v = ~horizontal & (s >= up) & (s > down)
+    horizontal = sh >= sv
+    keep_h = horizontal & (s >= pad[1:-1, :-2]) & (s > pad[1:-1, 2:])
+    keep_v = ~horizontal & (s >= pad[:-2, 1:-1]) & (s > pad[2:, 1:-1])
     return np.nonzero(cand & (keep_h | keep_v))
 
 
@@ -392,8 +444,9 @@ def geometric_edges(
     extrapolation from both sides fails by ``depth_jump_rel``); borders: covered / uncovered
     pairs; creases: angle between back-projected normals across a pixel above
     ``crease_angle_deg``, non-maximum suppressed to one pixel. The shaded colour is not used.
+    Points are unique per pixel (rounded position); occlusions and borders win over creases.
     """
-    import cv2  # noqa: F401 (fail early if OpenCV is missing)
+    import cv2
 
     depth = np.asarray(depth)
     camera_K = np.asarray(camera_K, dtype=np.float64)
@@ -401,19 +454,16 @@ def geometric_edges(
         raise ValueError(f"depth: expected shape (H, W), got {depth.shape}")
     check_shape("camera_K", camera_K, (3, 3))
     h, w = depth.shape
-    z = depth.astype(np.float32)
+    z = depth.astype(np.float32, copy=True)
     valid = np.isfinite(z) & (z > 0)
-    z = np.where(valid, z, 0.0).astype(np.float32)
-    with np.errstate(divide="ignore"):
-        inv = np.where(valid, 1.0 / np.where(valid, z, 1.0), 0.0).astype(np.float32)
+    z[~valid] = 0.0
+    inv = np.zeros_like(z)
+    np.divide(1.0, z, out=inv, where=valid)
 
     pts, dep, kinds = [], [], []
-    occ_near = np.zeros((h, w), dtype=bool)  # pixels next to an occlusion or border
+    occ_near = np.zeros((h, w), dtype=bool)  # pixels of an occlusion or border pair
     for axis in (1, 0):
-        occ, border = _occlusion_pairs(inv if axis == 1 else inv.T, valid if axis == 1 else valid.T,
-                                       config.depth_jump_rel)
-        if axis == 0:
-            occ, border = occ.T, border.T
+        occ, border = _occlusion_pairs(inv, valid, config.depth_jump_rel, axis)
         for mask, kind in ((occ, KIND_OCCLUSION), (border, KIND_BORDER)):
             p, (ra, ca), (rb, cb) = _pair_points(mask, axis)
             occ_near[ra, ca] = True
@@ -421,10 +471,8 @@ def geometric_edges(
             if kind == KIND_BORDER and not config.include_borders:
                 continue
             za, zb = z[ra, ca], z[rb, cb]
-            if kind == KIND_OCCLUSION:
-                d = np.minimum(za, zb)
-            else:
-                d = np.maximum(za, zb)  # the covered side
+            # occlusion: the near (occluding) surface; border: the covered side
+            d = np.minimum(za, zb) if kind == KIND_OCCLUSION else np.maximum(za, zb)
             pts.append(p)
             dep.append(d.astype(np.float64))
             kinds.append(np.full(len(p), kind, dtype=np.uint8))
@@ -432,23 +480,19 @@ def geometric_edges(
     if config.include_creases and config.crease_angle_deg < 180:
         k = max(1, int(config.normal_step_px))
         kinv = np.linalg.inv(camera_K)
-        xs = np.arange(w, dtype=np.float32)
-        ys = np.arange(h, dtype=np.float32)
-        rx = (kinv[0, 0] * xs[None, :] + kinv[0, 1] * ys[:, None] + kinv[0, 2]).astype(np.float32)
-        ry = np.broadcast_to((kinv[1, 1] * ys[:, None] + kinv[1, 2]).astype(np.float32), (h, w))
-        p3 = np.stack([rx * z, ry * z, z], axis=2)
-        margin = max(0, int(config.crease_margin_px))
-        blocked = occ_near | ~valid
-        if margin:
-            import cv2
-
-            kern = np.ones((2 * margin + 1, 2 * margin + 1), np.uint8)
-            blocked = cv2.dilate(blocked.astype(np.uint8), kern).astype(bool)
+        xs = np.arange(w, dtype=np.float64)
+        ys = np.arange(h, dtype=np.float64)[:, None]
+        rx = (kinv[0, 0] * xs + kinv[0, 1] * ys + kinv[0, 2]).astype(np.float32)
+        ry = (kinv[1, 0] * xs + kinv[1, 1] * ys + kinv[1, 2]).astype(np.float32)
         usable = valid & ~occ_near
-        n, ok = _normals(p3, usable, k)
+        n, ok = _normals((rx * z, ry * z, z), usable, k)
         rows, cols = _crease_pixels(n, ok, math.cos(math.radians(config.crease_angle_deg)), k)
-        keep = ~blocked[rows, cols]
-        rows, cols = rows[keep], cols[keep]
+        margin = max(0, int(config.crease_margin_px))
+        if margin and len(rows):
+            kern = np.ones((2 * margin + 1, 2 * margin + 1), np.uint8)
+            blocked = cv2.dilate((~usable).view(np.uint8), kern) > 0
+            keep = ~blocked[rows, cols]
+            rows, cols = rows[keep], cols[keep]
         pts.append(np.stack([cols, rows], axis=1).astype(np.float64))
         dep.append(z[rows, cols].astype(np.float64))
         kinds.append(np.full(len(rows), KIND_CREASE, dtype=np.uint8))
@@ -485,27 +529,20 @@ def _row_major_index(pixels: np.ndarray, width: int) -> np.ndarray:
     return pixels[:, 1].astype(np.int64) * width + pixels[:, 0].astype(np.int64)
 
 
-def _distance_with_nearest(
-    mask: np.ndarray, all_index: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Distance to the nearest True pixel of ``mask`` and its index into the photo edge list.
-
-    all_index: (E,) row-major pixel index of every photo edge point (sorted ascending).
-    """
+def _distance_with_labels(mask: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Distance to the nearest True pixel of ``mask``, its OpenCV label (from 1; 0 = none) and
+    the row-major pixel index of each label - 1 (OpenCV numbers the zero pixels row-major)."""
     import cv2
 
     h, w = mask.shape
-    if not mask.any():
-        return np.full((h, w), np.inf, dtype=np.float32), np.full((h, w), -1, dtype=np.int32)
+    order = np.flatnonzero(mask.ravel())
+    if not len(order):
+        return np.full((h, w), np.inf, np.float32), np.zeros((h, w), np.int32), order
     src = np.where(mask, 0, 255).astype(np.uint8)
     dist, labels = cv2.distanceTransformWithLabels(
         src, cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL
     )
-    # labels number the zero pixels in row-major order from 1
-    zero_index = np.flatnonzero(mask.ravel())
-    edge_of_zero = np.searchsorted(all_index, zero_index).astype(np.int32)
-    nearest = edge_of_zero[labels - 1]
-    return dist.astype(np.float32), nearest
+    return dist, labels, order
 
 
 def photo_edges(photo_rgb: np.ndarray, config: PhotoEdgeConfig = PhotoEdgeConfig()) -> PhotoEdges:
@@ -533,22 +570,22 @@ def photo_edges(photo_rgb: np.ndarray, config: PhotoEdgeConfig = PhotoEdgeConfig
     gy = cv2.Sobel(gray, cv2.CV_32F, 0, 1, ksize=3)
     mag = cv2.magnitude(gx, gy)  # Sobel units (8 x grey levels per pixel)
     per_px = mag / 8.0
+    sample = per_px[::2, ::2]  # thresholds from a quarter of the pixels (speed)
     hi = max(
-        float(np.percentile(per_px, config.high_percentile)),
-        config.median_factor * float(np.median(per_px)),
+        float(np.percentile(sample, config.high_percentile)),
+        config.median_factor * float(np.median(sample)),
         config.min_gradient,
     )
     lo = config.low_ratio * hi
     # OpenCV Canny on given derivatives (int16): keep full range by scaling to fit
     scale = min(1.0, 30000.0 / max(float(mag.max()), 1e-6))
-    dx = np.round(gx * scale).astype(np.int16)
-    dy = np.round(gy * scale).astype(np.int16)
+    dx = (gx * scale).astype(np.int16)
+    dy = (gy * scale).astype(np.int16)
     edges = cv2.Canny(dx, dy, lo * 8.0 * scale, hi * 8.0 * scale, L2gradient=True) > 0
-    theta = np.mod(np.arctan2(gy, gx), np.pi).astype(np.float32)
 
     rows, cols = np.nonzero(edges)  # row-major order
     pixels = np.stack([cols, rows], axis=1).astype(np.int32)
-    th = theta[rows, cols].astype(np.float64)
+    th = np.mod(np.arctan2(gy[rows, cols], gx[rows, cols]), np.pi).astype(np.float64)
     normals = np.stack([np.cos(th), np.sin(th)], axis=1)
     # sub-pixel: parabola through the magnitude at -1, 0, +1 along the quantised normal
     q = np.floor(th / (np.pi / 4) + 0.5).astype(np.int64) % 4  # 0: x, 1: diag, 2: y, 3: anti
@@ -570,25 +607,37 @@ def photo_edges(photo_rgb: np.ndarray, config: PhotoEdgeConfig = PhotoEdgeConfig
     if n_bins < 3:
         raise ValueError(f"n_bins must be >= 3, got {n_bins}")
     bins = np.floor(th / (np.pi / n_bins) + 0.5).astype(np.int64) % n_bins
-    all_index = _row_major_index(pixels, w)
     odist = np.empty((n_bins, h, w), dtype=np.float32)
-    onear = np.empty((n_bins, h, w), dtype=np.int32)
-    bin_map = np.full((h, w), -1, dtype=np.int64)
+    olab = np.empty((n_bins, h, w), dtype=np.int32)
+    bin_map = np.full((h, w), 255, dtype=np.uint8)
     bin_map[rows, cols] = bins
+    label_edges = []
     for b in range(n_bins):
-        compat = (bin_map == b) | (bin_map == (b - 1) % n_bins) | (bin_map == (b + 1) % n_bins)
-        odist[b], onear[b] = _distance_with_nearest(compat, all_index)
+        compat = [(b - 1) % n_bins, b, (b + 1) % n_bins]
+        lut = np.full(256, 255, dtype=np.uint8)
+        lut[compat] = 0
+        src = cv2.LUT(bin_map, lut)
+        # OpenCV numbers the zero pixels row-major from 1, as ``points`` are ordered
+        label_edges.append(np.flatnonzero(np.isin(bins, compat)).astype(np.int32))
+        if len(label_edges[-1]):
+            odist[b], olab[b] = cv2.distanceTransformWithLabels(
+                src, cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL
+            )
+        else:
+            odist[b], olab[b] = np.inf, 0
     logger.debug("photo edges: %d pixels, canny thresholds %.1f / %.1f", len(points), lo, hi)
     return PhotoEdges(
         magnitude=per_px,
-        orientation=theta,
+        grad_x=gx,
+        grad_y=gy,
         edges=edges,
         points=points,
         normals=normals,
         pixels=pixels,
         bins=bins.astype(np.int32),
         oriented_dist=odist,
-        oriented_nearest=onear,
+        oriented_labels=olab,
+        label_edges=tuple(label_edges),
         thresholds=(lo, hi),
     )
 
@@ -602,34 +651,72 @@ def _bins_of(normals: np.ndarray, n_bins: int) -> np.ndarray:
     return (np.floor(ang / (np.pi / n_bins) + 0.5).astype(np.int64) % n_bins).astype(np.int64)
 
 
-def _shift_scores(
-    pts: np.ndarray,
-    bins: np.ndarray,
-    shifts: np.ndarray,
-    pe: PhotoEdges,
-    tau: float,
-    min_inside: float,
-) -> np.ndarray:
-    """Oriented truncated chamfer score (mean of 1 - min(d, tau) / tau over the points that land
-    in the photo; 0 where fewer than ``min_inside`` land) for each shift (S, 2)."""
-    h, w = pe.height, pe.width
-    flat = pe.oriented_dist.reshape(-1)
-    out = np.empty(len(shifts), dtype=np.float64)
-    base = bins * (h * w)
-    chunk = max(1, 400_000 // max(1, len(pts)))
-    for s0 in range(0, len(shifts), chunk):
-        sh = shifts[s0 : s0 + chunk]
-        x = np.floor(pts[None, :, 0] + sh[:, None, 0] + 0.5).astype(np.int64)
-        y = np.floor(pts[None, :, 1] + sh[:, None, 1] + 0.5).astype(np.int64)
-        inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
-        idx = base[None, :] + np.clip(y, 0, h - 1) * w + np.clip(x, 0, w - 1)
-        d = np.minimum(flat[idx], tau)
-        s = np.where(inside, 1.0 - d / tau, 0.0).sum(axis=1)
-        n_in = inside.sum(axis=1)
+@dataclass(frozen=True, eq=False)
+class _ScoreMaps:
+    """Truncated chamfer scores 255 x (1 - min(d, tau) / tau) per orientation bin, as uint8,
+    padded by ``pad`` pixels of 0 so that shifted look-ups need no bounds checks."""
+
+    flat: np.ndarray
+    pad: int
+    width: int
+    height: int
+
+    @classmethod
+    def build(cls, pe: PhotoEdges, tau: float, pad: int) -> _ScoreMaps:
+        import cv2
+
+        b, h, w = pe.oriented_dist.shape
+        out = np.zeros((b, h + 2 * pad, w + 2 * pad), dtype=np.uint8)
+        for i in range(b):
+            d = np.minimum(pe.oriented_dist[i], np.float32(tau))  # inf (no edge) -> tau
+            # 255 (1 - d / tau), saturated to uint8
+            out[i, pad : pad + h, pad : pad + w] = cv2.convertScaleAbs(
+                d, alpha=-255.0 / tau, beta=255.0
+            )
+        return cls(out.reshape(-1), pad, w, h)
+
+    def scores(
+        self, pts: np.ndarray, bins: np.ndarray, shifts: np.ndarray, min_inside: float
+    ) -> np.ndarray:
+        """Mean score over the points that land inside the photo, for each integer shift (S, 2);
+        0 where fewer than ``min_inside`` of the points land inside."""
+        w, h, pad = self.width, self.height, self.pad
+        wp, hp = w + 2 * pad, h + 2 * pad
+        x = np.floor(pts[:, 0] + 0.5).astype(np.int64)
+        y = np.floor(pts[:, 1] + 0.5).astype(np.int64)
+        sx = np.round(shifts[:, 0]).astype(np.int64)
+        sy = np.round(shifts[:, 1]).astype(np.int64)
+        if np.any(np.abs(sx) > pad) or np.any(np.abs(sy) > pad):
+            raise ValueError("shift beyond the padding of the score maps")
+        pidx = (bins * (hp * wp) + (y + pad) * wp + (x + pad)).astype(np.int32)
+        soff = (sy * wp + sx).astype(np.int32)
+        out = np.empty(len(shifts), dtype=np.float64)
+        chunk = max(1, 2_000_000 // max(1, len(pts)))
+        for s0 in range(0, len(shifts), chunk):
+            idx = soff[s0 : s0 + chunk, None] + pidx[None, :]
+            out[s0 : s0 + chunk] = self.flat[idx].sum(axis=1, dtype=np.int64)
+        n_in = _count_in_windows(x, y, -sx, w - sx, -sy, h - sy)
         with np.errstate(divide="ignore", invalid="ignore"):
-            sc = np.where(n_in >= min_inside * len(pts), s / np.maximum(n_in, 1), 0.0)
-        out[s0 : s0 + chunk] = sc
-    return out
+            mean = out / 255.0 / np.maximum(n_in, 1)
+        return np.where(n_in >= min_inside * len(pts), mean, 0.0)
+
+
+def _count_in_windows(
+    x: np.ndarray, y: np.ndarray, x0: np.ndarray, x1: np.ndarray, y0: np.ndarray, y1: np.ndarray
+) -> np.ndarray:
+    """Number of points with x0 <= x < x1 and y0 <= y < y1, per window (all integer arrays):
+    a 2D histogram on the window bounds only, integrated."""
+    ex = np.unique(np.concatenate([x0, x1]))
+    ey = np.unique(np.concatenate([y0, y1]))
+    bx = np.searchsorted(ex, x, side="right")  # point counts as "< ex[i]" for i >= bx
+    by = np.searchsorted(ey, y, side="right")
+    hist = np.bincount(by * (len(ex) + 1) + bx, minlength=(len(ey) + 1) * (len(ex) + 1))
+    cum = hist.reshape(len(ey) + 1, len(ex) + 1).cumsum(0).cumsum(1)  # cum[j, i]: y<ey[j], x<ex[i]
+
+    def c(yy: np.ndarray, xx: np.ndarray) -> np.ndarray:
+        return cum[np.searchsorted(ey, yy), np.searchsorted(ex, xx)]
+
+    return c(y1, x1) - c(y0, x1) - c(y1, x0) + c(y0, x0)
 
 
 def _subset(n: int, k: int) -> np.ndarray:
@@ -668,12 +755,17 @@ def _separated_runner_up(
 
 
 def _fine_search(
-    pts: np.ndarray, bins: np.ndarray, centre: np.ndarray, radius: int, pe, tau, min_inside
+    maps: _ScoreMaps,
+    pts: np.ndarray,
+    bins: np.ndarray,
+    centre: np.ndarray,
+    radius: int,
+    min_inside: float,
 ) -> tuple[np.ndarray, float]:
     r = np.arange(-radius, radius + 1, dtype=np.float64)
     gx, gy = np.meshgrid(centre[0] + r, centre[1] + r)
     shifts = np.stack([gx.ravel(), gy.ravel()], axis=1)
-    sc = _shift_scores(pts, bins, shifts, pe, tau, min_inside)
+    sc = maps.scores(pts, bins, shifts, min_inside)
     i = int(np.argmax(sc))
     return shifts[i], float(sc[i])
 
@@ -699,9 +791,7 @@ def _correspond(
     x = np.floor(q[:, 0] + 0.5).astype(np.int64)
     y = np.floor(q[:, 1] + 0.5).astype(np.int64)
     inside = (x >= 0) & (x < w) & (y >= 0) & (y < h) & np.all(np.isfinite(q), axis=1)
-    xc, yc = np.clip(x, 0, w - 1), np.clip(y, 0, h - 1)
-    d = pe.oriented_dist[bins, yc, xc]
-    e = pe.oriented_nearest[bins, yc, xc]
+    d, e = pe.compatible_nearest(bins, np.clip(x, 0, w - 1), np.clip(y, 0, h - 1))
     ok = inside & (d <= max_dist) & (e >= 0)
     return ok, e
 
@@ -745,8 +835,11 @@ def _refine(
     t = _normaliser(re.width, re.height)
     t_inv = np.linalg.inv(t)
     hn = t @ np.array([[1, 0, shift[0]], [0, 1, shift[1]], [0, 0, 1.0]]) @ t_inv
-    pn = re.points @ t[:2, :2].T + t[:2, 2]
+    sub = _subset(len(re), config.refine_points)
+    pn = re.points[sub] @ t[:2, :2].T + t[:2, 2]
+    bins = bins[sub]
     scale = t[0, 0]
+    corners = image_corners(re.width, re.height) @ t[:2, :2].T + t[:2, 2]
     final = MODELS.index(config.model)
     stages = [m for m in MODELS if MODELS.index(m) <= final]
     iters = max(1, int(config.iterations))
@@ -775,9 +868,11 @@ def _refine(
                 delta = -np.linalg.solve(a + lam * np.eye(len(a)), g)
             except np.linalg.LinAlgError:
                 return t_inv @ hn @ t
-            hn = _update_matrix(delta, model) @ hn
-            hn = hn / hn[2, 2]
-            if np.max(np.abs(delta)) / scale < 1e-3:  # < ~0.001 px at the corners
+            new = _update_matrix(delta, model) @ hn
+            new = new / new[2, 2]
+            moved = np.abs(_apply(new, corners) - _apply(hn, corners)).max() / scale
+            hn = new
+            if moved < config.converged_px:
                 break
     return t_inv @ hn @ t
 
@@ -833,6 +928,7 @@ def align_edges(
             n_edges=len(re),
             n_photo_edges=len(pe),
             score=0.0,
+            baseline_score=0.0,
             shift=None,
             second_shift=None,
             second_score=0.0,
@@ -853,21 +949,18 @@ def align_edges(
         return fail(EdgeReason.TOO_FEW_PHOTO_EDGES)
 
     # (a) coarse exhaustive shift search
-    step = (
-        float(config.coarse_step_px)
-        if config.coarse_step_px is not None
-        else max(2.0, round(0.005 * diag))
-    )
+    if config.coarse_step_px is not None:
+        step = max(1, int(round(config.coarse_step_px)))
+    else:  # ~0.5 % of the diagonal, fine enough for the tau-wide basin of the score
+        step = int(max(1, min(max(2, round(0.005 * diag)), math.floor(tau / 1.5))))
     radius = config.search_radius * diag
     n_side = int(math.floor(radius / step))
-    offs = np.arange(-n_side, n_side + 1) * step
+    offs = np.arange(-n_side, n_side + 1, dtype=np.float64) * step
+    maps = _ScoreMaps.build(pe, tau, pad=n_side * step + step + 1)
     gx, gy = np.meshgrid(offs, offs)
     shifts = np.stack([gx.ravel(), gy.ravel()], axis=1)
     sub_c = _subset(len(re), config.coarse_points)
-    tau_c = max(tau, 1.5 * step)
-    sc = _shift_scores(
-        re.points[sub_c], bins[sub_c], shifts, pe, tau_c, config.min_inside
-    ).reshape(gx.shape)
+    sc = maps.scores(re.points[sub_c], bins[sub_c], shifts, config.min_inside).reshape(gx.shape)
     timings["coarse"] = time.perf_counter() - t0
     if not np.any(sc > 0):
         return fail(EdgeReason.NO_OVERLAP, support_identity=support_id)
@@ -880,20 +973,25 @@ def align_edges(
     t1 = time.perf_counter()
     sub_f = _subset(len(re), config.fine_points)
     pf, bf = re.points[sub_f], bins[sub_f]
-    r_f = int(math.ceil(step))
     best_shift, best_score = _fine_search(
-        pf, bf, np.array([offs[bx], offs[by]]), r_f, pe, tau, config.min_inside
+        maps, pf, bf, np.array([offs[bx], offs[by]]), step, config.min_inside
     )
     second_shift, second_score = None, 0.0
     if runner is not None:
         s2, sc2 = _fine_search(
-            pf, bf, np.array([offs[runner[1]], offs[runner[0]]]), r_f, pe, tau, config.min_inside
+            maps, pf, bf, np.array([offs[runner[1]], offs[runner[0]]]), step, config.min_inside
         )
         if sc2 > best_score:  # the fine search can swap them
             s2, sc2, best_shift, best_score = best_shift, best_score, s2, sc2
         if np.hypot(*(s2 - best_shift)) > config.ambiguity_separation * tau:
             second_shift, second_score = s2, sc2
-    ambiguity = second_score / best_score if best_score > 0 else 0.0
+    # ambiguity relative to the typical (median) score of a random shift: dense clutter lifts
+    # every score, a true repeat brings the runner-up close to the best
+    baseline = float(np.median(sc))
+    if second_shift is not None and best_score > baseline:
+        ambiguity = max(0.0, (second_score - baseline) / (best_score - baseline))
+    else:
+        ambiguity = 0.0
     ambiguous = second_shift is not None and ambiguity >= config.ambiguity_ratio
     timings["fine"] = time.perf_counter() - t1
 
@@ -924,6 +1022,7 @@ def align_edges(
         support_identity=support_id,
         residual_px=float(np.median(np.abs(res))) if len(res) else float("nan"),
         score=best_score,
+        baseline_score=baseline,
         shift=(float(best_shift[0]), float(best_shift[1])),
         second_shift=None
         if second_shift is None
