@@ -1,0 +1,310 @@
+"""Geometry-edge evidence: render edges from depth, photo edges, oriented chamfer alignment.
+
+Three levels: analytic depth maps and drawn photos (no renderer, exact answers); scenes of plain
+boxes rendered with the project's renderer (photo = a differently shaded, noisy, JPEG'd render at
+the true pose; render at a perturbed pose); the real datasets (``shared_data``).
+"""
+
+from __future__ import annotations
+
+import math
+
+import cv2
+import numpy as np
+import pytest
+
+from pgt_check.geometry.edges import (
+    KIND_BORDER,
+    KIND_CREASE,
+    KIND_OCCLUSION,
+    EdgeAlignConfig,
+    EdgeReason,
+    RenderEdgeConfig,
+    align_edges,
+    geometric_edges,
+    photo_edges,
+)
+from pgt_check.geometry.homography import apply_homography, corner_error, image_corners
+from pgt_check.geometry.transforms import axis_angle_to_rotmat, invert_rigid, make_rigid
+from pgt_check.types import Camera
+
+W, H = 320, 240
+K = np.array([[260.0, 0, (W - 1) / 2], [0, 260.0, (H - 1) / 2], [0, 0, 1]])
+
+
+def corner_distance(h1: np.ndarray, h2: np.ndarray, w: int = W, h: int = H) -> float:
+    """Mean distance between the image corners mapped by two homographies (px)."""
+    c = image_corners(w, h)
+    return float(np.mean(np.linalg.norm(apply_homography(h1, c) - apply_homography(h2, c), axis=1)))
+
+
+def blocks_depth(seed: int = 0, n: int = 7) -> np.ndarray:
+    """A back plane at 4 m with fronto-parallel rectangles at 1.5-3 m (varied sizes)."""
+    rng = np.random.default_rng(seed)
+    z = np.full((H, W), 4.0, dtype=np.float32)
+    for _ in range(n):
+        w, h = rng.integers(25, 80, 2)
+        x, y = rng.integers(10, W - w - 10), rng.integers(10, H - h - 10)
+        z[y : y + h, x : x + w] = rng.uniform(1.5, 3.0)
+    return z
+
+
+def photo_from_depth(z: np.ndarray, warp: np.ndarray | None = None, seed: int = 0) -> np.ndarray:
+    """A 'photo' whose intensity edges are the depth edges: grey levels by depth, rendered 4x
+    larger and area-averaged (anti-aliased sub-pixel edges), warped by ``warp`` (photo_from_render,
+    3x3), blurred, noisy."""
+    rng = np.random.default_rng(seed)
+    levels = np.unique(z)
+    grey = rng.uniform(0.15, 0.85, len(levels))
+    img = grey[np.searchsorted(levels, z)].astype(np.float32)
+    s = 4
+    big = cv2.resize(img, (W * s, H * s), interpolation=cv2.INTER_NEAREST)
+    up = np.array([[s, 0, (s - 1) / 2], [0, s, (s - 1) / 2], [0, 0, 1.0]])  # x_big = s x + ..
+    h = np.eye(3) if warp is None else np.asarray(warp, dtype=np.float64)
+    big = cv2.warpPerspective(
+        big, up @ h @ np.linalg.inv(up), (W * s, H * s), flags=cv2.INTER_LINEAR,
+        borderMode=cv2.BORDER_REFLECT,
+    )
+    out = cv2.resize(big, (W, H), interpolation=cv2.INTER_AREA)
+    out = cv2.GaussianBlur(out, (0, 0), 0.7) + rng.normal(0, 0.01, out.shape).astype(np.float32)
+    return np.repeat(np.clip(out, 0, 1)[:, :, None], 3, axis=2)
+
+
+def translation(dx: float, dy: float) -> np.ndarray:
+    return np.array([[1, 0, dx], [0, 1, dy], [0, 0, 1.0]])
+
+
+# ---------------------------------------------------------------------------------------------
+# render edges from analytic depth maps
+
+
+def test_occlusion_edges_are_midpoints_with_near_depth():
+    z = np.full((60, 80), 3.0, dtype=np.float32)
+    z[20:40, 30:50] = 1.0  # a near square: columns 30..49, rows 20..39
+    re = geometric_edges(z, K)
+    assert re.n_detected == len(re)
+    assert set(np.unique(re.kind)) == {KIND_OCCLUSION}  # a plane: no creases, no borders
+    # every point sits on the square's outline (pixel boundaries at 29.5 / 49.5, 19.5 / 39.5)
+    x, y = re.points[:, 0], re.points[:, 1]
+    on_v = np.isin(x, [29.5, 49.5]) & (y >= 20) & (y <= 39)
+    on_h = np.isin(y, [19.5, 39.5]) & (x >= 30) & (x <= 49)
+    assert np.all(on_v | on_h)
+    # the whole outline, once per pixel (80 pair midpoints; one corner pair rounds to the
+    # same pixel and is kept once)
+    assert on_v.sum() >= 39 and on_h.sum() >= 39 and len(re) == 79
+    np.testing.assert_allclose(re.depth, 1.0)
+    # normals across the edge: (+-1, 0) on vertical sides, (0, +-1) on horizontal sides (away
+    # from the corners, where the structure tensor mixes both)
+    mid_v = on_v & (y > 23) & (y < 36)
+    mid_h = on_h & (x > 33) & (x < 46)
+    assert np.all(np.abs(re.normals[mid_v, 0]) > 0.99)
+    assert np.all(np.abs(re.normals[mid_h, 1]) > 0.99)
+
+
+def test_background_border_and_no_edges_on_a_slanted_plane():
+    h, w = 60, 80
+    yy, xx = np.mgrid[0:h, 0:w].astype(np.float64)
+    # plane Z = 3 + 0.8 X (steeply slanted): 1/z is affine in the pixel coordinates
+    xn = (xx - K[0, 2]) / K[0, 0]
+    z = (3.0 / (1.0 - 0.8 * xn)).astype(np.float32)
+    assert len(geometric_edges(z, K)) == 0
+    z[:, 50:] = 0.0  # no surface on the right: a mesh border at x = 49.5
+    re = geometric_edges(z, K)
+    assert set(np.unique(re.kind)) == {KIND_BORDER}
+    np.testing.assert_allclose(re.points[:, 0], 49.5)
+    np.testing.assert_allclose(re.depth, z[re.points[:, 1].astype(int), 49])
+    assert len(geometric_edges(z, K, RenderEdgeConfig(include_borders=False))) == 0
+
+
+def test_crease_of_a_folded_surface_is_one_pixel_wide():
+    h, w = 60, 81
+    cx = 40.0
+    k = np.array([[100.0, 0, cx], [0, 100.0, 29.5], [0, 0, 1]])
+    xx = np.arange(w, dtype=np.float64)[None, :].repeat(h, axis=0)
+    xn = (xx - cx) / 100.0
+    z = (3.0 / (1.0 + np.abs(xn))).astype(np.float32)  # Z = 3 - |X|: a 90 degree ridge
+    re = geometric_edges(z, k)
+    assert len(re) > 0
+    assert set(np.unique(re.kind)) == {KIND_CREASE}
+    np.testing.assert_array_equal(re.points[:, 0], cx)  # exactly the ridge column, one wide
+    assert len(re) >= h - 2 * 4  # the whole ridge except the margins of the normals
+    np.testing.assert_allclose(re.depth, 3.0, rtol=1e-5)
+    # a shallow fold (10 degrees) is no crease
+    z_flat = (3.0 / (1.0 + 0.09 * np.abs(xn))).astype(np.float32)
+    assert len(geometric_edges(z_flat, k)) == 0
+
+
+def test_render_edges_subsample_and_input_checks():
+    z = blocks_depth()
+    full = geometric_edges(z, K, RenderEdgeConfig(max_points=None))
+    capped = geometric_edges(z, K, RenderEdgeConfig(max_points=200, seed=3))
+    assert len(capped) == 200 and capped.n_detected == full.n_detected > 200
+    again = geometric_edges(z, K, RenderEdgeConfig(max_points=200, seed=3))
+    np.testing.assert_array_equal(capped.points, again.points)  # seeded
+    with pytest.raises(ValueError, match="depth"):
+        geometric_edges(np.zeros((4, 5, 1)), K)
+    with pytest.raises(ValueError, match="camera_K"):
+        geometric_edges(z, np.eye(2))
+    # NaN / inf / negative depths are "no surface", not crashes
+    bad = z.copy()
+    bad[:5] = np.nan
+    bad[5:8] = -1.0
+    bad[8:10] = np.inf
+    re = geometric_edges(bad, K)
+    assert np.all(re.kind[re.points[:, 1] < 9.5] == KIND_BORDER)
+    assert np.any(re.points[:, 1] == 9.5)  # the border to the first valid row
+
+
+# ---------------------------------------------------------------------------------------------
+# photo edges
+
+
+def test_photo_edges_subpixel_position_and_orientation():
+    x0 = 40.3  # the step sits between pixel centres; pixel i covers [i - .5, i + .5]
+    xs = np.arange(96, dtype=np.float64)
+    row = np.clip(xs + 0.5 - x0, 0.0, 1.0) * 0.6 + 0.2
+    img = np.repeat(np.repeat(row[None, :], 64, axis=0)[:, :, None], 3, axis=2)
+    pe = photo_edges(img.astype(np.float32))
+    inner = (pe.points[:, 1] > 3) & (pe.points[:, 1] < 60)
+    assert inner.sum() > 50
+    np.testing.assert_allclose(pe.points[inner, 0], x0, atol=0.15)
+    np.testing.assert_allclose(np.abs(pe.normals[inner, 0]), 1.0, atol=1e-3)
+    assert pe.orientation.shape == (64, 96)
+
+
+def test_oriented_distance_and_nearest_match_brute_force():
+    rng = np.random.default_rng(0)
+    img = np.full((80, 100), 0.5, dtype=np.float32)
+    for _ in range(12):  # random rectangles and lines: edges of all orientations
+        x, y = rng.integers(0, 90), rng.integers(0, 70)
+        cv2.rectangle(img, (int(x), int(y)), (int(x + rng.integers(5, 30)),
+                      int(y + rng.integers(5, 30))), float(rng.uniform(0, 1)), -1)
+        cv2.line(img, tuple(int(v) for v in rng.integers(0, 80, 2)),
+                 tuple(int(v) for v in rng.integers(0, 80, 2)), float(rng.uniform(0, 1)), 2)
+    pe = photo_edges(np.repeat(img[:, :, None], 3, axis=2))
+    assert len(pe) > 100
+    n_bins = pe.n_bins
+    qy, qx = rng.integers(0, 80, 300), rng.integers(0, 100, 300)
+    qb = rng.integers(0, n_bins, 300)
+    d, e = pe.compatible_nearest(qb, qx, qy)
+    for i in range(300):
+        diff = (pe.bins - qb[i] + n_bins) % n_bins
+        compat = np.isin(diff, [0, 1, n_bins - 1])
+        dist = np.hypot(pe.pixels[compat, 0] - qx[i], pe.pixels[compat, 1] - qy[i])
+        assert d[i] == pytest.approx(dist.min(), abs=0.1 + 0.03 * dist.min())  # mask-5 approx.
+        assert compat[e[i]]
+        assert np.hypot(*(pe.pixels[e[i]] - [qx[i], qy[i]])) == pytest.approx(d[i], abs=0.1 + 0.03 * d[i])
+    np.testing.assert_array_equal(pe.oriented_nearest[qb, qy, qx], e)
+    # unoriented maps: distance to the nearest edge pixel of any orientation
+    all_d = np.hypot(pe.pixels[:, 0][None] - qx[:, None], pe.pixels[:, 1][None] - qy[:, None])
+    np.testing.assert_allclose(pe.dist[qy, qx], all_d.min(axis=1), atol=0.6)
+    assert np.all(pe.edges[pe.pixels[pe.nearest[qy, qx], 1], pe.pixels[pe.nearest[qy, qx], 0]])
+
+
+def test_photo_edges_of_a_blank_image():
+    pe = photo_edges(np.full((40, 50, 3), 0.4, dtype=np.float32))
+    assert len(pe) == 0
+    assert np.all(np.isinf(pe.oriented_dist))
+    with pytest.raises(ValueError, match="photo_rgb"):
+        photo_edges(np.zeros((4, 5, 2)))
+
+
+# ---------------------------------------------------------------------------------------------
+# alignment on drawn photos
+
+
+@pytest.mark.parametrize(
+    "warp",
+    [
+        np.eye(3),
+        translation(6.3, -4.7),
+        translation(-21.4, 13.2),
+        # small similarity about the centre: 1 deg rotation, 1 % zoom, a shift
+        translation(W / 2, H / 2) @ np.array(
+            [[1.01 * math.cos(0.0175), -1.01 * math.sin(0.0175), 3.0],
+             [1.01 * math.sin(0.0175), 1.01 * math.cos(0.0175), -2.0], [0, 0, 1]]
+        ) @ translation(-W / 2, -H / 2),
+    ],
+    ids=["identity", "shift", "large_shift", "similarity"],
+)
+def test_alignment_recovers_known_warp(warp):
+    z = blocks_depth(seed=1)
+    re = geometric_edges(z, K)
+    pe = photo_edges(photo_from_depth(z, warp))
+    al = align_edges(re, pe)
+    assert al.success, al.reason
+    assert corner_distance(al.photo_from_render, warp) < 0.6
+    assert al.corner_error == pytest.approx(corner_error(warp, W, H), abs=0.6)
+    assert al.support > 0.85
+    assert not al.ambiguous
+    if corner_error(warp, W, H) > 10:
+        assert al.support_identity < 0.5 * al.support
+
+
+def test_matches_lie_on_photo_edges_and_carry_depth():
+    z = blocks_depth(seed=2)
+    warp = translation(4.0, 2.5)
+    re = geometric_edges(z, K)
+    al = align_edges(re, photo_edges(photo_from_depth(z, warp)))
+    m = al.matches
+    assert len(m) == pytest.approx(al.support * len(re), abs=1)
+    # the photo point is the aligned render point moved across the edge onto the photo edge
+    # (but for a few points at box corners, where the nearest photo edge is the other side)
+    err = np.linalg.norm(m.photo_points - (m.render_points + [4.0, 2.5]), axis=1)
+    assert np.mean(err < 0.8) > 0.98 and np.median(err) < 0.3
+    moved = m.photo_points - apply_homography(al.photo_from_render, m.render_points)
+    np.testing.assert_allclose(np.abs(np.sum(moved * m.photo_normals, axis=1)), np.abs(m.residuals),
+                               atol=1e-9)
+    # depth is that of the near side of each (occlusion) pair
+    p = m.render_points
+    x0, x1 = np.floor(p[:, 0]).astype(int), np.ceil(p[:, 0]).astype(int)
+    y0, y1 = np.floor(p[:, 1]).astype(int), np.ceil(p[:, 1]).astype(int)
+    np.testing.assert_allclose(m.depth, np.minimum(z[y0, x0], z[y1, x1]))
+
+
+def test_clutter_in_the_photo_does_not_move_the_alignment():
+    z = blocks_depth(seed=3)
+    warp = translation(-7.2, 5.1)
+    photo = photo_from_depth(z, warp)
+    rng = np.random.default_rng(5)
+    for _ in range(60):  # texture and objects the mesh does not have
+        p0 = tuple(int(v) for v in rng.integers(0, [W, H]))
+        p1 = tuple(int(v) for v in rng.integers(0, [W, H]))
+        colour = tuple(float(c) for c in rng.uniform(0, 1, 3))
+        if rng.random() < 0.5:
+            cv2.line(photo, p0, p1, colour, int(rng.integers(1, 3)))
+        else:
+            cv2.circle(photo, p0, int(rng.integers(3, 25)), colour, -1)
+    pe = photo_edges(photo)
+    al = align_edges(geometric_edges(z, K), pe)
+    assert al.success, al.reason
+    assert corner_distance(al.photo_from_render, warp) < 1.0
+
+
+def test_periodic_stripes_are_ambiguous():
+    z = np.full((H, W), 4.0, dtype=np.float32)
+    period = 26  # px, well inside the +-10 % search range
+    for x in range(0, W, period):
+        z[:, x : x + 10] = 3.0  # vertical slats across the whole view
+    re = geometric_edges(z, K)
+    al = align_edges(re, photo_edges(photo_from_depth(z, translation(3.0, 0.0))))
+    assert al.ambiguous
+    assert not al.success and al.reason is EdgeReason.AMBIGUOUS
+    assert al.ambiguity >= 0.85
+    assert abs(abs(al.second_shift[0] - al.shift[0]) % period) in (0, 1, period - 1)
+
+
+def test_too_few_edges_and_input_checks():
+    yy, xx = np.mgrid[0:H, 0:W]
+    plane = (3.0 / (1.0 - 0.3 * (yy - K[1, 2]) / K[1, 1])).astype(np.float32)
+    pe = photo_edges(photo_from_depth(blocks_depth()))
+    al = align_edges(geometric_edges(plane, K), pe)
+    assert not al.success and al.reason is EdgeReason.TOO_FEW_EDGES
+    assert al.photo_from_render is None and al.corner_error == math.inf
+    blank = photo_edges(np.full((H, W, 3), 0.5, dtype=np.float32))
+    al = align_edges(geometric_edges(blocks_depth(), K), blank)
+    assert not al.success and al.reason is EdgeReason.TOO_FEW_PHOTO_EDGES
+    with pytest.raises(ValueError, match="photo edges"):
+        align_edges(geometric_edges(blocks_depth(), K), photo_edges(np.zeros((10, 10, 3))))
+    with pytest.raises(ValueError, match="model"):
+        align_edges(geometric_edges(blocks_depth(), K), pe, EdgeAlignConfig(model="rigid"))
