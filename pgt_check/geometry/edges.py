@@ -119,8 +119,9 @@ class EdgeAlignConfig:
     #: Tukey scale of the last refinement stage: max(min_scale_px, final_scale x tau)
     final_scale: float = 0.35
     min_scale_px: float = 1.5
-    #: second optimum (> ``ambiguity_separation`` x tau away, separated by a valley) whose score
-    #: above the median shift score is at least this share of the best's -> ambiguous
+    #: best shift farther than ``ambiguity_separation`` x tau from the best (a second peak or a
+    #: ridge of parallel edges) whose score above the median shift score is at least this share
+    #: of the best's -> ambiguous
     ambiguity_ratio: float = 0.85
     ambiguity_separation: float = 3.0
     min_edges: int = 50
@@ -729,29 +730,17 @@ def _subset(n: int, k: int) -> np.ndarray:
 def _separated_runner_up(
     grid: np.ndarray, xs: np.ndarray, ys: np.ndarray, best: tuple[int, int], min_dist: float
 ) -> tuple[int, int] | None:
-    """Best local maximum of ``grid`` farther than ``min_dist`` from ``best`` and separated from
-    it by a valley (the score along the straight path dips below both)."""
-    from scipy.ndimage import maximum_filter
+    """(row, col) of the best score of ``grid`` farther than ``min_dist`` (px) from ``best``.
 
-    peaks = (grid == maximum_filter(grid, size=3, mode="nearest")) & (grid > 0)
-    iy, ix = np.nonzero(peaks)
-    if len(iy) == 0:
-        return None
+    Either a second peak (a repeated structure) or a point on a ridge through the best one (all
+    edges parallel: the shift along them is unconstrained); both make the best shift ambiguous.
+    """
     by, bx = best
-    dist = np.hypot(xs[ix] - xs[bx], ys[iy] - ys[by])
-    order = np.argsort(-grid[iy, ix])
-    for j in order:
-        if dist[j] <= min_dist:
-            continue
-        # valley test along the segment
-        t = np.linspace(0.0, 1.0, 2 + int(np.ceil(max(abs(ix[j] - bx), abs(iy[j] - by)))))
-        sx = np.round(bx + t * (ix[j] - bx)).astype(int)
-        sy = np.round(by + t * (iy[j] - by)).astype(int)
-        path_min = float(grid[sy, sx].min())
-        second = float(grid[iy[j], ix[j]])
-        if path_min < 0.9 * second:
-            return int(iy[j]), int(ix[j])
-    return None
+    far = np.hypot(xs[None, :] - xs[bx], ys[:, None] - ys[by]) > min_dist
+    if not np.any(far & (grid > 0)):
+        return None
+    i = int(np.argmax(np.where(far, grid, -np.inf)))
+    return int(i // grid.shape[1]), int(i % grid.shape[1])
 
 
 def _fine_search(
@@ -761,11 +750,17 @@ def _fine_search(
     centre: np.ndarray,
     radius: int,
     min_inside: float,
+    away_from: np.ndarray | None = None,
+    min_dist: float = 0.0,
 ) -> tuple[np.ndarray, float]:
+    """Best integer shift within +-radius of ``centre`` (farther than ``min_dist`` from
+    ``away_from`` if given) and its score."""
     r = np.arange(-radius, radius + 1, dtype=np.float64)
     gx, gy = np.meshgrid(centre[0] + r, centre[1] + r)
     shifts = np.stack([gx.ravel(), gy.ravel()], axis=1)
     sc = maps.scores(pts, bins, shifts, min_inside)
+    if away_from is not None:
+        sc = np.where(np.hypot(*(shifts - away_from).T) > min_dist, sc, -1.0)
     i = int(np.argmax(sc))
     return shifts[i], float(sc[i])
 
@@ -978,12 +973,20 @@ def align_edges(
     )
     second_shift, second_score = None, 0.0
     if runner is not None:
+        sep = config.ambiguity_separation * tau
         s2, sc2 = _fine_search(
-            maps, pf, bf, np.array([offs[runner[1]], offs[runner[0]]]), step, config.min_inside
+            maps,
+            pf,
+            bf,
+            np.array([offs[runner[1]], offs[runner[0]]]),
+            step,
+            config.min_inside,
+            away_from=best_shift,
+            min_dist=sep,
         )
         if sc2 > best_score:  # the fine search can swap them
             s2, sc2, best_shift, best_score = best_shift, best_score, s2, sc2
-        if np.hypot(*(s2 - best_shift)) > config.ambiguity_separation * tau:
+        if sc2 > 0 and np.hypot(*(s2 - best_shift)) > sep:
             second_shift, second_score = s2, sc2
     # ambiguity relative to the typical (median) score of a random shift: dense clutter lifts
     # every score, a true repeat brings the runner-up close to the best
