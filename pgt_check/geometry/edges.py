@@ -111,7 +111,7 @@ class EdgeAlignConfig:
     min_inside: float = 0.5
     model: str = "homography"
     #: refinement iterations in all (split over the stages shift -> ... -> model)
-    iterations: int = 24
+    iterations: int = 30
     #: a stage stops when an update moves no image corner by more than this (px)
     converged_px: float = 0.02
     #: Levenberg damping, relative to the mean diagonal of the normal equations
@@ -119,6 +119,8 @@ class EdgeAlignConfig:
     #: Tukey scale of the last refinement stage: max(min_scale_px, final_scale x tau)
     final_scale: float = 0.35
     min_scale_px: float = 1.5
+    #: before refining, re-search the shift within +- this (px) at the narrow final scale
+    polish_radius_px: int = 3
     #: best shift farther than ``ambiguity_separation`` x tau from the best (a second peak or a
     #: ridge of parallel edges) whose score above the median shift score is at least this share
     #: of the best's -> ambiguous
@@ -137,7 +139,8 @@ class RenderEdges:
     of an occlusion / border pair; pixel centres for creases). normals: (N, 2) float64 unit edge
     normal (direction across the edge, sign arbitrary). depth: (N,) float64 metric depth of the
     surface the edge belongs to (the near side for occlusions). kind: (N,) uint8, KIND_*.
-    n_detected: number of points before subsampling.
+    n_detected: number of points before subsampling. camera_K: the render's intrinsics (lets
+    ``align_edges`` start from the camera rotation that explains the best shift).
     """
 
     points: np.ndarray
@@ -147,6 +150,7 @@ class RenderEdges:
     width: int
     height: int
     n_detected: int
+    camera_K: np.ndarray | None = None
 
     def __len__(self) -> int:
         return len(self.points)
@@ -519,7 +523,7 @@ def geometric_edges(
         sel = np.sort(rng.choice(n_detected, size=config.max_points, replace=False))
         points, depths, kind, normals = points[sel], depths[sel], kind[sel], normals[sel]
     logger.debug("render edges: %d detected, %d kept", n_detected, len(points))
-    return RenderEdges(points, normals, depths, kind, w, h, n_detected)
+    return RenderEdges(points, normals, depths, kind, w, h, n_detected, camera_K.copy())
 
 
 # --------------------------------------------------------------------------------------------
@@ -765,6 +769,54 @@ def _fine_search(
     return shifts[i], float(sc[i])
 
 
+def translation_matrix(dx: float, dy: float) -> np.ndarray:
+    return np.array([[1.0, 0.0, dx], [0.0, 1.0, dy], [0.0, 0.0, 1.0]])
+
+
+def rotation_homography(camera_K: np.ndarray, dx: float, dy: float) -> np.ndarray:
+    """photo_from_render = K R K^-1 of the camera rotation (no roll) that moves the principal
+    point by (dx, dy) px: a shift with the perspective (keystone) of a real rotation."""
+    k = np.asarray(camera_K, dtype=np.float64)
+    kinv = np.linalg.inv(k)
+    a = kinv @ np.array([k[0, 2], k[1, 2], 1.0])
+    b = kinv @ np.array([k[0, 2] + dx, k[1, 2] + dy, 1.0])
+    a, b = a / np.linalg.norm(a), b / np.linalg.norm(b)
+    v, c = np.cross(a, b), float(np.dot(a, b))
+    vx = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    r = np.eye(3) + vx + vx @ vx / (1.0 + c)  # rotation taking a to b (Rodrigues)
+    h = k @ r @ kinv
+    return h / h[2, 2]
+
+
+def _polish(
+    re: RenderEdges,
+    pe: PhotoEdges,
+    bins: np.ndarray,
+    start: np.ndarray,
+    tau: float,
+    config: EdgeAlignConfig,
+) -> np.ndarray:
+    """``start`` followed by the integer shift within +-``polish_radius_px`` with the best score
+    at a narrow truncation (the final Tukey scale): the wide tau of the search favours the middle
+    of a clutter of edges, the narrow one the shift that puts most edges exactly on photo edges."""
+    r = int(config.polish_radius_px)
+    if r <= 0:
+        return start
+    tau_n = max(config.min_scale_px, config.final_scale * tau)
+    sub = _subset(len(re), config.refine_points)
+    q0, b = _apply(start, re.points[sub]), bins[sub]
+    offs = np.arange(-r, r + 1, dtype=np.float64)
+    gx, gy = np.meshgrid(offs, offs)
+    shifts = np.stack([gx.ravel(), gy.ravel()], axis=1)
+    h, w = pe.height, pe.width
+    x = np.floor(q0[None, :, 0] + shifts[:, None, 0] + 0.5).astype(np.int64)
+    y = np.floor(q0[None, :, 1] + shifts[:, None, 1] + 0.5).astype(np.int64)
+    inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
+    d = pe.oriented_dist[b[None, :], np.clip(y, 0, h - 1), np.clip(x, 0, w - 1)]
+    score = np.where(inside, 1.0 - np.minimum(d, tau_n) / tau_n, 0.0).sum(axis=1)
+    return translation_matrix(*shifts[int(np.argmax(score))]) @ start
+
+
 def _normaliser(width: int, height: int) -> np.ndarray:
     """T mapping pixels to normalised coordinates (centre 0, half-diagonal 1)."""
     s = 2.0 / math.hypot(width, height)
@@ -822,35 +874,36 @@ def _refine(
     re: RenderEdges,
     pe: PhotoEdges,
     bins: np.ndarray,
-    shift: np.ndarray,
+    init: np.ndarray,
     tau: float,
     config: EdgeAlignConfig,
 ) -> np.ndarray:
-    """Point-to-line IRLS (Tukey) from ``shift``; returns photo_from_render (pixels)."""
+    """Point-to-line IRLS (Tukey) from ``init`` (3x3 photo_from_render); returns the refined
+    photo_from_render (pixels) and its robust cost (lower is better)."""
     t = _normaliser(re.width, re.height)
     t_inv = np.linalg.inv(t)
-    hn = t @ np.array([[1, 0, shift[0]], [0, 1, shift[1]], [0, 0, 1.0]]) @ t_inv
+    hn = t @ init @ t_inv
     sub = _subset(len(re), config.refine_points)
     pn = re.points[sub] @ t[:2, :2].T + t[:2, 2]
     bins = bins[sub]
     scale = t[0, 0]
     corners = image_corners(re.width, re.height) @ t[:2, :2].T + t[:2, 2]
     final = MODELS.index(config.model)
-    stages = [m for m in MODELS if MODELS.index(m) <= final]
+    c_min = min(tau, max(config.min_scale_px, tau * config.final_scale))
+    # stages: the models up to the requested one at the Tukey scale tau, then the requested
+    # model with the scale annealed to c_min (wide first: large corrections need the far points)
+    stages = [(m, tau) for m in MODELS[: final + 1]]
+    stages += [(config.model, c) for c in np.geomspace(tau, c_min, 3)[1:]]
     iters = max(1, int(config.iterations))
     per_stage = max(2, iters // len(stages))
-    c_min = min(tau, max(config.min_scale_px, tau * config.final_scale))
-    for stage_i, model in enumerate(stages):
+    for stage_i, (model, c) in enumerate(stages):
         n_it = per_stage if stage_i < len(stages) - 1 else max(2, iters - per_stage * stage_i)
-        # Tukey scale anneals from tau (first stage) to c_min (last stage)
-        frac = stage_i / max(1, len(stages) - 1)
-        c = tau + (c_min - tau) * frac
         for _ in range(n_it):
             qn = _apply(hn, pn)
             q = (qn - t[:2, 2]) / scale
             ok, e = _correspond(q, bins, pe, tau)
             if ok.sum() < _N_PARAMS[model] * 3:
-                return t_inv @ hn @ t
+                return t_inv @ hn @ t, math.inf
             nrm = pe.normals[e[ok]]
             r = np.sum(nrm * (q[ok] - pe.points[e[ok]]), axis=1)  # px
             wgt = np.where(np.abs(r) < c, (1 - (r / c) ** 2) ** 2, 0.0)
@@ -862,14 +915,20 @@ def _refine(
             try:
                 delta = -np.linalg.solve(a + lam * np.eye(len(a)), g)
             except np.linalg.LinAlgError:
-                return t_inv @ hn @ t
+                return t_inv @ hn @ t, math.inf
             new = _update_matrix(delta, model) @ hn
             new = new / new[2, 2]
             moved = np.abs(_apply(new, corners) - _apply(hn, corners)).max() / scale
             hn = new
             if moved < config.converged_px:
                 break
-    return t_inv @ hn @ t
+    hmat = t_inv @ hn @ t
+    # robust cost at the final scale: Tukey rho (0..1) per point, 1 for unmatched points
+    q = _apply(hmat, re.points[sub])
+    ok, e = _correspond(q, bins, pe, c_min)
+    r = np.sum(pe.normals[e[ok]] * (q[ok] - pe.points[e[ok]]), axis=1)
+    rho = 1.0 - (1.0 - np.minimum((r / c_min) ** 2, 1.0)) ** 3
+    return hmat, float(rho.sum() + (~ok).sum())
 
 
 def _support(
@@ -1000,7 +1059,14 @@ def align_edges(
 
     # (b) refinement
     t2 = time.perf_counter()
-    hmat = _refine(re, pe, bins, best_shift, tau, config)
+    starts = [translation_matrix(*best_shift)]
+    if re.camera_K is not None and np.hypot(*best_shift) > 0.5:
+        starts.append(rotation_homography(re.camera_K, *best_shift))
+    refined = [
+        _refine(re, pe, bins, _polish(re, pe, bins, h0, tau, config), tau, config)
+        for h0 in starts
+    ]
+    hmat = min(refined, key=lambda hc: hc[1])[0]
     timings["refine"] = time.perf_counter() - t2
 
     # evaluation

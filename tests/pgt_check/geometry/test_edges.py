@@ -493,3 +493,67 @@ def test_rendered_plane_filling_the_view_has_too_few_edges():
     al = align_edges(edges, photo_edges(photo))
     assert len(edges) < 50
     assert not al.success and al.reason is EdgeReason.TOO_FEW_EDGES
+
+
+# ---------------------------------------------------------------------------------------------
+# real data: colourless meshes rendered at the given poses
+
+
+def _real_frames(root, mesh_shading, frames, rot_deg=2.0):
+    """Align render edges and photo edges at 640 px for the given frames, at the stored pose and
+    with an injected camera rotation; returns [(stored, rotated, predicted_rotated_h)]."""
+    from pgt_check.io import load_image, read_trajectory
+    from pgt_check.io.images import resize_image
+    from pgt_check.render import load_mesh, make_renderer
+
+    traj = read_trajectory(root / "trajectories.txt")
+    renderer = make_renderer(load_mesh(root / "mesh.ply", shading=mesh_shading))
+    delta = axis_angle_to_rotmat(np.array([0.3, 1.0, 0.1]), rot_deg)
+    out = []
+    try:
+        for i in frames:
+            frame = traj[i]
+            cam = frame.camera.scaled(640 / max(frame.camera.width, frame.camera.height))
+            photo = resize_image(load_image(frame.image_file), (cam.width, cam.height))
+            pe = photo_edges(photo)
+            pose = frame.world_from_cam
+            rotated = pose.copy()
+            rotated[:3, :3] = pose[:3, :3] @ delta
+            res = [
+                align_edges(geometric_edges(renderer.render(cam, p).depth, cam.K), pe)
+                for p in (pose, rotated)
+            ]
+            # render at the rotated pose -> render at the stored pose -> photo
+            inj = cam.K @ delta @ np.linalg.inv(cam.K)
+            out.append((res[0], res[1], res[0].photo_from_render @ inj, cam))
+    finally:
+        renderer.close()
+    return out
+
+
+@pytest.mark.shared_data
+def test_real_castle_colourless_mesh(shared_data):
+    root = shared_data / "sceaux_castle"
+    for stored, rotated, predicted, cam in _real_frames(root, "auto", [0, 4]):
+        assert stored.success, stored.reason
+        assert stored.corner_error < 4.0  # OpenMVS poses fit the photos to ~1 px (README)
+        assert stored.support > 0.7
+        assert rotated.success, rotated.reason
+        # 2 deg at f = 675 px: ~29 px; measured 24-29 (the corners extrapolate the facade)
+        pred_err = corner_error(predicted, cam.width, cam.height)
+        assert rotated.corner_error == pytest.approx(pred_err, rel=0.3)
+        assert corner_distance(rotated.photo_from_render, predicted, cam.width, cam.height) < 8
+
+
+@pytest.mark.shared_data
+def test_real_7scenes_mesh_without_colours(shared_data):
+    root = shared_data / "7scenes_redkitchen"
+    for stored, rotated, predicted, cam in _real_frames(root, "shaded", [0, 50]):
+        assert stored.success, stored.reason
+        # the D-SLAM poses are offset from the RGB photos by a real ~8-10 px (README)
+        assert 4.0 < stored.corner_error < 15.0
+        assert rotated.success, rotated.reason
+        pred_err = corner_error(predicted, cam.width, cam.height)
+        assert rotated.corner_error == pytest.approx(pred_err, rel=0.35)
+        # noisy TSDF creases: a few px per frame, but the injected ~19 px motion is found
+        assert corner_distance(rotated.photo_from_render, predicted, cam.width, cam.height) < 10
