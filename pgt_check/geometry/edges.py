@@ -12,11 +12,22 @@ al = align_edges(re, pe)                             # EdgeAlignment(success, re
 al.corner_error, al.support, al.ambiguous, al.matches.render_points, al.matches.depth
 ```
 
-Steps of ``align_edges``: (a) exhaustive search over 2D shifts (+-``search_radius`` x image
-diagonal) of an oriented, truncated chamfer score on a coarse grid, with a second, spatially
-separated optimum for the ambiguity test, refined at 1 px; (b) point-to-line iterative closest
-edge (oriented correspondences from per-orientation-bin distance transforms with labels, Tukey
-IRLS, Levenberg damping) from shift through similarity and affine to the requested model.
+Steps of ``align_edges``:
+
+(a) exhaustive search over integer 2D shifts (+-``search_radius`` x image diagonal, coarse grid
+    of ~0.5 % of the diagonal, then 1 px) of an oriented, truncated chamfer score: the mean of
+    ``1 - min(d, tau) / tau`` over the render edge points, d = distance to the nearest photo edge
+    whose orientation is within one bin (22.5 deg) of the point's. The best score farther than
+    3 tau from the best one (a second peak: repeated structure; or a ridge: parallel edges only)
+    gives the ambiguity, normalised by the median score of all shifts.
+(b) refinement from two starts, the best shift as a translation and as the camera rotation
+    that produces it (``rotation_homography``, which carries the keystone of a real rotation):
+    re-search of the shift at a narrow truncation, then point-to-line iterative closest edge
+    (oriented correspondences from per-bin distance transforms with labels, Tukey IRLS,
+    Levenberg damping) from shift through similarity and affine to ``model``, then ``model``
+    with the Tukey scale annealed from tau to ``final_scale`` x tau. Only the start with the
+    better narrow score is refined.
+
 Pure numpy / OpenCV / scipy.
 """
 
@@ -24,6 +35,7 @@ from __future__ import annotations
 
 import logging
 import math
+import time
 from dataclasses import dataclass, field
 from enum import Enum
 from functools import cached_property
@@ -795,13 +807,12 @@ def _polish(
     start: np.ndarray,
     tau: float,
     config: EdgeAlignConfig,
-) -> np.ndarray:
+) -> tuple[np.ndarray, float]:
     """``start`` followed by the integer shift within +-``polish_radius_px`` with the best score
-    at a narrow truncation (the final Tukey scale): the wide tau of the search favours the middle
-    of a clutter of edges, the narrow one the shift that puts most edges exactly on photo edges."""
-    r = int(config.polish_radius_px)
-    if r <= 0:
-        return start
+    at a narrow truncation (the final Tukey scale), and that score: the wide tau of the search
+    favours the middle of a clutter of edges, the narrow one the shift that puts most edges
+    exactly on photo edges."""
+    r = max(0, int(config.polish_radius_px))
     tau_n = max(config.min_scale_px, config.final_scale * tau)
     sub = _subset(len(re), config.refine_points)
     q0, b = _apply(start, re.points[sub]), bins[sub]
@@ -814,7 +825,8 @@ def _polish(
     inside = (x >= 0) & (x < w) & (y >= 0) & (y < h)
     d = pe.oriented_dist[b[None, :], np.clip(y, 0, h - 1), np.clip(x, 0, w - 1)]
     score = np.where(inside, 1.0 - np.minimum(d, tau_n) / tau_n, 0.0).sum(axis=1)
-    return translation_matrix(*shifts[int(np.argmax(score))]) @ start
+    i = int(np.argmax(score))
+    return translation_matrix(*shifts[i]) @ start, float(score[i]) / max(1, len(sub))
 
 
 def _normaliser(width: int, height: int) -> np.ndarray:
@@ -931,9 +943,7 @@ def _refine(
     return hmat, float(rho.sum() + (~ok).sum())
 
 
-def _support(
-    pts: np.ndarray, bins: np.ndarray, h: np.ndarray, pe: PhotoEdges, tau: float
-) -> float:
+def _support(pts: np.ndarray, bins: np.ndarray, h: np.ndarray, pe: PhotoEdges, tau: float) -> float:
     if len(pts) == 0:
         return 0.0
     ok, _ = _correspond(_apply(h, pts), bins, pe, tau)
@@ -955,8 +965,6 @@ def align_edges(
     Render and photo must have the same size (the working resolution). Never raises for bad
     data: failures come back with ``success=False`` and an ``EdgeReason``.
     """
-    import time
-
     re, pe = render_edges, photo_edges
     if config.model not in MODELS:
         raise ValueError(f"model must be one of {', '.join(MODELS)}, got {config.model!r}")
@@ -1062,11 +1070,10 @@ def align_edges(
     starts = [translation_matrix(*best_shift)]
     if re.camera_K is not None and np.hypot(*best_shift) > 0.5:
         starts.append(rotation_homography(re.camera_K, *best_shift))
-    refined = [
-        _refine(re, pe, bins, _polish(re, pe, bins, h0, tau, config), tau, config)
-        for h0 in starts
-    ]
-    hmat = min(refined, key=lambda hc: hc[1])[0]
+    # the start that puts more edges exactly on photo edges (narrow score) is refined
+    polished = [_polish(re, pe, bins, h0, tau, config) for h0 in starts]
+    start = max(polished, key=lambda hs: hs[1])[0]
+    hmat = _refine(re, pe, bins, start, tau, config)[0]
     timings["refine"] = time.perf_counter() - t2
 
     # evaluation
@@ -1114,5 +1121,13 @@ def align_edges(
         support_id,
         ambiguity,
     )
-    return EdgeAlignment(success=True, reason=None, model=config.model, tau_px=tau,
-                         n_edges=len(re), n_photo_edges=len(pe), timings=timings, **out)
+    return EdgeAlignment(
+        success=True,
+        reason=None,
+        model=config.model,
+        tau_px=tau,
+        n_edges=len(re),
+        n_photo_edges=len(pe),
+        timings=timings,
+        **out,
+    )

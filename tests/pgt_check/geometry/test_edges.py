@@ -62,7 +62,10 @@ def photo_from_depth(z: np.ndarray, warp: np.ndarray | None = None, seed: int = 
     up = np.array([[s, 0, (s - 1) / 2], [0, s, (s - 1) / 2], [0, 0, 1.0]])  # x_big = s x + ..
     h = np.eye(3) if warp is None else np.asarray(warp, dtype=np.float64)
     big = cv2.warpPerspective(
-        big, up @ h @ np.linalg.inv(up), (W * s, H * s), flags=cv2.INTER_LINEAR,
+        big,
+        up @ h @ np.linalg.inv(up),
+        (W * s, H * s),
+        flags=cv2.INTER_LINEAR,
         borderMode=cv2.BORDER_REFLECT,
     )
     out = cv2.resize(big, (W, H), interpolation=cv2.INTER_AREA)
@@ -177,10 +180,20 @@ def test_oriented_distance_and_nearest_match_brute_force():
     img = np.full((80, 100), 0.5, dtype=np.float32)
     for _ in range(12):  # random rectangles and lines: edges of all orientations
         x, y = rng.integers(0, 90), rng.integers(0, 70)
-        cv2.rectangle(img, (int(x), int(y)), (int(x + rng.integers(5, 30)),
-                      int(y + rng.integers(5, 30))), float(rng.uniform(0, 1)), -1)
-        cv2.line(img, tuple(int(v) for v in rng.integers(0, 80, 2)),
-                 tuple(int(v) for v in rng.integers(0, 80, 2)), float(rng.uniform(0, 1)), 2)
+        cv2.rectangle(
+            img,
+            (int(x), int(y)),
+            (int(x + rng.integers(5, 30)), int(y + rng.integers(5, 30))),
+            float(rng.uniform(0, 1)),
+            -1,
+        )
+        cv2.line(
+            img,
+            tuple(int(v) for v in rng.integers(0, 80, 2)),
+            tuple(int(v) for v in rng.integers(0, 80, 2)),
+            float(rng.uniform(0, 1)),
+            2,
+        )
     pe = photo_edges(np.repeat(img[:, :, None], 3, axis=2))
     assert len(pe) > 100
     n_bins = pe.n_bins
@@ -193,7 +206,9 @@ def test_oriented_distance_and_nearest_match_brute_force():
         dist = np.hypot(pe.pixels[compat, 0] - qx[i], pe.pixels[compat, 1] - qy[i])
         assert d[i] == pytest.approx(dist.min(), abs=0.1 + 0.03 * dist.min())  # mask-5 approx.
         assert compat[e[i]]
-        assert np.hypot(*(pe.pixels[e[i]] - [qx[i], qy[i]])) == pytest.approx(d[i], abs=0.1 + 0.03 * d[i])
+        assert np.hypot(*(pe.pixels[e[i]] - [qx[i], qy[i]])) == pytest.approx(
+            d[i], abs=0.1 + 0.03 * d[i]
+        )
     np.testing.assert_array_equal(pe.oriented_nearest[qb, qy, qx], e)
     # unoriented maps: distance to the nearest edge pixel of any orientation
     all_d = np.hypot(pe.pixels[:, 0][None] - qx[:, None], pe.pixels[:, 1][None] - qy[:, None])
@@ -220,10 +235,15 @@ def test_photo_edges_of_a_blank_image():
         translation(6.3, -4.7),
         translation(-21.4, 13.2),
         # small similarity about the centre: 1 deg rotation, 1 % zoom, a shift
-        translation(W / 2, H / 2) @ np.array(
-            [[1.01 * math.cos(0.0175), -1.01 * math.sin(0.0175), 3.0],
-             [1.01 * math.sin(0.0175), 1.01 * math.cos(0.0175), -2.0], [0, 0, 1]]
-        ) @ translation(-W / 2, -H / 2),
+        translation(W / 2, H / 2)
+        @ np.array(
+            [
+                [1.01 * math.cos(0.0175), -1.01 * math.sin(0.0175), 3.0],
+                [1.01 * math.sin(0.0175), 1.01 * math.cos(0.0175), -2.0],
+                [0, 0, 1],
+            ]
+        )
+        @ translation(-W / 2, -H / 2),
     ],
     ids=["identity", "shift", "large_shift", "similarity"],
 )
@@ -253,8 +273,9 @@ def test_matches_lie_on_photo_edges_and_carry_depth():
     err = np.linalg.norm(m.photo_points - (m.render_points + [4.0, 2.5]), axis=1)
     assert np.mean(err < 0.8) > 0.98 and np.median(err) < 0.3
     moved = m.photo_points - apply_homography(al.photo_from_render, m.render_points)
-    np.testing.assert_allclose(np.abs(np.sum(moved * m.photo_normals, axis=1)), np.abs(m.residuals),
-                               atol=1e-9)
+    np.testing.assert_allclose(
+        np.abs(np.sum(moved * m.photo_normals, axis=1)), np.abs(m.residuals), atol=1e-9
+    )
     # depth is that of the near side of each (occlusion) pair
     p = m.render_points
     x0, x1 = np.floor(p[:, 0]).astype(int), np.ceil(p[:, 0]).astype(int)
@@ -335,13 +356,18 @@ def boxes_on_floor():
     """Five plain-coloured boxes of different sizes on a grey floor (trimesh Scene)."""
     import trimesh
 
-    floor = trimesh.Trimesh([[-6, -6, 0], [6, -6, 0], [6, 6, 0], [-6, 6, 0]],
-                            [[0, 1, 2], [0, 2, 3]], process=False)
+    floor = trimesh.Trimesh(
+        [[-6, -6, 0], [6, -6, 0], [6, 6, 0], [-6, 6, 0]], [[0, 1, 2], [0, 2, 3]], process=False
+    )
     parts = [_coloured(floor, (150, 150, 150))]
     rng = np.random.default_rng(0)
-    for x, y, sx, sy, sz in [(0, 0, 0.8, 0.6, 0.7), (1.3, 0.6, 0.5, 0.5, 1.2),
-                             (-1.2, 0.8, 0.6, 0.9, 0.5), (0.4, 1.8, 1.2, 0.4, 0.9),
-                             (-0.6, -1.0, 0.4, 0.4, 0.4)]:
+    for x, y, sx, sy, sz in [
+        (0, 0, 0.8, 0.6, 0.7),
+        (1.3, 0.6, 0.5, 0.5, 1.2),
+        (-1.2, 0.8, 0.6, 0.9, 0.5),
+        (0.4, 1.8, 1.2, 0.4, 0.9),
+        (-0.6, -1.0, 0.4, 0.4, 0.4),
+    ]:
         box = trimesh.creation.box(extents=[sx, sy, sz])
         box.apply_translation([x, y, sz / 2])
         parts.append(_coloured(box, tuple(int(c) for c in rng.integers(60, 200, 3))))
@@ -353,8 +379,9 @@ def slats_on_a_wall(period: float = 0.35):
     row far wider than the view: shifting by one period changes (almost) nothing."""
     import trimesh
 
-    wall = trimesh.Trimesh([[-9, 3, -4], [9, 3, -4], [9, 3, 4], [-9, 3, 4]],
-                           [[0, 1, 2], [0, 2, 3]], process=False)
+    wall = trimesh.Trimesh(
+        [[-9, 3, -4], [9, 3, -4], [9, 3, 4], [-9, 3, 4]], [[0, 1, 2], [0, 2, 3]], process=False
+    )
     parts = [_coloured(wall, (170, 170, 170))]
     for x in np.arange(-8.0, 8.0, period):
         slat = trimesh.creation.box(extents=[0.12, 0.05, 1.2])
@@ -380,8 +407,9 @@ class RenderedScene:
             img = 0.5 * img + 0.65 * self.coloured.render(CAM, pose).rgb
         img = cv2.GaussianBlur(img, (0, 0), 0.8)
         img = img + np.random.default_rng(seed).normal(0, 0.02, img.shape).astype(np.float32)
-        ok, buf = cv2.imencode(".jpg", (np.clip(img, 0, 1) * 255).astype(np.uint8),
-                               [cv2.IMWRITE_JPEG_QUALITY, 80])
+        ok, buf = cv2.imencode(
+            ".jpg", (np.clip(img, 0, 1) * 255).astype(np.uint8), [cv2.IMWRITE_JPEG_QUALITY, 80]
+        )
         assert ok
         return cv2.imdecode(buf, cv2.IMREAD_UNCHANGED).astype(np.float32) / 255.0
 
@@ -480,8 +508,11 @@ def test_rendered_plane_filling_the_view_has_too_few_edges():
 
     from pgt_check.render import make_renderer, mesh_from_trimesh
 
-    plane = trimesh.Trimesh([[-50, -50, 0], [50, -50, 0], [50, 50, 0], [-50, 50, 0]],
-                            [[0, 1, 2], [0, 2, 3]], process=False)
+    plane = trimesh.Trimesh(
+        [[-50, -50, 0], [50, -50, 0], [50, 50, 0], [-50, 50, 0]],
+        [[0, 1, 2], [0, 2, 3]],
+        process=False,
+    )
     renderer = make_renderer(mesh_from_trimesh(plane))
     try:
         render = renderer.render(CAM, look_at([0.0, -1.0, 2.0], [0.0, 1.0, 0.0]))
@@ -531,6 +562,18 @@ def _real_frames(root, mesh_shading, frames, rot_deg=2.0):
     return out
 
 
+def _distance_at_matches(al, h: np.ndarray) -> float:
+    """Mean distance (px) between where ``al`` and ``h`` map the matched render edge points."""
+    pts = al.matches.render_points
+    return float(
+        np.mean(
+            np.linalg.norm(
+                apply_homography(al.photo_from_render, pts) - apply_homography(h, pts), axis=1
+            )
+        )
+    )
+
+
 @pytest.mark.shared_data
 def test_real_castle_colourless_mesh(shared_data):
     root = shared_data / "sceaux_castle"
@@ -542,7 +585,8 @@ def test_real_castle_colourless_mesh(shared_data):
         # 2 deg at f = 675 px: ~29 px; measured 24-29 (the corners extrapolate the facade)
         pred_err = corner_error(predicted, cam.width, cam.height)
         assert rotated.corner_error == pytest.approx(pred_err, rel=0.3)
-        assert corner_distance(rotated.photo_from_render, predicted, cam.width, cam.height) < 8
+        assert corner_distance(rotated.photo_from_render, predicted, cam.width, cam.height) < 6
+        assert _distance_at_matches(rotated, predicted) < 2.5  # where the evidence is
 
 
 @pytest.mark.shared_data
@@ -555,5 +599,6 @@ def test_real_7scenes_mesh_without_colours(shared_data):
         assert rotated.success, rotated.reason
         pred_err = corner_error(predicted, cam.width, cam.height)
         assert rotated.corner_error == pytest.approx(pred_err, rel=0.35)
-        # noisy TSDF creases: a few px per frame, but the injected ~19 px motion is found
-        assert corner_distance(rotated.photo_from_render, predicted, cam.width, cam.height) < 10
+        # noisy TSDF creases and a parallax offset: a few px per frame, but the injected
+        # ~19 px motion is found
+        assert _distance_at_matches(rotated, predicted) < 6.0
