@@ -98,7 +98,7 @@ def shared_transform(
     axis), translation (random direction, scene units), scale. (4, 4) float64."""
     rng = np.random.default_rng(seed)
     c = np.mean([f.center for f in traj.frames], axis=0)
-    r = axis_angle_to_rotmat(_random_unit(rng) * np.deg2rad(rotation_deg))
+    r = axis_angle_to_rotmat(_random_unit(rng), rotation_deg)
     m = np.eye(4)
     m[:3, :3] = scale * r
     m[:3, 3] = c - scale * r @ c + translation * _random_unit(rng)
@@ -136,7 +136,7 @@ def drift_trajectory(
             continue
         a = (i - i0 + 1) / (n - i0)
         m = np.eye(4)
-        m[:3, :3] = axis_angle_to_rotmat(axis * np.deg2rad(rotation_deg * a))
+        m[:3, :3] = axis_angle_to_rotmat(axis, rotation_deg * a)
         c = f.center
         m[:3, 3] = c - m[:3, :3] @ c + translation * a * direction
         frames.append(f.with_pose(_apply(f.world_from_cam, m)))

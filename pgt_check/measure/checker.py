@@ -150,6 +150,7 @@ class FrameChecker:
             match_height=size[1],
             coverage=render.coverage_fraction,
             shading=render.shading,
+            intrinsics=(*camera.focal, *camera.principal_point),
         )
         if keep is not None:
             keep.photo, keep.render = photo_w, render.rgb
