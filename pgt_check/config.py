@@ -21,7 +21,7 @@ from typing import Any, Literal
 from pgt_check.errors import ConfigError
 
 #: config sections whose change invalidates stored per-frame measurements
-MEASUREMENT_SECTIONS = ("input", "render", "match", "homography", "enhance", "pose")
+MEASUREMENT_SECTIONS = ("input", "render", "match", "homography", "enhance", "edges", "pose")
 
 
 @dataclass(frozen=True)
@@ -138,6 +138,21 @@ class EnhanceConfig:
 
 
 @dataclass(frozen=True)
+class EdgeConfig:
+    """The geometric-edge path: the render's silhouettes and creases (from its depth) aligned
+    with the photo's edges (absolute evidence that needs no texture; ``geometry.edges``).
+
+    mode: "auto" runs it where the raw feature path is not decisive (as ``enhance.auto``),
+    "always", or "never". model: the 2D motion fitted ("homography" or "similarity").
+    """
+
+    mode: Literal["never", "auto", "always"] = "auto"
+    model: Literal["homography", "similarity"] = "homography"
+    #: mesh borders (holes, scan limits) count as edges
+    include_borders: bool = True
+
+
+@dataclass(frozen=True)
 class PoseConfig:
     """The PnP pose-error estimate from the render depth (pycolmap)."""
 
@@ -185,6 +200,7 @@ class RunConfig:
     match: MatchConfig = field(default_factory=MatchConfig)
     homography: HomographyConfig = field(default_factory=HomographyConfig)
     enhance: EnhanceConfig = field(default_factory=EnhanceConfig)
+    edges: EdgeConfig = field(default_factory=EdgeConfig)
     pose: PoseConfig = field(default_factory=PoseConfig)
     verdict: VerdictConfig = field(default_factory=VerdictConfig)
     #: frames that get image panels in the report (all FAIL/UNVERIFIABLE first, then the worst)

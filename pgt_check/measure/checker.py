@@ -21,7 +21,13 @@ import numpy as np
 from pgt_check.config import RunConfig
 from pgt_check.enhance.base import Evidence, ReferenceView, View
 from pgt_check.errors import InputError
-from pgt_check.measure.paths import FrameImages, PathResult, absolute_evidence
+from pgt_check.measure.edge_path import EdgePath, edge_evidence, measure_edges
+from pgt_check.measure.paths import (
+    MAX_EVIDENCE_POINTS,
+    FrameImages,
+    PathResult,
+    absolute_evidence,
+)
 from pgt_check.measure.record import (
     EnhanceWhy,
     FrameMeasurement,
@@ -33,6 +39,28 @@ from pgt_check.measure.record import (
 from pgt_check.types import Camera, Frame, Trajectory
 
 logger = logging.getLogger(__name__)
+
+
+_ENHANCE = (
+    EnhanceWhy.MODE_ALWAYS,
+    EnhanceWhy.RAW_FAILED,
+    EnhanceWhy.RAW_FEW_INLIERS,
+    EnhanceWhy.RAW_NEAR_THRESHOLD,
+)
+_NO_ENHANCE = (EnhanceWhy.MODE_NEVER, EnhanceWhy.RAW_DECISIVE, EnhanceWhy.NO_REFERENCE)
+
+
+@dataclass(frozen=True, eq=False)
+class _Working:
+    """One frame at working resolution: photo, cameras (original and working), the size and
+    scale (working / original), and the render."""
+
+    photo: np.ndarray
+    camera: Camera
+    cam_w: Camera
+    size: tuple[int, int]
+    scale: tuple[float, float]
+    render: Any
 
 
 @dataclass
@@ -157,24 +185,34 @@ class FrameChecker:
         if m.coverage < self.config.verdict.min_coverage:
             return _replace(m, error=MeasureReason.LOW_COVERAGE)
 
-        raw = self._match_path(render.rgb, photo_w, render.coverage, size, scale, camera, clock)
-        threshold = self.config.verdict.threshold_for(camera.width, camera.height)
+        ctx = _Working(photo_w, camera, cam_w, size, scale, render)
+        return self._compare(frame, ctx, m, keep, clock)
+
+    def _compare(
+        self,
+        frame: Frame,
+        w: _Working,
+        m: FrameMeasurement,
+        keep: FrameImages | None,
+        clock: _Clock,
+    ) -> FrameMeasurement:
+        """Raw path, then (where it is not decisive) the enhanced and geometric-edge paths."""
+        raw = self._match_path(
+            w.render.rgb, w.photo, w.render.coverage, w.size, w.scale, w.camera, clock
+        )
+        threshold = self.config.verdict.threshold_for(w.camera.width, w.camera.height)
         why, detail = self._enhance_decision(raw, threshold)
-        view = View(render, cam_w, frame.world_from_cam)
         enh = ref_id = None
-        if why in (
-            EnhanceWhy.MODE_ALWAYS,
-            EnhanceWhy.RAW_FAILED,
-            EnhanceWhy.RAW_FEW_INLIERS,
-            EnhanceWhy.RAW_NEAR_THRESHOLD,
-        ):
+        if why in _ENHANCE:
+            view = View(w.render, w.cam_w, frame.world_from_cam)
             enh, ref_id, enh_img, n_tried = self._enhanced_path(
-                frame, view, photo_w, size, scale, camera, clock
+                frame, view, w.photo, w.size, w.scale, w.camera, clock
             )
             if n_tried == 0:
                 why, detail = EnhanceWhy.NO_REFERENCE, ""
             if keep is not None:
                 keep.enhanced = enh_img
+        edges = self._edge_path(w, raw, threshold, clock)
         chosen, path_name = raw, "raw"
         if enh is not None and enh.success and (not raw.success or enh.n_inliers >= raw.n_inliers):
             chosen, path_name = enh, "enhanced"  # the path with more geometric support decides
@@ -183,26 +221,50 @@ class FrameChecker:
             keep.inliers = chosen.inliers
         pose = None
         if chosen.success and self.config.pose.enabled:
-            pose = self._pose_estimate(chosen, render.depth, cam_w, frame, clock)
+            pose = self._pose_estimate(chosen, w.render.depth, w.cam_w, frame, clock)
         method = self.config.enhance.method
         absolute = [(raw, "raw")]
         if enh is not None and self.enhancer.evidence is Evidence.ABSOLUTE:
             absolute.append((enh, method))
+        extra = []
+        if edges is not None:
+            extra.append((*edge_evidence(edges, w.cam_w, w.scale, MAX_EVIDENCE_POINTS), "edges"))
         return _replace(
             m,
-            evidence=absolute_evidence(absolute, render.depth, cam_w, scale),
-            raw=raw.measurement("raw", "render", Evidence.ABSOLUTE, camera),
+            evidence=absolute_evidence(absolute, w.render.depth, w.cam_w, w.scale, extra=extra),
+            raw=raw.measurement("raw", "render", Evidence.ABSOLUTE, w.camera),
             enhanced=None
             if enh is None
-            else enh.measurement("enhanced", method, self.enhancer.evidence, camera, ref_id),
-            enhance_ran=why
-            not in (EnhanceWhy.MODE_NEVER, EnhanceWhy.RAW_DECISIVE, EnhanceWhy.NO_REFERENCE),
+            else enh.measurement("enhanced", method, self.enhancer.evidence, w.camera, ref_id),
+            edges=None if edges is None else edges.measurement,
+            enhance_ran=why not in _NO_ENHANCE,
             enhance_why=why,
             enhance_why_detail=detail,
             verdict_path=path_name,
             pose=pose,
             auto_threshold_px=threshold if self.config.enhance.mode == "auto" else None,
         )
+
+    def _edge_path(
+        self, w: _Working, raw: PathResult, threshold: float, clock: _Clock
+    ) -> EdgePath | None:
+        """The geometric-edge path, where the config asks for it (auto: raw not decisive)."""
+        e = self.config.edges
+        if e.mode == "never":
+            return None
+        if e.mode == "auto":
+            decisive = (
+                raw.success
+                and raw.n_inliers >= self.config.enhance.auto_min_inliers
+                and abs(raw.corner_error_px - threshold)
+                > self.config.enhance.auto_margin * threshold
+            )
+            if decisive:
+                return None
+        t = time.perf_counter()
+        out = measure_edges(w.render, w.photo, w.cam_w, w.scale, w.camera, e)
+        clock.add("edges", time.perf_counter() - t)
+        return out
 
     def _load_photo(self, frame: Frame) -> tuple[np.ndarray, Camera]:
         from pgt_check.io import load_image

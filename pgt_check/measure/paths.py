@@ -100,12 +100,14 @@ def absolute_evidence(
     cam_w: Camera,
     scale: tuple[float, float],
     max_points: int = MAX_EVIDENCE_POINTS,
+    extra: Sequence[tuple[np.ndarray, np.ndarray, str]] = (),
 ) -> AbsoluteEvidence | None:
     """Homography inliers of absolute paths as 2D-3D correspondences (None if there are none).
 
     Render keypoints are lifted with the render depth into the checked camera's frame
     (``geometry.pnp.lift_keypoints``: depth-edge keypoints are dropped); photo keypoints are
-    scaled from working to original pixels. At most ``max_points`` are kept (evenly spaced).
+    scaled from working to original pixels. ``extra``: correspondences lifted elsewhere
+    (pts2d, pts_cam, source). At most ``max_points`` per source are kept (evenly spaced).
     """
     from pgt_check.geometry.pnp import lift_keypoints
 
@@ -117,16 +119,21 @@ def absolute_evidence(
         valid, xyz = lift_keypoints(kr, depth, cam_w, np.eye(4))
         if not valid.any():
             continue
-        orig = (kp[valid] + 0.5) / np.asarray(scale) - 0.5
+        orig, xyz = (kp[valid] + 0.5) / np.asarray(scale) - 0.5, xyz[valid]
+        if len(orig) > max_points:
+            keep = np.linspace(0, len(orig) - 1, max_points).round().astype(int)
+            orig, xyz = orig[keep], xyz[keep]
         pts2d.append(orig)
-        pts_cam.append(xyz[valid])
+        pts_cam.append(xyz)
         sources.append(source)
+    for p2d, p3d, source in extra:  # e.g. matched geometric edges (already lifted)
+        if len(p2d):
+            pts2d.append(p2d)
+            pts_cam.append(p3d)
+            sources.append(source)
     if not pts2d:
         return None
     p2, p3 = np.concatenate(pts2d), np.concatenate(pts_cam)
-    if len(p2) > max_points:
-        keep = np.linspace(0, len(p2) - 1, max_points).round().astype(int)
-        p2, p3 = p2[keep], p3[keep]
     return AbsoluteEvidence(
         tuple(sources),
         tuple((float(u), float(v)) for u, v in p2),

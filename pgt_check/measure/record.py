@@ -152,6 +152,7 @@ class Timings:
     match: float | None = None
     homography: float | None = None
     enhance: float | None = None
+    edges: float | None = None
     pose: float | None = None
     total: float | None = None
 
@@ -229,6 +230,8 @@ class FrameMeasurement:
     match_height: int | None = None
     raw: PathMeasurement | None = None
     enhanced: PathMeasurement | None = None
+    #: the geometric-edge path (absolute; runs where the raw path is not decisive)
+    edges: PathMeasurement | None = None
     enhance_ran: bool = False
     enhance_why: EnhanceWhy | None = None
     enhance_why_detail: str = ""
@@ -307,6 +310,7 @@ class FrameMeasurement:
             enhanced=(
                 None if d.get("enhanced") is None else PathMeasurement.from_json(d["enhanced"])
             ),
+            edges=None if d.get("edges") is None else PathMeasurement.from_json(d["edges"]),
             enhance_ran=bool(d.get("enhance_ran")),
             enhance_why=None if not why else EnhanceWhy(why),
             enhance_why_detail=str(d.get("enhance_why_detail") or ""),

@@ -106,63 +106,61 @@ def _calibrated(m: FrameMeasurement, path: PathMeasurement | None, shared: Any) 
 
 
 def judge(m: FrameMeasurement, config: VerdictConfig, shared: Any = None) -> Judgement:
-    """The frame's verdict from both paths and the run-level checks (``verdict.shared``).
+    """The frame's verdict from its paths and the run-level checks (``verdict.shared``).
 
-    Rules: a confident FAIL of any path (>= ``confident_inliers`` inliers) is a FAIL; otherwise
-    the deciding path's verdict stands, except that a PASS needs absolute evidence, or relative
-    evidence plus a passed registration check: a relative-only PASS becomes UNVERIFIABLE
-    (``relative_evidence_only``). A failed registration check or a flagged drift segment turns
-    the PASS of the frames it covers into FAIL.
+    Rules: a confident FAIL of a feature path (>= ``confident_inliers`` inliers) is a FAIL.
+    Otherwise the deciding feature path (more inliers) gives the verdict; where no feature path
+    is verifiable, the geometric-edge path does. A PASS needs absolute evidence (an absolute
+    path decided, or the raw or edge path also passes), or relative evidence plus a passed
+    registration check; a relative-only PASS is UNVERIFIABLE (``relative_evidence_only``). A
+    failed registration check or a flagged drift segment turns the frames' PASS into FAIL.
     """
     base, why = decide(m, config)
     if m.error is not MeasureReason.NONE or why == MeasureReason.LOW_COVERAGE.value:
         return Judgement(base, why, "none", "", "")
-    remove = config.remove_calibration
-    outcomes = {}
+    out = {}
+    for name in ("raw", "enhanced", "edges"):
+        p = getattr(m, name)
+        h = _calibrated(m, p, shared) if config.remove_calibration else None
+        out[name] = None if p is None else path_outcome(m, p, config, h)
+    raw_v = "" if out["raw"] is None else out["raw"][0].value
+    enh_v = "" if out["enhanced"] is None else out["enhanced"][0].value
+    edge_v = None if out["edges"] is None else out["edges"][0]
+
+    def j(verdict: Verdict, reason: str, evidence: str) -> Judgement:
+        return Judgement(verdict, reason, evidence, raw_v, enh_v)
+
     for name in ("raw", "enhanced"):
         p = getattr(m, name)
-        h = _calibrated(m, p, shared) if remove else None
-        outcomes[name] = path_outcome(m, p, config, h) if p is not None else None
-    raw_v = "" if outcomes["raw"] is None else outcomes["raw"][0].value
-    enh_v = "" if outcomes["enhanced"] is None else outcomes["enhanced"][0].value
+        if out[name] and out[name][0] is Verdict.FAIL and p.n_inliers >= config.confident_inliers:
+            return j(Verdict.FAIL, out[name][1], p.evidence.value)
     chosen = m.chosen
-    base, why = outcomes[m.verdict_path] if m.verdict_path in outcomes else (base, why)
-    for name in ("raw", "enhanced"):
-        p, out = getattr(m, name), outcomes[name]
-        if out and out[0] is Verdict.FAIL and p.n_inliers >= config.confident_inliers:
-            return Judgement(Verdict.FAIL, out[1], p.evidence.value, raw_v, enh_v)
     evidence = "none" if chosen is None else chosen.evidence.value
+    base, why = out.get(m.verdict_path) or (base, why)
+    if base is Verdict.UNVERIFIABLE and edge_v in (Verdict.PASS, Verdict.FAIL):
+        base, why = out["edges"]
+        evidence = Evidence.ABSOLUTE.value
     if base is not Verdict.PASS:
-        return Judgement(base, why, evidence, raw_v, enh_v)
-    reg = NOT_CHECKED if shared is None else shared.registration_status
+        return j(base, why, evidence)
     if shared is not None and m.frame_id in shared.drift_flagged:
         px = shared.drift_px.get(m.frame_id, float("nan"))
-        return Judgement(
-            Verdict.FAIL,
-            f"drift: this segment moves {px:.1f} px off the mesh",
-            evidence,
-            raw_v,
-            enh_v,
-        )
+        return j(Verdict.FAIL, f"drift: this segment moves {px:.1f} px off the mesh", evidence)
+    reg = NOT_CHECKED if shared is None else shared.registration_status
     if reg == FAILED:
         e = shared.registration if shared.registration["status"] == FAILED else shared.similarity
-        return Judgement(
+        return j(
             Verdict.FAIL,
-            f"registration: trajectory off the mesh by "
-            f"{e['effect_px']:.1f} px ({e['angle_deg']:.2f} deg)",
+            f"registration: trajectory off the mesh by {e['effect_px']:.1f} "
+            f"px ({e['angle_deg']:.2f} deg)",
             evidence,
-            raw_v,
-            enh_v,
         )
     if evidence == Evidence.ABSOLUTE.value:
-        return Judgement(Verdict.PASS, "", evidence, raw_v, enh_v)
-    if raw_v == Verdict.PASS.value:  # the absolute raw path confirms the relative PASS
-        return Judgement(Verdict.PASS, "", Evidence.ABSOLUTE.value, raw_v, enh_v)
+        return j(Verdict.PASS, "", evidence)
+    if Verdict.PASS.value in (raw_v, edge_v and edge_v.value):  # an absolute path confirms
+        return j(Verdict.PASS, "", Evidence.ABSOLUTE.value)
     if reg == PASSED:
-        return Judgement(Verdict.PASS, "", "relative+registration", raw_v, enh_v)
-    return Judgement(
-        Verdict.UNVERIFIABLE, f"relative_evidence_only (registration {reg})", evidence, raw_v, enh_v
-    )
+        return j(Verdict.PASS, "", "relative+registration")
+    return j(Verdict.UNVERIFIABLE, f"relative_evidence_only (registration {reg})", evidence)
 
 
 def gate(counts: Mapping[str, int], config: VerdictConfig) -> tuple[bool, str]:
