@@ -138,10 +138,14 @@ def main() -> None:
     results = {}
     try:
         ev = build_evidence(frames, [f.world_from_cam for f in frames], renderer, matcher)
-        results["given"] = summarise("given", "given (depth-camera D-SLAM poses)", ev, args.threshold_px)
+        results["given"] = summarise(
+            "given", "given (depth-camera D-SLAM poses)", ev, args.threshold_px
+        )
         poses_rgb = [rgb_by_id[f.frame_id].world_from_cam for f in frames]
         ev_rgb = build_evidence(frames, poses_rgb, renderer, matcher)
-        results["dslam_rgb"] = summarise("dslam_rgb", "visloc RGB D-SLAM poses", ev_rgb, args.threshold_px)
+        results["dslam_rgb"] = summarise(
+            "dslam_rgb", "visloc RGB D-SLAM poses", ev_rgb, args.threshold_px
+        )
         # move the whole trajectory: 2 deg about its centroid + 4 % of the median depth
         depth = results["given"]["registration"]["median_scene_depth"]
         centroid = np.mean([f.world_from_cam[:3, 3] for f in frames], axis=0)
@@ -157,7 +161,9 @@ def main() -> None:
             moved.append(p)
         print(f"\nmove: 2 deg, {100 * np.linalg.norm(t):.2f} cm (4 % of {depth:.2f} m)")
         ev_moved = build_evidence(frames, moved, renderer, matcher)
-        results["moved"] = summarise("moved", "given, moved 2 deg + 4 % depth", ev_moved, args.threshold_px)
+        results["moved"] = summarise(
+            "moved", "given, moved 2 deg + 4 % depth", ev_moved, args.threshold_px
+        )
     finally:
         renderer.close()
     if args.json:

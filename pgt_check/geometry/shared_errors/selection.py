@@ -62,20 +62,21 @@ def _ambiguity(
     there is no significant shared error)."""
     if not (gain_w > model_penalty * n_w * unit or gain_c > model_penalty * n_c * unit):
         return ""
+    reasons = []
     if not corr < max_correlation:  # nan (joint fit failed) counts as inseparable
-        return (
+        reasons.append(
             f"world and camera-calibration parameters are not separable with this trajectory "
-            f"(canonical correlation {corr:.3f} >= {max_correlation}): the shared error may be "
-            f"a registration or a calibration error"
+            f"(canonical correlation {corr:.3f} >= {max_correlation})"
         )
     margin = max(ambiguity_margin * max(gain_w, gain_c), model_penalty * n_c * unit)
     if abs(gain_w - gain_c) <= margin:
-        return (
+        reasons.append(
             f"world-only and calibration-only fits explain the shared error about equally well "
-            f"(robust-cost drop {gain_w:.1f} vs {gain_c:.1f}, margin {margin:.1f}): it may be "
-            f"a registration or a calibration error"
+            f"(robust-cost drop {gain_w:.1f} vs {gain_c:.1f}, margin {margin:.1f})"
         )
-    return ""
+    if not reasons:
+        return ""
+    return "; ".join(reasons) + ": it may be a registration or a calibration error"
 
 
 def _select(
