@@ -89,6 +89,8 @@ def summarise(slug: str, name: str, ev: list[FrameEvidence], threshold_px: float
             f"{r.residual_median_after:.2f} px, corr {r.max_correlation:.3f}, "
             f"ambiguous {r.ambiguous_with_calibration}, exceeds({threshold_px}) {r.exceeds(threshold_px)}"
         )
+        if r.ambiguity:
+            print(f"  ambiguous: {r.ambiguity}")
     if cal.success:
         print(
             f"calibration: rot {cal.equivalent_rotation_deg:.3f} deg CI "
@@ -103,7 +105,8 @@ def summarise(slug: str, name: str, ev: list[FrameEvidence], threshold_px: float
         print(f"calibration: failed ({cal.reason})")
     if drift.success:
         print(
-            f"drift: segments {drift.segments}, window effects "
+            f"drift: segments {drift.segments} (rejected {drift.rejected_segments}), windows "
+            f"{[(w.start, w.stop) for w in drift.windows]}, effects "
             f"{[round(w.estimate.effect_px, 2) for w in drift.windows]}, "
             f"lower bounds {[round(w.estimate.effect_px_ci[0], 2) for w in drift.windows]}"
         )

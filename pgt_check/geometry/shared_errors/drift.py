@@ -155,6 +155,15 @@ def _flags(p, bounds, wins, low, member, opt):
     return flagged, idx(kept), idx(rejected)
 
 
+def _compare(p: _Problem, bounds, ref: _State, ref_deltas, opt: _DriftOptions, calib: bool):
+    """(windows, score, low, frame flags, segments, rejected segments), None without a
+    successful window."""
+    wins, score, low, member = _evaluate(p, bounds, ref, ref_deltas, opt, calib)
+    if score is None:
+        return None
+    return (wins, score, low, *_flags(p, bounds, wins, low, member, opt))
+
+
 def _reference_estimate(p: _Problem, st: _State, calib: bool, sel, opt: _DriftOptions):
     """The reference as a RegistrationEstimate over all frames (no bootstrap)."""
     fit = _fit_at(
@@ -228,17 +237,16 @@ def estimate_drift(
     if not bounds:
         return DriftEstimate(False, "too_few_inliers", threshold_px=threshold_px)
     ref_state, ref_deltas = _reference(p, fit.state, None, opt, calib)
-    wins, score, low, member = _evaluate(p, bounds, ref_state, ref_deltas, opt, calib)
-    if score is None:
+    res = _compare(p, bounds, ref_state, ref_deltas, opt, calib)
+    if res is None:
         return DriftEstimate(False, "too_few_inliers", threshold_px=threshold_px)
-    flagged, segments, rejected = _flags(p, bounds, wins, low, member, opt)
-    if flagged.any() and (~flagged).sum() >= 2 * min_frames:
+    if res[3].any() and (~res[3]).sum() >= 2 * min_frames:
         # refit the reference on the unflagged frames and compare again
-        ref = _reference(p, ref_state, np.flatnonzero(~flagged), opt, calib)
-        if ref is not None:
-            ref_state, ref_deltas = ref
-            wins, score, low, member = _evaluate(p, bounds, ref_state, ref_deltas, opt, calib)
-            flagged, segments, rejected = _flags(p, bounds, wins, low, member, opt)
+        ref = _reference(p, ref_state, np.flatnonzero(~res[3]), opt, calib)
+        res2 = None if ref is None else _compare(p, bounds, *ref, opt, calib)
+        if res2 is not None:
+            ref_state, res = ref[0], res2
+    wins, score, low, flagged, segments, rejected = res
     return DriftEstimate(
         True,
         "",
