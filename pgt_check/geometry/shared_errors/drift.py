@@ -44,27 +44,43 @@ class _DriftOptions:
 
 
 def _window_bounds(
-    index: np.ndarray, inliers: np.ndarray, length: int, stride: int, min_frames: int, min_inl: int
+    index: np.ndarray,
+    inliers: np.ndarray,
+    points: np.ndarray,
+    length: int,
+    stride: int,
+    min_frames: int,
+    min_inl: int,
+    min_pts: int,
 ) -> list[tuple[int, int]]:
     """Frame-position ranges [a, b) of the windows: nominal ``length`` index units every
-    ``stride``, each grown about its centre until it holds ``min_frames`` frames and ``min_inl``
-    inliers; duplicates and windows that would need all frames are dropped."""
+    ``stride``, each grown about its centre until it holds ``min_frames`` frames, ``min_inl``
+    inliers and ``min_pts`` points; duplicates and windows that would need all frames are
+    dropped."""
     lo, hi, nf = int(index[0]), int(index[-1]), len(index)
     starts = list(range(lo, max(lo, hi - length + 1) + 1, stride))
     if starts[-1] + length <= hi:
         starts.append(hi - length + 1)
     cum = np.concatenate([[0], np.cumsum(inliers)])
+    cum_pts = np.concatenate([[0], np.cumsum(points)])
+
+    def enough(a: int, b: int) -> bool:
+        return (
+            b - a >= min_frames
+            and cum[b] - cum[a] >= min_inl
+            and cum_pts[b] - cum_pts[a] >= min_pts
+        )
+
     out: list[tuple[int, int]] = []
     for s in starts:
         a, b = int(np.searchsorted(index, s)), int(np.searchsorted(index, s + length))
         centre = s + (length - 1) / 2
-        while (b - a < min_frames or cum[b] - cum[a] < min_inl) and (a > 0 or b < nf):
+        while not enough(a, b) and (a > 0 or b < nf):
             if a > 0 and (b >= nf or centre - index[a - 1] <= index[b] - centre):
                 a -= 1
             else:
                 b += 1
-        enough = b - a >= min_frames and cum[b] - cum[a] >= min_inl
-        if enough and (a, b) != (0, nf) and (a, b) not in out:
+        if enough(a, b) and (a, b) != (0, nf) and (a, b) not in out:
             out.append((a, b))
     return out
 
@@ -194,6 +210,7 @@ def estimate_drift(
     max_error_px: float = 6.0,
     min_frames: int = 5,
     min_window_inliers: int = 150,
+    min_points: int = 60,
     min_points_per_frame: int = 6,
     min_segment_windows: int = 2,
     min_segment_frames: int = 3,
@@ -203,16 +220,14 @@ def estimate_drift(
 ) -> DriftEstimate:
     """Windowed world corrections along ``index`` relative to the reference registration.
 
-    window: nominal window length as a fraction of the index span; step: window step as a
-    fraction of the window; windows grow about their centre to ``min_frames`` frames and
-    ``min_window_inliers`` inliers. The reference is the global fit (calibration as in
-    ``estimate_registration``); when frames are flagged it is refitted once on the unflagged
-    frames, so a drifting segment does not bias what the rest is compared with. A window is
-    flagged when the lower 95 % bound of its effect relative to the reference exceeds
-    threshold_px; a frame when it lies in a flagged window and the lower bound interpolated
-    between window centres exceeds threshold_px, within a run of such frames that spans
-    ``min_segment_windows`` flagged windows or ``min_segment_frames`` frames (shorter runs are
-    listed in ``rejected_segments``).
+    window / step: nominal window length (fraction of the index span) and step (fraction of the
+    window); windows grow about their centre to ``min_frames`` frames, ``min_window_inliers``
+    inliers and ``min_points`` points. The reference is the global fit (calibration as in
+    ``estimate_registration``), refitted once on the unflagged frames when frames are flagged.
+    A window is flagged when the lower 95 % bound of its effect relative to the reference
+    exceeds threshold_px; a frame when it lies in a flagged window, its interpolated lower bound
+    exceeds threshold_px, and its run of such frames spans ``min_segment_windows`` flagged
+    windows or ``min_segment_frames`` frames (shorter runs: ``rejected_segments``).
     """
     opt = _DriftOptions(
         threshold_px, similarity, n_bootstrap, seed, loss_scale_px, max_error_px, min_frames,
@@ -231,8 +246,10 @@ def estimate_drift(
     span = int(p.index[-1] - p.index[0]) + 1
     length = max(1, int(round(window * span)))
     inliers = _inliers_per_frame(p, fit, max_error_px)
+    points = np.bincount(p.fidx, minlength=p.n_frames)
+    stride = max(1, int(round(step * length)))
     bounds = _window_bounds(
-        p.index, inliers, length, max(1, int(round(step * length))), min_frames, min_window_inliers
+        p.index, inliers, points, length, stride, min_frames, min_window_inliers, min_points
     )
     if not bounds:
         return DriftEstimate(False, "too_few_inliers", threshold_px=threshold_px)
