@@ -62,10 +62,9 @@ def build_evidence(frames, poses, renderer, matcher) -> list[FrameEvidence]:
 SAVE: Path | None = None
 
 
-def summarise(name: str, ev: list[FrameEvidence], threshold_px: float) -> dict:
+def summarise(slug: str, name: str, ev: list[FrameEvidence], threshold_px: float) -> dict:
     if SAVE is not None:
         SAVE.mkdir(parents=True, exist_ok=True)
-        slug = name.split(" ")[0].strip(",")
         (SAVE / f"{slug}.json").write_text(json.dumps([e.to_json() for e in ev]))
     t0 = time.perf_counter()
     reg = estimate_registration(ev)
@@ -90,6 +89,8 @@ def summarise(name: str, ev: list[FrameEvidence], threshold_px: float) -> dict:
             f"{r.residual_median_after:.2f} px, corr {r.max_correlation:.3f}, "
             f"ambiguous {r.ambiguous_with_calibration}, exceeds({threshold_px}) {r.exceeds(threshold_px)}"
         )
+        if r.ambiguity:
+            print(f"  ambiguous: {r.ambiguity}")
     if cal.success:
         print(
             f"calibration: rot {cal.equivalent_rotation_deg:.3f} deg CI "
@@ -104,7 +105,8 @@ def summarise(name: str, ev: list[FrameEvidence], threshold_px: float) -> dict:
         print(f"calibration: failed ({cal.reason})")
     if drift.success:
         print(
-            f"drift: segments {drift.segments}, window effects "
+            f"drift: segments {drift.segments} (rejected {drift.rejected_segments}), windows "
+            f"{[(w.start, w.stop) for w in drift.windows]}, effects "
             f"{[round(w.estimate.effect_px, 2) for w in drift.windows]}, "
             f"lower bounds {[round(w.estimate.effect_px_ci[0], 2) for w in drift.windows]}"
         )
@@ -139,10 +141,14 @@ def main() -> None:
     results = {}
     try:
         ev = build_evidence(frames, [f.world_from_cam for f in frames], renderer, matcher)
-        results["given"] = summarise("given (depth-camera D-SLAM poses)", ev, args.threshold_px)
+        results["given"] = summarise(
+            "given", "given (depth-camera D-SLAM poses)", ev, args.threshold_px
+        )
         poses_rgb = [rgb_by_id[f.frame_id].world_from_cam for f in frames]
         ev_rgb = build_evidence(frames, poses_rgb, renderer, matcher)
-        results["dslam_rgb"] = summarise("visloc RGB D-SLAM poses", ev_rgb, args.threshold_px)
+        results["dslam_rgb"] = summarise(
+            "dslam_rgb", "visloc RGB D-SLAM poses", ev_rgb, args.threshold_px
+        )
         # move the whole trajectory: 2 deg about its centroid + 4 % of the median depth
         depth = results["given"]["registration"]["median_scene_depth"]
         centroid = np.mean([f.world_from_cam[:3, 3] for f in frames], axis=0)
@@ -158,7 +164,9 @@ def main() -> None:
             moved.append(p)
         print(f"\nmove: 2 deg, {100 * np.linalg.norm(t):.2f} cm (4 % of {depth:.2f} m)")
         ev_moved = build_evidence(frames, moved, renderer, matcher)
-        results["moved"] = summarise("given, moved 2 deg + 4 % depth", ev_moved, args.threshold_px)
+        results["moved"] = summarise(
+            "moved", "given, moved 2 deg + 4 % depth", ev_moved, args.threshold_px
+        )
     finally:
         renderer.close()
     if args.json:

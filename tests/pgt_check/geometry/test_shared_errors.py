@@ -293,10 +293,106 @@ def test_frame_evidence_json_round_trip_and_speed():
     back = [FrameEvidence.from_json(json.loads(json.dumps(e.to_json()))) for e in ev]
     np.testing.assert_allclose(back[3].pts3d, ev[3].pts3d, atol=1e-5)
     np.testing.assert_allclose(back[3].pts2d, ev[3].pts2d, atol=1e-3)
-    t0 = time.perf_counter()
+    t0 = time.process_time()  # CPU time: robust to other jobs on a shared machine
     reg = estimate_registration(back)
     cal = estimate_calibration(back)
     drift = estimate_drift(back)
-    assert time.perf_counter() - t0 < 5.0  # ~1 s on one core; generous for a shared machine
+    assert time.process_time() - t0 < 5.0  # ~0.7 s on one core
     assert reg.success and drift.success and cal["cam"].success
     json.dumps(reg.to_json()), json.dumps(drift.to_json()), json.dumps(cal["cam"].to_json())
+
+
+# ---- ambiguity between registration and calibration (cost-based) ----
+
+
+def test_equally_explained_error_is_ambiguous_even_when_separable_by_correlation():
+    """Same viewing direction: world-only and calibration-only fits explain a camera rotation
+    equally well. With the correlation test switched off, the cost test alone flags it; the
+    registration reports the world-only fit (the error is still caught) and the calibration the
+    calibration-only fit, both with the reason."""
+    rc = axis_angle_to_rotmat(np.array([1.0, 1.0, 0.3]), 0.8)
+    ev = make_evidence(6, layout="line", cam_rotation=rc)
+    reg = estimate_registration(ev, max_correlation=1.01)
+    assert reg.success and reg.ambiguous_with_calibration and not reg.calibration_fitted
+    assert "about equally well" in reg.ambiguity and "not separable" not in reg.ambiguity
+    assert abs(reg.gain_world_only - reg.gain_calibration_only) < 0.1 * reg.gain_world_only
+    world_only = estimate_registration(ev, calibration="none")
+    assert reg.effect_px == pytest.approx(world_only.effect_px, rel=1e-9)
+    assert reg.exceeds(THRESHOLD_PX)
+    (cal,) = estimate_calibration(ev, max_correlation=1.01).values()
+    assert cal.success and not cal.separable and not cal.registration_fitted
+    assert "about equally well" in cal.ambiguity
+    assert _within(cal.equivalent_rotation_deg, 0.8, 0.1) and cal.exceeds(THRESHOLD_PX)
+
+
+def test_misregistration_is_caught_when_ambiguous_and_clear_cases_are_not_ambiguous():
+    c = similarity(2.0, (0.3, -0.5, 0.8), (0.08, -0.06, 0.05))
+    # line layout: blocks not separable, but the world-only fit still measures the error
+    line = estimate_registration(make_evidence(6, layout="line", world_error=lambda i: c))
+    assert line.success and line.ambiguous_with_calibration and not line.calibration_fitted
+    assert "not separable" in line.ambiguity
+    assert _within(line.angle_deg, 2.0) and line.exceeds(THRESHOLD_PX)
+    # loop: world error and intrinsics error are attributed without ambiguity
+    loop = estimate_registration(make_evidence(1, world_error=lambda i: c))
+    assert not loop.ambiguous_with_calibration and loop.ambiguity == ""
+    assert loop.gain_world_only > 3 * loop.gain_calibration_only
+    (cal,) = estimate_calibration(make_evidence(5, focal_scale=1.02, pp_shift=(5, 0))).values()
+    assert cal.separable and cal.ambiguity == "" and cal.exceeds(THRESHOLD_PX)
+    assert cal.gain_calibration_only > 3 * cal.gain_world_only
+    # no significant shared error: nothing to attribute, not ambiguous even when inseparable
+    clean = estimate_registration(make_evidence(6, layout="line"))
+    assert clean.max_correlation > 0.995 and not clean.ambiguous_with_calibration
+
+
+# ---- drift on sparse evidence ----
+
+
+def _drift_ramp(n: int, start: int, angle: float = 2.0):
+    def drift(i):
+        a = max(0.0, (i - start) / (n - 1 - start))
+        return similarity(angle * a, (0.2, 0.7, -0.4), (0.06 * a, 0, -0.04 * a), centre=(3, 0, 0))
+
+    return drift
+
+
+def test_drift_windows_grow_on_sparse_evidence_and_noise_flags_nothing():
+    """20 frames x 25 points (the real 7-Scenes density): nominal 4-frame windows hold ~70
+    inliers; they grow to >= 150 inliers and >= 5 frames, and a correct trajectory (2 px
+    noise) flags no frame in any of 3 seeds."""
+    for seed in (30, 31, 32):
+        ev = make_evidence(seed, n_frames=20, n_points=25, noise_px=2.0)
+        d = estimate_drift(ev, threshold_px=THRESHOLD_PX)
+        assert d.success, d.reason
+        assert not d.frame_flagged.any() and d.segments == ()
+        for w in d.windows:
+            assert w.stop - w.start >= 5 and w.estimate.n_inliers >= 150 * 0.9
+            assert w.flagged == (w.estimate.effect_px_ci[0] > THRESHOLD_PX)
+        assert max(w.stop - w.start for w in d.windows) > 4  # grown past the nominal length
+
+
+def test_drift_flags_only_on_the_lower_bound_and_long_enough_segments():
+    n, start = 40, 24
+    ev = make_evidence(10, world_error=_drift_ramp(n, start))
+    d = estimate_drift(ev, threshold_px=THRESHOLD_PX)
+    assert d.success and len(d.segments) == 1
+    flagged_windows = [w for w in d.windows if w.flagged]
+    assert flagged_windows and all(
+        w.estimate.effect_px_ci[0] > THRESHOLD_PX for w in flagged_windows
+    )
+    # every flagged frame lies in a flagged window, with its interpolated lower bound above
+    for i in np.flatnonzero(d.frame_flagged):
+        idx = d.frame_index[i]
+        assert any(w.start <= idx < w.stop for w in flagged_windows)
+        assert d.frame_score_low_px[i] > THRESHOLD_PX
+    # a threshold between the point effect and its lower bound: not flagged
+    w = max(d.windows, key=lambda w: w.estimate.effect_px)
+    mid = 0.5 * (w.estimate.effect_px + w.estimate.effect_px_ci[0])
+    strict = estimate_drift(ev, threshold_px=mid)
+    top = max(strict.windows, key=lambda x: x.estimate.effect_px)
+    assert top.estimate.effect_px > mid and not top.flagged
+    # the segment rule is configurable: demanding more than the run has rejects it
+    long = estimate_drift(
+        ev, threshold_px=THRESHOLD_PX, min_segment_frames=100, min_segment_windows=100
+    )
+    assert long.segments == () and not long.frame_flagged.any()
+    assert long.rejected_segments == d.segments

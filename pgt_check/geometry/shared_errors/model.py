@@ -1,0 +1,227 @@
+"""The fitting problem: all frames' points about the camera centroid, the model state, and the
+residuals / Jacobians of the observation model (see the package docstring)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from pgt_check.geometry.shared_errors.evidence import FrameEvidence
+
+
+@dataclass(frozen=True, eq=False)
+class _Problem:
+    origin: np.ndarray  # (3,) camera centroid (world)
+    frame_ids: tuple[str, ...]  # (F,) sorted by index
+    index: np.ndarray  # (F,) int
+    cam: np.ndarray  # (F,) int camera-group of each frame
+    camera_ids: tuple[str, ...]  # (G,)
+    rt: np.ndarray  # (F, 3, 3) cam_from_world rotation
+    centre: np.ndarray  # (F, 3) camera centre relative to origin
+    K: np.ndarray  # (F, 3, 3)
+    y: np.ndarray  # (N, 3) world points relative to origin
+    obs: np.ndarray  # (N, 2) photo pixels
+    fidx: np.ndarray  # (N,) frame of each point (contiguous, non-decreasing)
+    starts: np.ndarray  # (F,) first point of each frame
+
+    @property
+    def n_frames(self) -> int:
+        return len(self.frame_ids)
+
+    @property
+    def n_cams(self) -> int:
+        return len(self.camera_ids)
+
+
+@dataclass(frozen=True, eq=False)
+class _State:
+    q: np.ndarray  # (3, 3) rotation of D
+    tau: np.ndarray  # (3,)
+    log_sigma: float
+    rcal: np.ndarray  # (G, 3, 3) true_cam_from_checked_cam
+    log_zoom: np.ndarray  # (G,)
+
+    @staticmethod
+    def identity(n_cams: int) -> _State:
+        return _State(
+            np.eye(3), np.zeros(3), 0.0, np.tile(np.eye(3), (n_cams, 1, 1)), np.zeros(n_cams)
+        )
+
+
+def _rodrigues(v: np.ndarray) -> np.ndarray:
+    """(..., 3) rotation vectors -> (..., 3, 3) rotations."""
+    v = np.asarray(v, np.float64)
+    th = np.linalg.norm(v, axis=-1)[..., None, None]
+    k = np.zeros(v.shape[:-1] + (3, 3))
+    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
+    k[..., 1, 0], k[..., 2, 0], k[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
+    small = th < 1e-8
+    ths = np.where(small, 1.0, th)
+    a = np.where(small, 1.0 - th**2 / 6, np.sin(ths) / ths)
+    b = np.where(small, 0.5 - th**2 / 24, (1 - np.cos(ths)) / ths**2)
+    return np.eye(3) + a * k + b * (k @ k)
+
+
+def _rotvec(r: np.ndarray) -> np.ndarray:
+    """(..., 3, 3) rotations -> (..., 3) rotation vectors (angles < 180 deg)."""
+    c = np.clip((np.trace(r, axis1=-2, axis2=-1) - 1) / 2, -1, 1)
+    th = np.arccos(c)
+    w = np.stack(
+        [r[..., 2, 1] - r[..., 1, 2], r[..., 0, 2] - r[..., 2, 0], r[..., 1, 0] - r[..., 0, 1]],
+        axis=-1,
+    )
+    s = np.sin(th)
+    f = np.where(th < 1e-8, 0.5, th / (2 * np.where(th < 1e-8, 1.0, s)))
+    return w * f[..., None]
+
+
+def _bmv(m: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Per-point matrix-vector product: m (N, R, 3), x (..., N, 3) -> (..., N, R)."""
+    return m[..., 0] * x[..., 0:1] + m[..., 1] * x[..., 1:2] + m[..., 2] * x[..., 2:3]
+
+
+def _angle_deg(r: np.ndarray) -> np.ndarray:
+    c = np.clip((np.trace(r, axis1=-2, axis2=-1) - 1) / 2, -1, 1)
+    return np.degrees(np.arccos(c))
+
+
+def _prepare(
+    evidence: Sequence[FrameEvidence], min_points_per_frame: int, min_frames: int
+) -> _Problem | str:
+    """Concatenate usable points; a reason string when there is too little to fit."""
+    usable = []
+    for ev in evidence:
+        if not (np.all(np.isfinite(ev.world_from_cam)) and np.all(np.isfinite(ev.K))):
+            continue
+        ok = np.all(np.isfinite(ev.pts2d), axis=1) & np.all(np.isfinite(ev.pts3d), axis=1)
+        r = ev.world_from_cam[:3, :3]
+        t = ev.world_from_cam[:3, 3]
+        z = (ev.pts3d[ok] - t) @ r[:, 2]
+        keep = np.flatnonzero(ok)[z > 1e-9 * max(1.0, float(np.abs(t).max()))]
+        if len(keep) >= min_points_per_frame:
+            usable.append((ev, keep))
+    if len(usable) < min_frames:
+        return "too_few_frames" if len(evidence) < min_frames else "too_few_points"
+    usable.sort(key=lambda e: e[0].index)
+    origin = np.mean([ev.world_from_cam[:3, 3] for ev, _ in usable], axis=0)
+    camera_ids = tuple(sorted({ev.camera_id for ev, _ in usable}))
+    counts = np.array([len(k) for _, k in usable])
+    return _Problem(
+        origin=origin,
+        frame_ids=tuple(ev.frame_id for ev, _ in usable),
+        index=np.array([ev.index for ev, _ in usable], int),
+        cam=np.array([camera_ids.index(ev.camera_id) for ev, _ in usable], int),
+        camera_ids=camera_ids,
+        rt=np.stack([ev.world_from_cam[:3, :3].T for ev, _ in usable]),
+        centre=np.stack([ev.world_from_cam[:3, 3] - origin for ev, _ in usable]),
+        K=np.stack([ev.K for ev, _ in usable]),
+        y=np.concatenate([ev.pts3d[k] - origin for ev, k in usable]),
+        obs=np.concatenate([ev.pts2d[k] for ev, k in usable]),
+        fidx=np.repeat(np.arange(len(usable)), counts),
+        starts=np.concatenate([[0], np.cumsum(counts)[:-1]]),
+    )
+
+
+def _subset(p: _Problem, frames: np.ndarray) -> _Problem:
+    """The sub-problem of the given frame positions (sorted), same origin and camera groups."""
+    frames = np.asarray(frames, int)
+    pts = np.isin(p.fidx, frames)
+    remap = np.full(p.n_frames, -1)
+    remap[frames] = np.arange(len(frames))
+    counts = np.bincount(p.fidx[pts], minlength=p.n_frames)[frames]
+    return _Problem(
+        origin=p.origin,
+        frame_ids=tuple(p.frame_ids[i] for i in frames),
+        index=p.index[frames],
+        cam=p.cam[frames],
+        camera_ids=p.camera_ids,
+        rt=p.rt[frames],
+        centre=p.centre[frames],
+        K=p.K[frames],
+        y=p.y[pts],
+        obs=p.obs[pts],
+        fidx=remap[p.fidx[pts]],
+        starts=np.concatenate([[0], np.cumsum(counts)[:-1]]),
+    )
+
+
+def _layout(p: _Problem, world: bool, similarity: bool, calib: bool) -> tuple[int, int, int]:
+    """(number of world columns, offset of the calibration columns, total columns)."""
+    nw = (7 if similarity else 6) if world else 0
+    return nw, nw, nw + (4 * p.n_cams if calib else 0)
+
+
+def _residuals(
+    p: _Problem,
+    st: _State,
+    *,
+    jac: bool = False,
+    world: bool = True,
+    similarity: bool = False,
+    calib: bool = False,
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """Residuals (N, 2) = predicted - observed, and the Jacobian (N, 2, P) of the active blocks.
+
+    Column order: world [rotation (3), translation (3), log scale (1, similarity)], then per
+    camera [rotation (3), log zoom (1)].
+    """
+    sig = np.exp(st.log_sigma)
+    w = sig * (p.y @ st.q.T)  # (N, 3): sigma Q Y
+    f = p.fidx
+    g = p.cam[f]
+    xw = w + st.tau - p.centre[f]
+    m_f = st.rcal[p.cam] @ p.rt  # (F, 3, 3) true_cam_from_world rotation
+    xp = _bmv(m_f[f], xw)
+    k = p.K[f]
+    fx, sk, fy = k[:, 0, 0], k[:, 0, 1], k[:, 1, 1]
+    z = xp[:, 2]
+    m0 = (fx * xp[:, 0] + sk * xp[:, 1]) / z
+    m1 = fy * xp[:, 1] / z
+    e = np.exp(st.log_zoom[g])
+    pred = np.stack([k[:, 0, 2] + e * m0, k[:, 1, 2] + e * m1], axis=1)
+    r = pred - p.obs
+    if not jac:
+        return r, None
+    nw, off, ncol = _layout(p, world, similarity, calib)
+    n = len(r)
+    d = np.zeros((n, 2, 3))  # d pred / d xp
+    d[:, 0, 0] = e * fx / z
+    d[:, 0, 1] = e * sk / z
+    d[:, 0, 2] = -e * m0 / z
+    d[:, 1, 1] = e * fy / z
+    d[:, 1, 2] = -e * m1 / z
+    jm = np.zeros((n, 2, ncol))
+    if world:
+        a = d @ m_f[f]  # d pred / d (D(Y))
+        jm[:, :, 0:3] = np.cross(w[:, None, :], a)
+        jm[:, :, 3:6] = a
+        if similarity:
+            jm[:, :, 6] = np.sum(a * w[:, None, :], axis=2)
+    if calib:
+        jr = np.cross(xp[:, None, :], d)
+        jz = np.stack([e * m0, e * m1], axis=1)
+        for gi in range(p.n_cams):
+            sel = g == gi
+            c0 = off + 4 * gi
+            jm[sel, :, c0 : c0 + 3] = jr[sel]
+            jm[sel, :, c0 + 3] = jz[sel]
+    return r, jm
+
+
+def _update(
+    p: _Problem, st: _State, delta: np.ndarray, world: bool, similarity: bool, calib: bool
+) -> _State:
+    nw, off, _ = _layout(p, world, similarity, calib)
+    q, tau, ls, rcal, lz = st.q, st.tau, st.log_sigma, st.rcal, st.log_zoom
+    if world:
+        q = _rodrigues(delta[0:3]) @ q
+        tau = tau + delta[3:6]
+        if similarity:
+            ls = ls + float(delta[6])
+    if calib:
+        dc = delta[off:].reshape(-1, 4)
+        rcal = _rodrigues(dc[:, :3]) @ rcal
+        lz = lz + dc[:, 3]
+    return _State(q, tau, ls, rcal, lz)
