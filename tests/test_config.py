@@ -27,12 +27,17 @@ def test_bad_config_is_an_error(data, msg):
         RunConfig.from_dict(data)
 
 
-def test_fingerprint_ignores_verdict_thresholds_only():
-    a = RunConfig()
-    b = RunConfig.from_dict({"verdict": {"threshold_px": 3.0}})
-    c = RunConfig.from_dict({"match": {"method": "orb"}})
-    assert a.measurement_fingerprint() == b.measurement_fingerprint()
-    assert a.measurement_fingerprint() != c.measurement_fingerprint()
+def test_fingerprint_holds_what_the_measurement_reads():
+    fp = lambda d: RunConfig.from_dict(d).measurement_fingerprint()  # noqa: E731
+    never = {"enhance": {"mode": "never"}}
+    # verdict-only settings never change it
+    assert fp({}) == fp({"verdict": {"min_inliers": 50, "max_fail_fraction": 0.2}})
+    # the threshold does not change a raw-only measurement ...
+    assert fp(never) == fp({**never, "verdict": {"threshold_px": 3.0}})
+    # ... but drives the --enhance auto decision (the default), and min_coverage always
+    assert fp({}) != fp({"verdict": {"threshold_px": 3.0}})
+    assert fp(never) != fp({**never, "verdict": {"min_coverage": 0.5}})
+    assert fp({}) != fp({"match": {"method": "orb"}})
 
 
 def test_load_config_file(tmp_path):

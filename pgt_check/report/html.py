@@ -334,7 +334,10 @@ def build_report(
     known = {str(r["frame_id"]) for r in records}
     assets = {k: v for k, v in assets.items() if k in known}
     plots = write_plots(records, summary, out_dir)
-    html = render_html(page_context(records, summary, assets, plots, absolute_paths))
+    context = page_context(records, summary, assets, plots, absolute_paths)
+    # the measurement store exists in real runs (written by the runner, not by the writers)
+    context["has_records"] = (out_dir / "records.jsonl").is_file()
+    html = render_html(context)
     path = out_dir / REPORT_NAME
     atomic_write_text(path, html)
     atomic_write_text(
