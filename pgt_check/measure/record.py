@@ -36,6 +36,12 @@ class MeasureReason(str, Enum):
     LOW_COVERAGE = "low_coverage"
     INTERNAL_ERROR = "internal_error"
     WORKER_CRASHED = "worker_crashed"
+    #: the photo's pixel size does not fit its camera (other aspect, or scaled > 8x)
+    IMAGE_SIZE_MISMATCH = "image_size_mismatch"
+    #: the reference photo of the enhanced path cannot be read
+    REFERENCE_UNREADABLE = "reference_unreadable"
+    #: the image header declares more pixels than ``input.max_image_pixels``
+    PIXEL_CAP_EXCEEDED = "pixel_cap_exceeded"
 
 
 class EnhanceWhy(str, Enum):
@@ -190,6 +196,9 @@ class FrameMeasurement:
     pose: PoseEstimate | None = None
     auto_threshold_px: float | None = None
     timings: Timings = field(default_factory=Timings)
+    #: hash of what this frame's measurement depends on besides the settings (pose, camera,
+    #: image bytes, the references' ones); a stored record whose key differs is measured again
+    input_key: str = ""
 
     # -- access ---------------------------------------------------------------------------
     @property
@@ -262,6 +271,7 @@ class FrameMeasurement:
             pose=None if d.get("pose") is None else PoseEstimate.from_json(d["pose"]),
             auto_threshold_px=_num(d.get("auto_threshold_px")),
             timings=Timings.from_json(d.get("timings") or {}),
+            input_key=str(d.get("input_key") or ""),
         )
 
     # -- flat view ---------------------------------------------------------------------------
