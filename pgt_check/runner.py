@@ -157,7 +157,10 @@ def preflight(config: RunConfig, references: Any = None) -> Any:
             stages.append((f"enhancer {config.enhance.method!r}", lambda: checker.enhancer))
         for what, build in stages:
             try:
-                build()
+                built = build()
+                load = getattr(built, "_load", None)  # lazy model loaders (MaRINeR): load now
+                if callable(load):
+                    load()
             except (InputError, MemoryError):
                 raise
             except ImportError as err:
