@@ -33,15 +33,15 @@ def check_pixel_cap(path: str | Path, max_pixels: int | None) -> None:
         return
     from PIL import Image
 
+    pil_limit = Image.MAX_IMAGE_PIXELS
+    Image.MAX_IMAGE_PIXELS = None  # this cap replaces PIL's bomb check (header only here)
     try:
         with Image.open(path) as im:
             width, height = im.size
-    except Image.DecompressionBombError as err:  # PIL's own (larger) bomb limit
-        raise PixelCapError(
-            f"{path}: image declares too many pixels (cap {max_pixels}: --max-image-pixels)"
-        ) from err
     except Exception:  # noqa: BLE001 - unidentifiable header: the decoder decides
         return
+    finally:
+        Image.MAX_IMAGE_PIXELS = pil_limit
     if int(width) * int(height) > max_pixels:
         raise PixelCapError(
             f"{path}: image declares {width}x{height} = {int(width) * int(height)} pixels, "
