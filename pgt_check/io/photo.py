@@ -8,7 +8,6 @@ import numpy as np
 from pgt_check.errors import ImageSizeMismatchError
 from pgt_check.types import Camera
 
-
 #: the largest factor between camera size and photo size accepted as a resized capture
 MAX_RESIZE_FACTOR = 8.0
 

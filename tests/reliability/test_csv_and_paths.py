@@ -14,16 +14,16 @@ from pgt_check.report.outputs import _csv_value
 def test_formula_cells_neutralised(scene, cli, base_args, tmp_path, case):
     images = scene / "images.txt"
     lines = images.read_text().splitlines()
-    for i in (1, 2):
-        old = lines[i].split(",")[2].strip()
-        new = f"images/=HYPERLINK(x){i}.jpg" if i == 1 else f"images/@SUM{i}.jpg"
-        shutil.copy(scene / old, scene / new)
-        lines[i] = lines[i].replace(old, new)
+    old = lines[1].split(",")[2].strip()
+    shutil.copy(scene / old, scene / "=HYPERLINK(x).jpg")  # a file name starting with '='
+    lines[1] = lines[1].replace(old, "=HYPERLINK(x).jpg")
     images.write_text("\n".join(lines) + "\n")
     rc, _, _ = cli(*base_args())
     assert rc == 0
     rows = list(csv.DictReader((tmp_path / "out" / "frames.csv").open()))
-    assert rows[0]["image_path"] == "images/=HYPERLINK(x)1.jpg"  # not at the cell start: kept
+    case("image file '=HYPERLINK(x).jpg' in frames.csv", "cell '=HYPERLINK(x).jpg",
+         f"{rc}: cell {rows[0]['image_path']!r}")
+    assert rows[0]["image_path"] == "'=HYPERLINK(x).jpg"
     assert _csv_value("=HYPERLINK(1)") == "'=HYPERLINK(1)"
     assert _csv_value("@SUM(A1)") == "'@SUM(A1)" and _csv_value("+1") == "'+1"
     assert _csv_value("\tx") == "'\tx" and _csv_value("-x") == "'-x"
