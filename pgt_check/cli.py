@@ -1,19 +1,25 @@
 """Command line: ``pgt-check TRAJECTORY --mesh MESH --out DIR`` (and ``pgt-check report DIR``).
 
-Exit codes: 0 gate passed, 1 gate failed (too many FAIL frames), 2 usage or input error.
+Exit codes (each means one thing, a CI gate relies on them):
+0 the poses were checked and the gate passed; 1 they were checked and the gate failed (too many
+FAIL or UNVERIFIABLE frames, none verified, internal errors); 2 usage, input or setup error:
+one line ``pgt-check: error: ...`` naming the file or option, never a traceback (``-v`` adds
+one); 130 interrupted (SIGINT or SIGTERM), with the command that resumes the run.
+Errors are told apart by exception type at this boundary (``pgt_check.errors``), not by message.
 """
 
 from __future__ import annotations
 
 import argparse
 import logging
+import signal
 import sys
 from collections.abc import Sequence
 from typing import Any
 
 from pgt_check import __version__
 from pgt_check.config import RunConfig, load_config_file, merge
-from pgt_check.errors import InputError
+from pgt_check.errors import ConfigError, InputError
 
 logger = logging.getLogger("pgt_check")
 
@@ -31,7 +37,8 @@ def build_parser() -> argparse.ArgumentParser:
         prog="pgt-check",
         description="Check pseudo-ground-truth camera poses frame by frame against a mesh.",
         epilog="Subcommand: 'pgt-check report OUT_DIR' rebuilds the report of a finished run. "
-        "Exit codes: 0 gate passed, 1 gate failed, 2 usage or input error.",
+        "Exit codes: 0 checked and the gate passed, 1 checked and the gate failed, 2 usage, "
+        "input or setup error, 130 interrupted (resumable).",
     )
     p.add_argument("trajectory", help="pose file or COLMAP model directory")
     p.add_argument("--mesh", required=True, help="mesh (PLY/OBJ/GLB) in the poses' world frame")
@@ -85,9 +92,18 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--min-coverage", type=float, default=None)
     g.add_argument("--max-fail-fraction", type=float, default=None,
                    help="gate: largest allowed fraction of FAIL frames (default 0)")
-    g.add_argument("--max-unverifiable-fraction", type=float, default=None)
+    g.add_argument("--max-unverifiable-fraction", type=float, default=None,
+                   help="gate: largest allowed fraction of UNVERIFIABLE frames (default 0.5); "
+                   "a run with no verified frame always fails")
+    g.add_argument("--max-internal-errors", type=int, default=None,
+                   help="gate: frames with internal errors or crashed workers allowed "
+                   "(default 0)")
     g = p.add_argument_group("run")
-    g.add_argument("--limit", type=int, default=None, help="check only the first N frames")
+    g.add_argument("--limit", type=int, default=None,
+                   help="check only the first N frames (N >= 1)")
+    g.add_argument("--max-image-pixels", type=int, default=None,
+                   help="images whose header declares more pixels are not decoded "
+                   "(UNVERIFIABLE pixel_cap_exceeded; default 100000000)")
     g.add_argument("--fail-fast", action="store_true", help="re-raise internal errors")
     g.add_argument("--report-details", type=int, default=None,
                    help="frames with image panels in report.html (default 40)")
@@ -134,9 +150,10 @@ def _cli_overrides(args: argparse.Namespace) -> dict[str, Any]:
         ("pose", "enabled"): False if args.no_pose_estimate else None,
         ("report_details",): args.report_details,
         ("absolute_paths",): True if args.absolute_paths else None,
-        ("match", "resize_max"): (None if args.resize_max == 0 else args.resize_max)
-        if args.resize_max is not None
-        else ...,
+        # 0 = original size: MatchConfig turns it into None
+        ("match", "resize_max"): args.resize_max,
+        ("input", "max_image_pixels"): args.max_image_pixels,
+        ("verdict", "max_internal_errors"): args.max_internal_errors,
         ("verdict", "threshold_px"): args.threshold_px,
         ("verdict", "threshold_rel_diag"): args.threshold_rel_diag,
         ("verdict", "min_inliers"): args.min_inliers,
@@ -173,13 +190,56 @@ def resume_command(argv: Sequence[str]) -> str:
     return shlex.join(["pgt-check", *args, "--resume"])
 
 
+#: config keys -> the CLI option that sets them (named in ConfigError messages)
+_OPTION_OF = {
+    "verdict.threshold_px": "--threshold-px",
+    "verdict.threshold_rel_diag": "--threshold-rel-diag",
+    "verdict.min_inliers": "--min-inliers",
+    "verdict.min_coverage": "--min-coverage",
+    "verdict.max_fail_fraction": "--max-fail-fraction",
+    "verdict.max_unverifiable_fraction": "--max-unverifiable-fraction",
+    "verdict.max_internal_errors": "--max-internal-errors",
+    "match.max_keypoints": "--max-keypoints",
+    "match.resize_max": "--resize-max",
+    "enhance.iterations": "--iterations",
+    "input.max_image_pixels": "--max-image-pixels",
+    "limit": "--limit",
+    "workers": "--workers",
+    "report_details": "--report-details",
+}
+
+
 def load_config(args: argparse.Namespace) -> RunConfig:
     from pgt_check.config import PRESETS
 
     base = PRESETS[args.preset] if args.preset else {}
     if args.config:
         base = merge(base, load_config_file(args.config))
-    return RunConfig.from_dict(merge(base, _cli_overrides(args)))
+    try:
+        return RunConfig.from_dict(merge(base, _cli_overrides(args)))
+    except ConfigError as err:
+        key = str(err).split(":", 1)[0]
+        if key in _OPTION_OF:
+            raise ConfigError(f"{_OPTION_OF[key]} (config {err})") from err
+        raise
+
+
+def _raise_interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt
+
+
+def install_sigterm_handler() -> None:
+    """SIGTERM (CI cancel, docker stop) ends the run like Ctrl-C: exit 130 with the resume
+    hint. pycolmap is imported first where installed, so its crash-dump handler (glog) cannot
+    replace this one later."""
+    try:
+        import pycolmap  # noqa: F401
+    except ImportError:
+        pass
+    try:
+        signal.signal(signal.SIGTERM, _raise_interrupt)
+    except ValueError:  # not the main thread (library use)
+        pass
 
 
 def configure_logging(verbose: int, quiet: bool) -> None:
@@ -221,15 +281,19 @@ def main(argv: Sequence[str] | None = None) -> int:
     except SystemExit as exc:  # argparse exits 2 on usage errors, 0 on --help/--version
         return int(exc.code or 0)
     configure_logging(args.verbose, args.quiet)
+    install_sigterm_handler()
     from pgt_check.runner import RunInterrupted, run
 
     try:
         config = load_config(args)
         summary = run(config)
-    except InputError as err:
+    except (InputError, OSError) as err:
+        # InputError covers ConfigError, FormatError, MissingExtraError and SetupError; an
+        # OSError that reaches here is a file the user named (--out, an input) that cannot be
+        # read or written
         if args.verbose:
             logger.exception("input error")
-        print(f"pgt-check: error: {err}", file=sys.stderr)
+        print(f"pgt-check: error: {_one_line(err)}", file=sys.stderr)
         return EXIT_INPUT
     except RunInterrupted as err:
         print(f"pgt-check: {err}; resume with: {resume_command(argv)}", file=sys.stderr)
@@ -239,6 +303,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         return 130
     _print_summary(summary, config.out)
     return EXIT_PASSED if summary["gate"]["passed"] else EXIT_FAILED
+
+
+def _one_line(err: BaseException) -> str:
+    if isinstance(err, OSError) and not isinstance(err, InputError):
+        what = err.strerror or type(err).__name__
+        return f"{err.filename}: {what}" if err.filename else f"{what}: {err}"
+    return " ".join(str(err).split("\n"))
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -31,3 +31,23 @@ class MissingExtraError(InputError):
             f"optional dependency '{module}' is not installed: "
             f"pip install 'pgt-check[{extra}]'"
         )
+
+
+class SetupError(InputError):
+    """The chosen method cannot run here (missing weights, a backend that cannot be built).
+
+    Found before the run starts (CLI exit code 2), never turned into a per-frame outcome."""
+
+
+class ImageSizeMismatchError(InputError):
+    """A photo whose pixel size does not fit its camera (per-frame ``image_size_mismatch``)."""
+
+
+class PixelCapError(InputError):
+    """An image whose header declares more pixels than the cap (per-frame
+    ``pixel_cap_exceeded``); raised before decoding, so memory stays bounded."""
+
+
+class ReferenceUnreadableError(InputError):
+    """The reference photo of the enhanced path cannot be read (per-frame
+    ``reference_unreadable``)."""

@@ -9,14 +9,17 @@ frames.csv, summary.json, junit.xml and report.html from the verdict rows.
 from __future__ import annotations
 
 import functools
+import hashlib
+import json
 import logging
+import os
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from pgt_check.config import RunConfig
-from pgt_check.errors import InputError
+from pgt_check.errors import InputError, MissingExtraError, SetupError
 from pgt_check.measure import (
     SCHEMA_VERSION,
     FrameImages,
@@ -65,8 +68,10 @@ def _progress(iterable, total: int, desc: str):
 def run(config: RunConfig) -> dict[str, Any]:
     """Check every frame of the configured trajectory and write the outputs to ``config.out``.
 
-    Returns the summary (also written as summary.json). Raises InputError for user errors and
-    RunInterrupted after a Ctrl-C (the frames done so far are kept for ``--resume``).
+    Returns the summary (also written as summary.json). Raises InputError for user errors
+    (SetupError when the chosen mesh / renderer / matcher / enhancer cannot be built, found
+    before any frame is measured) and RunInterrupted after a Ctrl-C or SIGTERM (the frames done
+    so far are kept for ``--resume``).
     """
     t0 = time.perf_counter()
     traj = load_trajectory(config)
@@ -75,13 +80,162 @@ def run(config: RunConfig) -> dict[str, Any]:
         frames = frames[: config.limit]
     logger.info("checking %d frames of %s (%s)", len(frames), traj.source, traj.format)
     references = pick_references(traj, frames, config)
-    return check_frames(
-        frames,
-        config,
-        functools.partial(build_frame_checker, config, references),
-        extra={"trajectory_format": traj.format},
-        t0=t0,
-    )
+    factory = functools.partial(build_frame_checker, config, references)
+    checker = preflight(config, references)
+    if config.executor == "serial":  # the serial executor reuses the checker built here
+        factory = _ReuseFirst(checker, factory)
+    else:
+        checker.close()
+    outside = images_outside_dataset(config, frames)
+    extra: dict[str, Any] = {"trajectory_format": traj.format}
+    if outside:
+        extra["images_outside_dataset"] = {"count": len(outside), "examples": outside[:5]}
+        extra["warnings"] = [
+            f"{len(outside)} image paths point outside the dataset folder (e.g. "
+            f"{outside[0]!r}): they were read and their thumbnails may appear in this report"
+        ]
+        logger.warning("%s", extra["warnings"][0])
+    t_hash = time.perf_counter()
+    inputs = {"mesh": content_hash(config.input.mesh)}
+    keys = frame_input_keys(frames, references)
+    logger.info("hashed the inputs in %.2f s", time.perf_counter() - t_hash)
+    try:
+        return check_frames(frames, config, factory, extra=extra, t0=t0, input_keys=keys,
+                            inputs=inputs)
+    finally:
+        if isinstance(factory, _ReuseFirst):
+            factory.close_unused()
+
+
+class _ReuseFirst:
+    """A checker factory whose first call returns an already built checker."""
+
+    def __init__(self, checker: Any, factory: Callable[[], Any]) -> None:
+        self._checker, self._factory = checker, factory
+
+    def __call__(self) -> Any:
+        if self._checker is not None:
+            checker, self._checker = self._checker, None
+            return checker
+        return self._factory()
+
+    def close_unused(self) -> None:
+        if self._checker is not None:
+            self._checker.close()
+            self._checker = None
+
+
+def preflight(config: RunConfig, references: Any = None) -> Any:
+    """Build the frame checker once before the run: the mesh is loaded and validated, the
+    renderer, matcher and (unless ``enhance.mode`` is never) the enhancer are built.
+
+    Raises InputError for a mesh that cannot be loaded or is unusable (no faces, non-finite
+    vertices), MissingExtraError for an extra that is not installed and SetupError for a method
+    that cannot be built (missing weights, a backend that fails); nothing of this becomes a
+    per-frame outcome. Returns the checker (the caller closes it).
+    """
+    import numpy as np
+
+    from pgt_check.measure import FrameChecker
+
+    checker = FrameChecker(config, dict(references or {}))
+    mesh_path = config.input.mesh
+    try:
+        try:
+            mesh = checker.mesh
+        except (InputError, MemoryError):
+            raise
+        except Exception as err:  # trimesh raises many types for broken files
+            raise InputError(f"{mesh_path}: cannot load mesh ({type(err).__name__}: {err})") from err
+        vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+        if faces.size == 0:
+            raise InputError(f"{mesh_path}: the mesh has no triangles (a point cloud?)")
+        if not np.isfinite(vertices).all():
+            n = int((~np.isfinite(vertices).all(axis=1)).sum())
+            raise InputError(f"{mesh_path}: {n} mesh vertices are not finite (NaN or inf)")
+        stages = [
+            (f"renderer {config.render.backend!r}", lambda: checker.renderer),
+            (f"matcher {config.match.method!r}", lambda: checker.matcher),
+        ]
+        if config.enhance.mode != "never":
+            stages.append((f"enhancer {config.enhance.method!r}", lambda: checker.enhancer))
+        for what, build in stages:
+            try:
+                built = build()
+                load = getattr(built, "_load", None)  # lazy model loaders (MaRINeR): load now
+                if callable(load):
+                    load()
+            except (InputError, MemoryError):
+                raise
+            except ImportError as err:
+                raise MissingExtraError(err.name or str(err), "enhance") from err
+            except Exception as err:
+                raise SetupError(f"cannot build the {what}: {type(err).__name__}: {err}") from err
+    except BaseException:
+        checker.close()
+        raise
+    return checker
+
+
+def images_outside_dataset(config: RunConfig, frames: Sequence[Frame]) -> list[str]:
+    """Image paths (as written) that lie outside the dataset folder: the trajectory's folder
+    (the model folder for COLMAP) or the ``--images`` folder. Such paths are read, not refused
+    (datasets often keep images elsewhere), but listed in the summary and the report."""
+    traj = Path(config.input.trajectory)
+    roots = [traj if traj.is_dir() else traj.parent]
+    if config.input.images and Path(config.input.images).is_dir():
+        roots.append(Path(config.input.images))
+    norm_roots = [os.path.normpath(os.path.abspath(r)) for r in roots]
+    out = []
+    for f in frames:
+        if f.image_file is None:
+            continue
+        p = os.path.normpath(os.path.abspath(f.image_file))
+        if not any(p == r or p.startswith(r.rstrip(os.sep) + os.sep) for r in norm_roots):
+            out.append(str(f.image_path or f.image_file))
+    return out
+
+
+def content_hash(path: str | Path) -> str:
+    from pgt_check.store import content_hash as _hash
+
+    return _hash(path)
+
+
+def frame_input_keys(
+    frames: Sequence[Frame], references: Any = None
+) -> dict[str, str]:
+    """Per-frame key of what the measurement reads besides the settings: the frame's pose,
+    camera, image path and image content hash (``store.content_hash``), and the same of its
+    reference frames. A stored record whose key differs is measured again (a pose edited in
+    place, a replaced photo)."""
+    import numpy as np
+
+    cache: dict[str, str] = {}
+
+    def part(f: Frame) -> dict[str, Any]:
+        image = "none"
+        if f.image_file is not None:
+            k = str(f.image_file)
+            if k not in cache:
+                cache[k] = content_hash(k)
+            image = cache[k]
+        cam = f.camera
+        return {
+            "id": f.frame_id,
+            "pose": np.asarray(f.world_from_cam, dtype=np.float64).tolist(),
+            "camera": [cam.model, cam.width, cam.height, [float(x) for x in cam.params]],
+            "image_path": str(f.image_path),
+            "image": image,
+        }
+
+    refs = dict(references or {})
+    keys = {}
+    for f in frames:
+        blob = {"frame": part(f), "refs": [part(r) for r in refs.get(f.frame_id, ())]}
+        text = json.dumps(blob, sort_keys=True, default=str).encode()
+        keys[f.frame_id] = hashlib.sha256(text).hexdigest()[:24]
+    return keys
 
 
 class RunInterrupted(Exception):
@@ -92,9 +246,13 @@ class RunInterrupted(Exception):
         self.done, self.total, self.out = done, total, out
 
 
-def measurement_fingerprint(config: RunConfig) -> str:
-    """Fingerprint of the stored measurements: their settings and the record layout."""
-    return config.measurement_fingerprint(schema=SCHEMA_VERSION)
+def measurement_fingerprint(config: RunConfig, inputs: dict[str, str] | None = None) -> str:
+    """Fingerprint of the stored measurements: their settings, the record layout and the
+    content hashes of the run-wide inputs (``inputs``, e.g. the mesh). Per-frame inputs (pose,
+    camera, image bytes) are keyed per record (``frame_input_keys``)."""
+    if not inputs:
+        return config.measurement_fingerprint(schema=SCHEMA_VERSION)
+    return config.measurement_fingerprint(schema=SCHEMA_VERSION, inputs=inputs)
 
 
 def stored_measurements(records: Sequence[dict[str, Any]]) -> list[FrameMeasurement]:
@@ -112,44 +270,64 @@ def check_frames(
     *,
     extra: dict[str, Any] | None = None,
     t0: float | None = None,
+    input_keys: dict[str, str] | None = None,
+    inputs: dict[str, str] | None = None,
 ) -> dict[str, Any]:
     """Measure ``frames`` (skipping those already in the store), then write the outputs.
+
+    ``input_keys`` (frame id -> ``frame_input_keys``): a stored record counts as done only if
+    it carries the same key; ``inputs`` (run-wide content hashes) enter the fingerprint.
 
     Measurements stream from the executor into ``out/records.jsonl`` as frames finish; the
     outputs are built from the store in ``frames`` order, so a resumed run writes the same
     frames.csv as an uninterrupted one (timing columns aside).
     """
     from pgt_check.executor import ExecutorStats, iter_results, stop_on_sigint
-    from pgt_check.report.outputs import write_outputs
+    from pgt_check.report.outputs import remove_completion_marker, write_outputs
     from pgt_check.store import RecordStore
 
     t0 = time.perf_counter() if t0 is None else t0
     out = Path(config.out)
     ids = [f.frame_id for f in frames]
     stats = ExecutorStats()
-    with RecordStore.open(
-        out,
-        measurement_fingerprint(config),
-        resume=config.resume,
-        overwrite=config.overwrite,
-        settings=config.measurement_settings(),
-        frame_ids=ids,
-    ) as store:
-        done = store.done_ids().intersection(ids)
+    settings = config.measurement_settings()
+    if inputs:
+        settings["inputs"] = dict(inputs)
+    try:
+        store_cm = RecordStore.open(
+            out,
+            measurement_fingerprint(config, inputs),
+            resume=config.resume,
+            overwrite=config.overwrite,
+            settings=settings,
+            frame_ids=ids,
+        )
+    except OSError as err:
+        raise InputError(
+            f"--out {out}: cannot use it as the output directory "
+            f"({err.strerror or type(err).__name__}{': ' + str(err.filename) if err.filename else ''})"
+        ) from err
+    with store_cm as store:
+        remove_completion_marker(out)  # the output set is incomplete from here on
+        done = _done_ids(store, ids, input_keys)
         if done:
-            logger.info(
-                "%d of %d frames already measured with these settings: skipped",
-                len(done),
-                len(frames),
-            )
+            logger.info("%d of %d frames already measured with these settings and inputs: "
+                        "skipped", len(done), len(frames))
+        stale = store.done_ids().intersection(ids) - done
+        if stale:
+            logger.info("%d frames whose inputs changed (pose, camera or image content) are "
+                        "measured again", len(stale))
         todo = (f for f in frames if f.frame_id not in done)
         with stop_on_sigint() as stop:
             results = iter_results(todo, checker_factory, config, stop=stop, stats=stats)
             for m in _progress(results, len(frames) - len(done), "pgt-check"):
-                store.append(m.to_json())
+                rec = m.to_json()
+                if input_keys is not None:
+                    rec["input_key"] = input_keys.get(m.frame_id, "")
+                store.append(rec)
             interrupted = stop.is_set()
         if interrupted:
-            n_done = len(store.done_ids().intersection(ids))
+            n_done = len(_done_ids(store, ids, input_keys))
             if n_done < len(ids):
                 logger.warning(
                     "interrupted: %d/%d frames done, stored in %s", n_done, len(ids), out
@@ -174,6 +352,14 @@ def check_frames(
         "wall_time_s": time.perf_counter() - t0,
     }
     return write_outputs(out, rows, config, extra=summary_extra, assets=assets)
+
+
+def _done_ids(store: Any, ids: Sequence[str], input_keys: dict[str, str] | None) -> set[str]:
+    """Frames of ``ids`` whose latest current record also has the current input key."""
+    latest = store.latest(ids)
+    if input_keys is None:
+        return set(latest)
+    return {fid for fid, rec in latest.items() if rec.get("input_key") == input_keys.get(fid)}
 
 
 def write_report_assets(

@@ -65,7 +65,8 @@ def default_workers() -> int:
 
 @contextlib.contextmanager
 def stop_on_sigint() -> Iterator[threading.Event]:
-    """While active, the first SIGINT sets the yielded event; a second raises KeyboardInterrupt.
+    """While active, the first SIGINT or SIGTERM sets the yielded event; a second raises
+    KeyboardInterrupt.
 
     Outside the main thread (where signal handlers cannot be installed) it only yields an event.
     """
@@ -79,11 +80,14 @@ def stop_on_sigint() -> Iterator[threading.Event]:
             raise KeyboardInterrupt
         stop.set()
 
-    previous = signal.signal(signal.SIGINT, handler)
+    # SIGTERM (CI cancel, docker stop, kill) is handled like SIGINT
+    signums = (signal.SIGINT, signal.SIGTERM)
+    previous = {s: signal.signal(s, handler) for s in signums}
     try:
         yield stop
     finally:
-        signal.signal(signal.SIGINT, previous)
+        for s, h in previous.items():
+            signal.signal(s, h)
 
 
 def internal_error(frame: Frame, err: BaseException) -> FrameMeasurement:

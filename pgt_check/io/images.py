@@ -11,26 +11,58 @@ from pathlib import Path
 
 import numpy as np
 
-from pgt_check.errors import InputError
+from pgt_check.errors import InputError, PixelCapError
 
 logger = logging.getLogger(__name__)
 
 #: file extensions treated as images when scanning a folder
 IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".pgm", ".webp")
 
+#: default cap on the pixels an image may declare (width x height), checked on the header
+#: before decoding: a decoded RGB float32 image takes 12 bytes per pixel plus the 8-bit buffer,
+#: so 100 MP bound one frame's photo at ~1.5 GB per worker
+DEFAULT_MAX_IMAGE_PIXELS = 100_000_000
 
-def load_image(path: str | Path) -> np.ndarray:
+
+def check_pixel_cap(path: str | Path, max_pixels: int | None) -> None:
+    """Raise PixelCapError if the header of ``path`` declares more than ``max_pixels`` pixels.
+
+    Reads only the header (PIL, lazy). A file PIL cannot identify is left to the decoder (which
+    then fails or decodes a format PIL lacks; OpenCV keeps its own 2^30-pixel limit)."""
+    if max_pixels is None:
+        return
+    from PIL import Image
+
+    pil_limit = Image.MAX_IMAGE_PIXELS
+    Image.MAX_IMAGE_PIXELS = None  # this cap replaces PIL's bomb check (header only here)
+    try:
+        with Image.open(path) as im:
+            width, height = im.size
+    except Exception:  # noqa: BLE001 - unidentifiable header: the decoder decides
+        return
+    finally:
+        Image.MAX_IMAGE_PIXELS = pil_limit
+    if int(width) * int(height) > max_pixels:
+        raise PixelCapError(
+            f"{path}: image declares {width}x{height} = {int(width) * int(height)} pixels, "
+            f"more than the cap of {max_pixels} (--max-image-pixels)"
+        )
+
+
+def load_image(path: str | Path, max_pixels: int | None = DEFAULT_MAX_IMAGE_PIXELS) -> np.ndarray:
     """Read an image as (H, W, 3) float32 RGB in [0, 1].
 
     8- and 16-bit integer images are scaled by their type's maximum; grayscale is repeated to
     three channels; an alpha channel is dropped. Raises InputError if the file is missing or
-    cannot be decoded.
+    cannot be decoded, PixelCapError (before decoding) if its header declares more than
+    ``max_pixels`` pixels (None = no cap).
     """
     import cv2  # heavy: imported on first use
 
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: image not found")
+    check_pixel_cap(path, max_pixels)
     try:
         data = np.fromfile(path, dtype=np.uint8)  # works for non-ASCII paths, unlike imread
     except OSError as err:

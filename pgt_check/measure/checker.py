@@ -20,7 +20,12 @@ import numpy as np
 
 from pgt_check.config import RunConfig
 from pgt_check.enhance.base import Evidence, ReferenceView, View
-from pgt_check.errors import InputError
+from pgt_check.errors import (
+    ImageSizeMismatchError,
+    InputError,
+    PixelCapError,
+    ReferenceUnreadableError,
+)
 from pgt_check.measure.edge_path import EdgePath, edge_evidence, measure_edges
 from pgt_check.measure.paths import (
     MAX_EVIDENCE_POINTS,
@@ -145,7 +150,8 @@ class FrameChecker:
         try:
             m = self._measure(frame, keep, clock)
         except InputError as err:
-            m = failed_measurement(frame, MeasureReason.IMAGE_UNREADABLE, str(err))
+            reason = _INPUT_ERROR_REASONS.get(type(err), MeasureReason.IMAGE_UNREADABLE)
+            m = failed_measurement(frame, reason, str(err))
         except Exception as err:  # one frame must not kill the run: recorded and counted
             if self.config.fail_fast:
                 raise
@@ -270,7 +276,10 @@ class FrameChecker:
         from pgt_check.io import load_image
         from pgt_check.io.photo import prepare_photo
 
-        return prepare_photo(load_image(frame.image_file), frame.camera)
+        return prepare_photo(
+            load_image(frame.image_file, max_pixels=self.config.input.max_image_pixels),
+            frame.camera,
+        )
 
     def _match_path(
         self,
@@ -337,7 +346,10 @@ class FrameChecker:
         """The reference photo at the same pixel scale as the frame's working image."""
         from pgt_check.io.images import resize_image
 
-        ref_photo, ref_cam = self._load_photo(ref)
+        try:
+            ref_photo, ref_cam = self._load_photo(ref)
+        except InputError as err:
+            raise ReferenceUnreadableError(f"reference {ref.frame_id}: {err}") from err
         sx = cam_w.width / frame.camera.width
         ref_size = (max(1, round(ref_cam.width * sx)), max(1, round(ref_cam.height * sx)))
         ref_cam_w = ref_cam.scaled(ref_size[0] / ref_cam.width, ref_size[1] / ref_cam.height)
@@ -407,6 +419,14 @@ class FrameChecker:
             corr.drot_deg,
             tuple(tuple(map(float, r)) for r in corr.world_from_cam),
         )
+
+
+#: per-frame reasons of the specific input errors (any other InputError: image_unreadable)
+_INPUT_ERROR_REASONS: dict[type, MeasureReason] = {
+    ImageSizeMismatchError: MeasureReason.IMAGE_SIZE_MISMATCH,
+    PixelCapError: MeasureReason.PIXEL_CAP_EXCEEDED,
+    ReferenceUnreadableError: MeasureReason.REFERENCE_UNREADABLE,
+}
 
 
 def _replace(m: FrameMeasurement, **changes: Any) -> FrameMeasurement:

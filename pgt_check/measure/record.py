@@ -36,6 +36,12 @@ class MeasureReason(str, Enum):
     LOW_COVERAGE = "low_coverage"
     INTERNAL_ERROR = "internal_error"
     WORKER_CRASHED = "worker_crashed"
+    #: the photo's pixel size does not fit its camera (other aspect, or scaled > 8x)
+    IMAGE_SIZE_MISMATCH = "image_size_mismatch"
+    #: the reference photo of the enhanced path cannot be read
+    REFERENCE_UNREADABLE = "reference_unreadable"
+    #: the image header declares more pixels than ``input.max_image_pixels``
+    PIXEL_CAP_EXCEEDED = "pixel_cap_exceeded"
 
 
 class EnhanceWhy(str, Enum):
@@ -245,6 +251,9 @@ class FrameMeasurement:
     intrinsics: tuple[float, float, float, float] | None = None
     camera_id: str = ""
     evidence: AbsoluteEvidence | None = None
+    #: hash of what this frame's measurement depends on besides the settings (pose, camera,
+    #: image bytes, the references' ones); a stored record whose key differs is measured again
+    input_key: str = ""
 
     # -- access ---------------------------------------------------------------------------
     @property
@@ -324,6 +333,7 @@ class FrameMeasurement:
             evidence=None
             if d.get("evidence") is None
             else AbsoluteEvidence.from_json(d["evidence"]),
+            input_key=str(d.get("input_key") or ""),
         )
 
     # -- flat view ---------------------------------------------------------------------------

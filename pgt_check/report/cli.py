@@ -44,6 +44,8 @@ def load_run(out_dir: Path) -> tuple[list[FrameMeasurement], dict]:
         for r in iter_records(rec_path)
         if r.get(FINGERPRINT_KEY) == info.get("fingerprint")
     }
+    if not isinstance(info, dict):
+        raise InputError(f"{run_path}: expected a JSON object")
     order = info.get("frame_ids") or list(latest)
     missing = [fid for fid in order if fid not in latest]
     if missing:
@@ -51,10 +53,14 @@ def load_run(out_dir: Path) -> tuple[list[FrameMeasurement], dict]:
             f"{out_dir}: {len(missing)} of {len(order)} frames have no record (e.g. "
             f"{missing[0]!r}): the run did not finish; resume it first"
         )
+    if not isinstance(info, dict) or not isinstance(cfg, dict):
+        raise InputError(f"{out_dir}: run.json or config.json is not a JSON object")
     try:
         return [FrameMeasurement.from_json(latest[fid]) for fid in order], cfg
     except OldRecordError as err:
         raise InputError(f"{rec_path}: {err}") from err
+    except (KeyError, ValueError, TypeError) as err:
+        raise InputError(f"{rec_path}: a record is malformed ({type(err).__name__}: {err})") from err
 
 
 def _warn_stale_auto_decisions(records: list[FrameMeasurement], config: RunConfig) -> None:
@@ -76,6 +82,19 @@ def _warn_stale_auto_decisions(records: list[FrameMeasurement], config: RunConfi
         )
 
 
+def _old_summary(path: Path) -> dict:
+    """The previous summary.json (for run facts the records lack); {} if missing or corrupt
+    (it is rebuilt anyway)."""
+    if not path.is_file():
+        return {}
+    try:
+        old = json.loads(path.read_text(encoding="utf-8"))
+    except (ValueError, OSError):
+        print(f"pgt-check report: note: {path} is unreadable; rebuilding it", file=sys.stderr)
+        return {}
+    return old if isinstance(old, dict) else {}
+
+
 def report_main(argv: Sequence[str]) -> int:
     p = argparse.ArgumentParser(
         prog="pgt-check report", description="Rebuild outputs of a run from its stored records."
@@ -83,6 +102,7 @@ def report_main(argv: Sequence[str]) -> int:
     p.add_argument("out_dir")
     p.add_argument("--threshold-px", type=float, default=None, help="re-judge with a new threshold")
     p.add_argument("--max-fail-fraction", type=float, default=None)
+    p.add_argument("--max-unverifiable-fraction", type=float, default=None)
     p.add_argument(
         "--absolute-paths",
         action="store_true",
@@ -93,7 +113,7 @@ def report_main(argv: Sequence[str]) -> int:
         args = p.parse_args(list(argv))
     except SystemExit as exc:
         return int(exc.code or 0)
-    from pgt_check.report.outputs import write_outputs
+    from pgt_check.report.outputs import outputs_complete, write_outputs
     from pgt_check.verdict import judge_run
 
     try:
@@ -104,23 +124,26 @@ def report_main(argv: Sequence[str]) -> int:
             override["verdict"]["threshold_px"] = args.threshold_px
         if args.max_fail_fraction is not None:
             override["verdict"]["max_fail_fraction"] = args.max_fail_fraction
+        if args.max_unverifiable_fraction is not None:
+            override["verdict"]["max_unverifiable_fraction"] = args.max_unverifiable_fraction
         if args.absolute_paths:
             override["absolute_paths"] = True
         config = RunConfig.from_dict(merge(cfg, override))
         _warn_stale_auto_decisions(records, config)
-        old = (
-            json.loads((out / "summary.json").read_text())
-            if (out / "summary.json").is_file()
-            else {}
-        )
+        complete, why = outputs_complete(out)
+        if not complete:
+            print(f"pgt-check report: note: the output set in {out} was incomplete ({why}); "
+                  "rebuilding all of it", file=sys.stderr)
+        old = _old_summary(out / "summary.json")
         extra = {
             k: old[k]
-            for k in ("trajectory_format", "shading", "setup_s", "wall_time_s")
+            for k in ("trajectory_format", "shading", "setup_s", "wall_time_s",
+                      "images_outside_dataset", "warnings", "executor")
             if k in old
         }
         judged = judge_run(records, config)
         summary = write_outputs(out, judged.rows, config, {**extra, **judged.summary_extra()})
-    except InputError as err:
+    except (InputError, OSError) as err:
         print(f"pgt-check report: error: {err}", file=sys.stderr)
         return 2
     c = summary["counts"]

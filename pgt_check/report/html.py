@@ -270,6 +270,9 @@ def page_context(
         "unverifiable_reasons": sorted(
             (stats.get("unverifiable_reasons") or {}).items(), key=lambda kv: -kv[1]
         ),
+        "input_warnings": [
+            redact_text(str(w), absolute_paths) for w in (summary.get("warnings") or [])
+        ],
         "offset_message": str(offset.get("message", "")),
         "offset_systematic": bool(offset.get("systematic")),
         "run_info": run_info,

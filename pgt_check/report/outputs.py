@@ -50,11 +50,20 @@ def _clean(value: Any) -> Any:
     return value
 
 
+#: first characters that make a spreadsheet read a cell as a formula (OWASP CSV injection)
+_FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
+
+
 def _csv_value(value: Any) -> Any:
+    """A frames.csv cell. Text (ids, paths, reasons) starting with ``= + - @``, tab or CR gets a
+    leading ``'`` so spreadsheets show it as text; numbers are never changed (a negative number
+    stays a number)."""
     if value is None:
         return ""
     if isinstance(value, float):
         return "" if not math.isfinite(value) else f"{value:.6g}"
+    if isinstance(value, str) and value.startswith(_FORMULA_START):
+        return "'" + value
     return value
 
 
@@ -111,7 +120,7 @@ def build_summary(
         w, h = 0, 0
     threshold = resolve_threshold_px(config.verdict, w, h)
     stats = run_statistics(records, threshold)
-    passed, why = gate(stats["counts"], config.verdict)
+    passed, why = gate(stats["counts"], config.verdict, stats["unverifiable_reasons"])
     summary = {
         "tool": "pgt-check",
         "version": __version__,
@@ -128,6 +137,55 @@ def build_summary(
     if extra:
         summary.update(extra)
     return _clean(summary)
+
+
+#: written last by ``write_outputs``: the output files and their sha256. Its absence means the
+#: output set is incomplete (a run or ``pgt-check report`` is writing, or was killed midway)
+COMPLETION_MARKER = "outputs.complete.json"
+#: the files the marker lists (when present)
+OUTPUT_FILES = ("frames.csv", "config.json", "summary.json", "report.html", "junit.xml",
+                "assets/index.json")
+
+
+def remove_completion_marker(out: Path) -> None:
+    """Mark ``out``'s output set incomplete (called before any output is rewritten)."""
+    try:
+        (Path(out) / COMPLETION_MARKER).unlink()
+    except FileNotFoundError:
+        pass
+
+
+def write_completion_marker(out: Path) -> None:
+    import hashlib
+
+    out = Path(out)
+    files = {}
+    for name in OUTPUT_FILES:
+        p = out / name
+        if p.is_file():
+            files[name] = hashlib.sha256(p.read_bytes()).hexdigest()
+    text = json.dumps({"tool": "pgt-check", "version": __version__, "files": files}, indent=2)
+    atomic_write_text(out / COMPLETION_MARKER, text + "\n")
+
+
+def outputs_complete(out: Path) -> tuple[bool, str]:
+    """Whether ``out`` holds a complete output set: the marker exists and every file it lists
+    has the sha256 it lists. Returns (complete, why not)."""
+    import hashlib
+
+    out = Path(out)
+    marker = out / COMPLETION_MARKER
+    if not marker.is_file():
+        return False, f"{COMPLETION_MARKER} is missing (the outputs were not finished)"
+    try:
+        files = json.loads(marker.read_text(encoding="utf-8"))["files"]
+        for name, digest in files.items():
+            p = out / name
+            if not p.is_file() or hashlib.sha256(p.read_bytes()).hexdigest() != digest:
+                return False, f"{name} does not match {COMPLETION_MARKER}"
+    except (ValueError, KeyError, TypeError, AttributeError, OSError) as err:
+        return False, f"{COMPLETION_MARKER} is unreadable ({err})"
+    return True, ""
 
 
 def write_outputs(
@@ -147,6 +205,7 @@ def write_outputs(
     ``assets/index.json`` already lists."""
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    remove_completion_marker(out)
     atomic_write_text(out / "frames.csv", frames_csv_text(records))
     atomic_write_text(out / "config.json", json.dumps(config.to_dict(), indent=2) + "\n")
     summary = build_summary(records, config, extra)
@@ -155,5 +214,6 @@ def write_outputs(
         from pgt_check.report.html import build_report
 
         build_report(out, records, summary, assets, absolute_paths=config.absolute_paths)
+    write_completion_marker(out)  # last: the set is complete
     logger.info("wrote %s", out)
     return summary

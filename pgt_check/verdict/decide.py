@@ -163,21 +163,45 @@ def judge(m: FrameMeasurement, config: VerdictConfig, shared: Any = None) -> Jud
     return j(Verdict.UNVERIFIABLE, f"relative_evidence_only (registration {reg})", evidence)
 
 
-def gate(counts: Mapping[str, int], config: VerdictConfig) -> tuple[bool, str]:
-    """Run-level gate over verdict counts; returns (passed, explanation)."""
+#: UNVERIFIABLE reasons that mean the tool itself failed on a frame (they count against the gate)
+INTERNAL_REASONS = (MeasureReason.INTERNAL_ERROR.value, MeasureReason.WORKER_CRASHED.value)
+
+
+def gate(
+    counts: Mapping[str, int],
+    config: VerdictConfig,
+    reasons: Mapping[str, int] | None = None,
+) -> tuple[bool, str]:
+    """Run-level gate over verdict counts; returns (passed, explanation). Fails closed.
+
+    Fails when no frame was checked or none was verified (PASS + FAIL = 0), when frames with an
+    internal error or a crashed worker (``reasons``: UNVERIFIABLE reason counts) exceed
+    ``max_internal_errors``, or when the FAIL or UNVERIFIABLE share exceeds its limit. The
+    comparisons are written so that a non-finite limit (rejected by the config anyway) fails.
+    """
     total = sum(counts.values())
     if total == 0:
         return False, "no frames were checked"
-    fail = counts.get(Verdict.FAIL.value, 0) / total
-    unv = counts.get(Verdict.UNVERIFIABLE.value, 0) / total
-    if fail > config.max_fail_fraction:
-        return False, f"FAIL fraction {fail:.3f} > max {config.max_fail_fraction:.3f}"
-    if unv > config.max_unverifiable_fraction:
-        return (
-            False,
-            f"UNVERIFIABLE fraction {unv:.3f} > max {config.max_unverifiable_fraction:.3f}",
+    n_fail = counts.get(Verdict.FAIL.value, 0)
+    n_pass = counts.get(Verdict.PASS.value, 0)
+    if n_pass + n_fail == 0:
+        return False, f"no frame was verified (all {total} frames UNVERIFIABLE)"
+    n_internal = sum(int((reasons or {}).get(r, 0)) for r in INTERNAL_REASONS)
+    if not n_internal <= config.max_internal_errors:
+        return False, (
+            f"{n_internal} frames with internal errors or crashed workers > max "
+            f"{config.max_internal_errors}"
         )
-    return True, f"FAIL fraction {fail:.3f} <= max {config.max_fail_fraction:.3f}"
+    fail = n_fail / total
+    unv = counts.get(Verdict.UNVERIFIABLE.value, 0) / total
+    if not fail <= config.max_fail_fraction:
+        return False, f"FAIL fraction {fail:.3f} > max {config.max_fail_fraction:.3f}"
+    if not unv <= config.max_unverifiable_fraction:
+        return False, f"UNVERIFIABLE fraction {unv:.3f} > max {config.max_unverifiable_fraction:.3f}"
+    return True, (
+        f"FAIL fraction {fail:.3f} <= max {config.max_fail_fraction:.3f}, UNVERIFIABLE fraction "
+        f"{unv:.3f} <= max {config.max_unverifiable_fraction:.3f}"
+    )
 
 
 def systematic_offset(
