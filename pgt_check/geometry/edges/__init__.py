@@ -29,8 +29,8 @@ Steps of ``align_edges``:
     better narrow score is refined.
 
 Pure numpy / OpenCV / scipy. Modules: ``config`` (settings, kinds, reasons), ``results``
-(result types), ``distance`` (labelled distance transforms), ``render_edges``
-(``geometric_edges``), ``photo_edges``, ``search`` (shift search, ambiguity), ``refine``
+(result types), ``distance`` (labelled distance transforms), ``render``
+(``geometric_edges``), ``photo`` (``photo_edges``), ``search`` (shift search, ambiguity), ``refine``
 (start matrices, polish, robust refinement), ``align`` (``align_edges``).
 """
 
@@ -47,9 +47,9 @@ from pgt_check.geometry.edges.config import (
     PhotoEdgeConfig,
     RenderEdgeConfig,
 )
-from pgt_check.geometry.edges.photo_edges import photo_edges
+from pgt_check.geometry.edges.photo import photo_edges
 from pgt_check.geometry.edges.refine import rotation_homography, translation_matrix
-from pgt_check.geometry.edges.render_edges import geometric_edges
+from pgt_check.geometry.edges.render import geometric_edges
 from pgt_check.geometry.edges.results import EdgeAlignment, EdgeMatches, PhotoEdges, RenderEdges
 
 __all__ = [

@@ -4,6 +4,7 @@ the per-bin distance transforms with labels used for oriented chamfer matching."
 from __future__ import annotations
 
 import logging
+from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -80,7 +81,8 @@ def _oriented_maps(
     bins: np.ndarray, rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int], n_bins: int
 ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
     """Per bin b: distance to the nearest edge of bin b +- 1 (inf: none), its OpenCV label and
-    the edge index of each label - 1."""
+    the edge index of each label - 1. The bins' distance transforms (most of the time of
+    ``photo_edges``) run on ``cv2.getNumThreads()`` threads (OpenCV releases the GIL)."""
     import cv2
 
     h, w = shape
@@ -88,20 +90,32 @@ def _oriented_maps(
     olab = np.empty((n_bins, h, w), dtype=np.int32)
     bin_map = np.full((h, w), 255, dtype=np.uint8)
     bin_map[rows, cols] = bins
-    label_edges = []
-    for b in range(n_bins):
-        compat = [(b - 1) % n_bins, b, (b + 1) % n_bins]
-        lut = np.full(256, 255, dtype=np.uint8)
-        lut[compat] = 0
-        src = cv2.LUT(bin_map, lut)
-        # OpenCV numbers the zero pixels row-major from 1, as ``points`` are ordered
-        label_edges.append(np.flatnonzero(np.isin(bins, compat)).astype(np.int32))
-        if len(label_edges[-1]):
-            odist[b], olab[b] = cv2.distanceTransformWithLabels(
-                src, cv2.DIST_L2, 5, labelType=cv2.DIST_LABEL_PIXEL
-            )
-        else:
+    # OpenCV numbers the zero pixels row-major from 1, as ``points`` are ordered
+    compat = [[(b - 1) % n_bins, b, (b + 1) % n_bins] for b in range(n_bins)]
+    label_edges = [np.flatnonzero(np.isin(bins, c)).astype(np.int32) for c in compat]
+
+    def transform(b: int) -> None:
+        if not len(label_edges[b]):
             odist[b], olab[b] = np.inf, 0
+            return
+        lut = np.full(256, 255, dtype=np.uint8)
+        lut[compat[b]] = 0
+        cv2.distanceTransformWithLabels(  # in place (odist[b], olab[b] are contiguous)
+            cv2.LUT(bin_map, lut),
+            cv2.DIST_L2,
+            5,
+            dst=odist[b],
+            labels=olab[b],
+            labelType=cv2.DIST_LABEL_PIXEL,
+        )
+
+    n_threads = min(n_bins, max(1, cv2.getNumThreads()))
+    if n_threads > 1 and len(bins):
+        with ThreadPoolExecutor(n_threads) as pool:
+            list(pool.map(transform, range(n_bins)))
+    else:
+        for b in range(n_bins):
+            transform(b)
     return odist, olab, label_edges
 
 
