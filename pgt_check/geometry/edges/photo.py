@@ -4,7 +4,6 @@ the per-bin distance transforms with labels used for oriented chamfer matching."
 from __future__ import annotations
 
 import logging
-from concurrent.futures import ThreadPoolExecutor
 
 import numpy as np
 
@@ -81,8 +80,8 @@ def _oriented_maps(
     bins: np.ndarray, rows: np.ndarray, cols: np.ndarray, shape: tuple[int, int], n_bins: int
 ) -> tuple[np.ndarray, np.ndarray, list[np.ndarray]]:
     """Per bin b: distance to the nearest edge of bin b +- 1 (inf: none), its OpenCV label and
-    the edge index of each label - 1. The bins' distance transforms (most of the time of
-    ``photo_edges``) run on ``cv2.getNumThreads()`` threads (OpenCV releases the GIL)."""
+    the edge index of each label - 1. The labelled distance transforms are ~70 % of the time of
+    ``photo_edges`` (8 x ~4.5 ms at 640 x 480); all bins are needed by ``align_edges``."""
     import cv2
 
     h, w = shape
@@ -94,10 +93,10 @@ def _oriented_maps(
     compat = [[(b - 1) % n_bins, b, (b + 1) % n_bins] for b in range(n_bins)]
     label_edges = [np.flatnonzero(np.isin(bins, c)).astype(np.int32) for c in compat]
 
-    def transform(b: int) -> None:
+    for b in range(n_bins):
         if not len(label_edges[b]):
             odist[b], olab[b] = np.inf, 0
-            return
+            continue
         lut = np.full(256, 255, dtype=np.uint8)
         lut[compat[b]] = 0
         cv2.distanceTransformWithLabels(  # in place (odist[b], olab[b] are contiguous)
@@ -108,14 +107,6 @@ def _oriented_maps(
             labels=olab[b],
             labelType=cv2.DIST_LABEL_PIXEL,
         )
-
-    n_threads = min(n_bins, max(1, cv2.getNumThreads()))
-    if n_threads > 1 and len(bins):
-        with ThreadPoolExecutor(n_threads) as pool:
-            list(pool.map(transform, range(n_bins)))
-    else:
-        for b in range(n_bins):
-            transform(b)
     return odist, olab, label_edges
 
 
