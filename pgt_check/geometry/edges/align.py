@@ -1,0 +1,202 @@
+"""``align_edges``: shift search, refinement and evaluation of the edge alignment."""
+
+from __future__ import annotations
+
+import logging
+import math
+import time
+
+import numpy as np
+
+from pgt_check.geometry.edges.config import MODELS, EdgeAlignConfig, EdgeReason
+from pgt_check.geometry.edges.refine import (
+    correspond,
+    polish,
+    refine,
+    rotation_homography,
+    support_at,
+    translation_matrix,
+    warp_points,
+)
+from pgt_check.geometry.edges.results import EdgeAlignment, EdgeMatches, PhotoEdges, RenderEdges
+from pgt_check.geometry.edges.search import ShiftSearch, bins_of, search_shifts
+from pgt_check.geometry.homography import check_homography, corner_error
+
+logger = logging.getLogger(__name__)
+
+
+def auto_tau(width: int, height: int) -> float:
+    """Default chamfer truncation (px) for a working image of this size."""
+    return max(3.0, 0.0075 * math.hypot(width, height))
+
+
+def _failure(
+    reason: EdgeReason,
+    re: RenderEdges,
+    pe: PhotoEdges,
+    tau: float,
+    config: EdgeAlignConfig,
+    timings: dict[str, float],
+    **kw,
+) -> EdgeAlignment:
+    """An unsuccessful ``EdgeAlignment``; ``kw`` overrides the empty defaults (diagnostics)."""
+    base = dict(
+        success=False,
+        reason=reason,
+        photo_from_render=None,
+        corner_error=float("inf"),
+        support=0.0,
+        support_identity=0.0,
+        residual_px=float("nan"),
+        n_edges=len(re),
+        n_photo_edges=len(pe),
+        score=0.0,
+        baseline_score=0.0,
+        shift=None,
+        second_shift=None,
+        second_score=0.0,
+        ambiguity=0.0,
+        ambiguous=False,
+        tau_px=tau,
+        model=config.model,
+        timings=timings,
+    )
+    base.update(kw)
+    return EdgeAlignment(**base)
+
+
+def _start(
+    re: RenderEdges,
+    pe: PhotoEdges,
+    bins: np.ndarray,
+    shift: np.ndarray,
+    tau: float,
+    config: EdgeAlignConfig,
+) -> np.ndarray:
+    """The refinement start: the best shift as a translation or as the camera rotation that
+    produces it, whichever puts more edges exactly on photo edges (narrow score), polished."""
+    starts = [translation_matrix(*shift)]
+    if re.camera_K is not None and np.hypot(*shift) > 0.5:
+        starts.append(rotation_homography(re.camera_K, *shift))
+    polished = [polish(re, pe, bins, h0, tau, config) for h0 in starts]
+    return max(polished, key=lambda hs: hs[1])[0]
+
+
+def _evaluate(
+    re: RenderEdges, pe: PhotoEdges, bins: np.ndarray, hmat: np.ndarray, tau: float
+) -> tuple[float, EdgeMatches]:
+    """Support (share of render edges within ``tau`` of a compatible photo edge) of ``hmat``
+    and the matches (photo points moved onto the photo edge lines)."""
+    q = warp_points(hmat, re.points)
+    ok, e = correspond(q, bins, pe, tau)
+    nrm = pe.normals[e[ok]]
+    res = np.sum(nrm * (q[ok] - pe.points[e[ok]]), axis=1)
+    matches = EdgeMatches(
+        render_points=re.points[ok].copy(),
+        photo_points=q[ok] - res[:, None] * nrm,
+        photo_normals=nrm,
+        depth=re.depth[ok].copy(),
+        residuals=res,
+    )
+    return float(ok.mean()), matches
+
+
+def _measured(
+    found: ShiftSearch,
+    hmat: np.ndarray,
+    support: float,
+    support_id: float,
+    matches: EdgeMatches,
+    width: int,
+    height: int,
+) -> dict:
+    """The measured fields of an ``EdgeAlignment`` (successful or not)."""
+    res = matches.residuals
+    s2 = found.second_shift
+    return dict(
+        photo_from_render=hmat,
+        corner_error=corner_error(hmat, width, height),
+        support=support,
+        support_identity=support_id,
+        residual_px=float(np.median(np.abs(res))) if len(res) else float("nan"),
+        score=found.best_score,
+        baseline_score=found.baseline,
+        shift=(float(found.best_shift[0]), float(found.best_shift[1])),
+        second_shift=None if s2 is None else (float(s2[0]), float(s2[1])),
+        second_score=found.second_score,
+        ambiguity=found.ambiguity,
+        ambiguous=found.ambiguous,
+        matches=matches,
+    )
+
+
+def align_edges(
+    render_edges: RenderEdges,
+    photo_edges: PhotoEdges,
+    config: EdgeAlignConfig = EdgeAlignConfig(),
+) -> EdgeAlignment:
+    """Estimate ``photo_from_render`` aligning the render's geometric edges with the photo's.
+
+    Render and photo must have the same size (the working resolution). Never raises for bad
+    data: failures come back with ``success=False`` and an ``EdgeReason``.
+    """
+    re, pe = render_edges, photo_edges
+    if config.model not in MODELS:
+        raise ValueError(f"model must be one of {', '.join(MODELS)}, got {config.model!r}")
+    if (re.width, re.height) != (pe.width, pe.height):
+        raise ValueError(
+            f"render edges are {re.width}x{re.height} but photo edges {pe.width}x{pe.height}"
+        )
+    w, h = re.width, re.height
+    tau = float(config.tau_px) if config.tau_px is not None else auto_tau(w, h)
+    timings: dict[str, float] = {}
+    t0 = time.perf_counter()
+    bins = bins_of(re.normals, pe.n_bins) if len(re) else np.zeros(0, dtype=np.int64)
+    support_id = support_at(re.points, bins, np.eye(3), pe, tau) if len(pe) else 0.0
+    if len(re) < config.min_edges:
+        return _failure(
+            EdgeReason.TOO_FEW_EDGES, re, pe, tau, config, timings, support_identity=support_id
+        )
+    if len(pe) < config.min_photo_edges:
+        return _failure(EdgeReason.TOO_FEW_PHOTO_EDGES, re, pe, tau, config, timings)
+
+    # (a) shift search
+    found = search_shifts(re, pe, bins, tau, config, timings)
+    if found is None:
+        return _failure(
+            EdgeReason.NO_OVERLAP, re, pe, tau, config, timings, support_identity=support_id
+        )
+    # (b) refinement of the better start
+    t2 = time.perf_counter()
+    hmat = refine(re, pe, bins, _start(re, pe, bins, found.best_shift, tau, config), tau, config)[0]
+    timings["refine"] = time.perf_counter() - t2
+
+    support, matches = _evaluate(re, pe, bins, hmat, tau)
+    timings["total"] = time.perf_counter() - t0
+    out = _measured(found, hmat, support, support_id, matches, w, h)
+    reason = None
+    if check_homography(hmat, w, h) is not None:
+        reason = EdgeReason.ILL_CONDITIONED
+    elif found.ambiguous:
+        reason = EdgeReason.AMBIGUOUS
+    elif support < config.min_support:
+        reason = EdgeReason.LOW_SUPPORT
+    if reason is not None:
+        return _failure(reason, re, pe, tau, config, timings, **out)
+    logger.debug(
+        "edge alignment: corner error %.2f px, support %.2f (identity %.2f), ambiguity %.2f",
+        out["corner_error"],
+        support,
+        support_id,
+        found.ambiguity,
+    )
+    return EdgeAlignment(
+        success=True,
+        reason=None,
+        model=config.model,
+        tau_px=tau,
+        n_edges=len(re),
+        n_photo_edges=len(pe),
+        timings=timings,
+        **out,
+    )

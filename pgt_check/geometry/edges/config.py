@@ -1,0 +1,98 @@
+"""Settings of the edge evidence, the kinds of render edge points and the failure reasons."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from enum import Enum
+
+#: kinds of render edge points (``RenderEdges.kind``)
+KIND_OCCLUSION = 0  # depth discontinuity between two surfaces
+KIND_BORDER = 1  # mesh / background border
+KIND_CREASE = 2  # normal discontinuity on one surface
+
+MODELS = ("shift", "similarity", "affine", "homography")
+#: parameters of each model (refinement needs at least 3 matches per parameter)
+N_PARAMS = {"shift": 2, "similarity": 4, "affine": 6, "homography": 8}
+
+
+class EdgeReason(str, Enum):
+    """Why an edge alignment is not usable (machine-readable, closed set)."""
+
+    TOO_FEW_EDGES = "too_few_edges"
+    TOO_FEW_PHOTO_EDGES = "too_few_photo_edges"
+    NO_OVERLAP = "no_overlap"
+    LOW_SUPPORT = "low_support"
+    AMBIGUOUS = "ambiguous"
+    ILL_CONDITIONED = "ill_conditioned_homography"
+
+
+@dataclass(frozen=True)
+class RenderEdgeConfig:
+    """Settings of ``geometric_edges`` (pixels of the render)."""
+
+    #: occlusion edge: inverse depth mis-predicted (by planar extrapolation from both sides) by
+    #: more than this fraction of the near inverse depth
+    depth_jump_rel: float = 0.04
+    #: crease: angle between the normals on both sides of a pixel above this (degrees)
+    crease_angle_deg: float = 28.0
+    #: baseline (px) of the finite differences for normals; 2 smooths faceted / noisy meshes
+    normal_step_px: int = 2
+    #: no creases this close (px) to an occlusion edge or the background (normals unreliable)
+    crease_margin_px: int = 2
+    include_borders: bool = True
+    include_creases: bool = True
+    #: keep at most this many points (seeded random subsample); None = all
+    max_points: int | None = 4000
+    seed: int = 0
+
+
+@dataclass(frozen=True)
+class PhotoEdgeConfig:
+    """Settings of ``photo_edges``."""
+
+    blur_sigma: float = 1.0
+    #: Canny high threshold = max(this percentile of the gradient magnitude,
+    #: ``median_factor`` x median, ``min_gradient`` (grey levels per pixel))
+    high_percentile: float = 90.0
+    median_factor: float = 3.0
+    min_gradient: float = 6.0
+    low_ratio: float = 0.4
+    #: orientation bins over [0, pi); a render edge matches photo edges of its bin +- 1
+    n_bins: int = 8
+
+
+@dataclass(frozen=True)
+class EdgeAlignConfig:
+    """Settings of ``align_edges`` (pixels of the working images)."""
+
+    #: chamfer truncation / inlier distance (px); None = 0.0075 x image diagonal, at least 3
+    tau_px: float | None = None
+    #: shift search range as a fraction of the image diagonal
+    search_radius: float = 0.1
+    #: coarse shift grid step (px); None = 0.005 x diagonal, at least 2
+    coarse_step_px: float | None = None
+    coarse_points: int = 500
+    fine_points: int = 2000
+    refine_points: int = 2000
+    #: a shift must keep at least this share of the render edges inside the photo
+    min_inside: float = 0.5
+    model: str = "homography"
+    #: refinement iterations in all (split over the stages shift -> ... -> model)
+    iterations: int = 30
+    #: a stage stops when an update moves no image corner by more than this (px)
+    converged_px: float = 0.02
+    #: Levenberg damping, relative to the mean diagonal of the normal equations
+    damping: float = 1e-3
+    #: Tukey scale of the last refinement stage: max(min_scale_px, final_scale x tau)
+    final_scale: float = 0.35
+    min_scale_px: float = 1.5
+    #: before refining, re-search the shift within +- this (px) at the narrow final scale
+    polish_radius_px: int = 3
+    #: best shift farther than ``ambiguity_separation`` x tau from the best (a second peak or a
+    #: ridge of parallel edges) whose score above the median shift score is at least this share
+    #: of the best's -> ambiguous
+    ambiguity_ratio: float = 0.85
+    ambiguity_separation: float = 3.0
+    min_edges: int = 50
+    min_photo_edges: int = 50
+    min_support: float = 0.3
