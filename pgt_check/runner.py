@@ -50,12 +50,47 @@ def load_trajectory(config: RunConfig) -> Trajectory:
     return traj
 
 
+#: seconds between progress lines when stderr is not a terminal (CI logs)
+PROGRESS_INTERVAL_S = 5.0
+
+
 def _progress(iterable, total: int, desc: str):
+    """A tqdm bar on a terminal; otherwise a log line every ``PROGRESS_INTERVAL_S``."""
+    import sys
+
+    if not sys.stderr.isatty():
+        return log_progress(iterable, total, desc)
     try:
         from tqdm import tqdm
     except ImportError:  # pragma: no cover - tqdm is a core dependency
         return iterable
-    return tqdm(iterable, total=total, desc=desc, unit="frame", disable=None)
+    return tqdm(iterable, total=total, desc=desc, unit="frame")
+
+
+def log_progress(iterable, total: int, desc: str, interval_s: float | None = None,
+                 clock: Callable[[], float] = time.monotonic):
+    """Yield from ``iterable``, logging ``desc: done/total frames (..%), rate, time left`` at
+    INFO every ``interval_s`` seconds (default ``PROGRESS_INTERVAL_S``) and once at the end."""
+    interval = PROGRESS_INTERVAL_S if interval_s is None else interval_s
+    t0 = last = clock()
+    done = 0
+
+    def line() -> None:
+        elapsed = max(clock() - t0, 1e-9)
+        rate = done / elapsed
+        left = f", about {(total - done) / rate:.0f} s left" if 0 < rate and done < total else ""
+        pct = f" ({100.0 * done / total:.0f} %)" if total else ""
+        logger.info("%s: %d/%d frames%s, %.2f frames/s%s", desc, done, total, pct, rate, left)
+
+    for item in iterable:
+        yield item
+        done += 1
+        now = clock()
+        if now - last >= interval:
+            last = now
+            line()
+    if done:
+        line()
 
 
 def run(config: RunConfig) -> dict[str, Any]:
@@ -74,7 +109,7 @@ def run(config: RunConfig) -> dict[str, Any]:
     return check_frames(
         frames,
         config,
-        functools.partial(build_frame_checker, config, references),
+        functools.partial(build_frame_checker, config, references, panel_writer(config)),
         extra={"trajectory_format": traj.format},
         t0=t0,
     )
@@ -86,6 +121,15 @@ class RunInterrupted(Exception):
     def __init__(self, done: int, total: int, out: str) -> None:
         super().__init__(f"interrupted: {done}/{total} frames done")
         self.done, self.total, self.out = done, total, out
+
+
+def panel_writer(config: RunConfig):
+    """The checker's panel sink: report panels of likely detail frames from the main pass."""
+    if config.report_details <= 0:
+        return None
+    from pgt_check.report.assets import PanelWriter
+
+    return PanelWriter(config.out, measurement_fingerprint(config), config.verdict)
 
 
 def measurement_fingerprint(config: RunConfig) -> str:
@@ -172,26 +216,42 @@ def write_report_assets(
     config: RunConfig,
     checker_factory: Callable[[], Any],
 ) -> dict[str, dict[str, str]] | None:
-    """Thumbnails for the report's detail panels: the selected frames are measured again here
-    (in this process, keeping their images); other frames never keep images."""
-    from pgt_check.report.assets import select_detail_frames, write_frame_assets
+    """Panels for the report's detail frames: those written during the main pass
+    (``report.assets.PanelWriter``) are reused; only the selected frames still without panels
+    are measured again here (in this process, keeping their images). Panels of frames that
+    were not selected are deleted."""
+    from pgt_check.report.assets import (
+        main_pass_assets,
+        prune_panels,
+        select_detail_frames,
+        write_frame_assets,
+    )
 
     if config.report_details <= 0:
         return None
+    out = Path(config.out)
     chosen = select_detail_frames(rows, max_details=config.report_details)
-    if not chosen:
-        return None
+    assets = main_pass_assets(out, chosen, measurement_fingerprint(config))
+    missing = [fid for fid in chosen if fid not in assets]
     by_id = {f.frame_id: f for f in frames}
-    row_by_id = {r["frame_id"]: r for r in rows}
-    checker = checker_factory()
-    assets: dict[str, dict[str, str]] = {}
-    try:
-        for fid in chosen:
-            images = FrameImages()
-            checker.measure(by_id[fid], keep=images)
-            if images.photo is None:
-                continue
-            assets[fid] = write_frame_assets(Path(config.out), row_by_id[fid], images)
-    finally:
-        checker.close()
-    return assets
+    missing = [fid for fid in missing if fid in by_id]
+    logger.info("report: %d detail frames, %d with panels from the main pass, %d measured again",
+                len(chosen), len(assets), len(missing))
+    if missing:
+        row_by_id = {r["frame_id"]: r for r in rows}
+        checker = checker_factory()
+        if getattr(checker, "panel_sink", None) is not None:
+            checker.panel_sink = None  # panels are written below, for these frames only
+        try:
+            for fid in missing:
+                images = FrameImages()
+                checker.measure(by_id[fid], keep=images)
+                if images.photo is None:
+                    continue
+                assets[fid] = write_frame_assets(out, row_by_id[fid], images)
+        finally:
+            checker.close()
+    removed = prune_panels(out, chosen)
+    if removed:
+        logger.debug("removed %d panel files of frames not shown", removed)
+    return {fid: assets[fid] for fid in chosen if fid in assets}

@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 import time
 import traceback
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -40,7 +40,8 @@ class FrameImages:
     """Working-resolution images and matches of one frame, filled on request for report panels.
 
     photo / render / enhanced: (h, w, 3) float32 RGB [0, 1]; kpts_*: (N, 2) working pixels;
-    inliers: (N,) bool of the homography of the deciding path.
+    inliers: (N,) bool of the homography of the deciding path. ``paths`` holds the matches of
+    each path that ran ("raw", "enhanced") with its homography in working pixels.
     """
 
     photo: np.ndarray | None = None
@@ -49,6 +50,18 @@ class FrameImages:
     kpts_render: np.ndarray | None = None
     kpts_photo: np.ndarray | None = None
     inliers: np.ndarray | None = None
+    paths: dict[str, PathImages] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class PathImages:
+    """Matches of one path for report panels: (N, 2) working pixels, (N,) bool inliers and the
+    photo_from_render homography in working pixels (None when it failed)."""
+
+    kpts_render: np.ndarray
+    kpts_photo: np.ndarray
+    inliers: np.ndarray
+    photo_from_render: np.ndarray | None = None
 
 
 @dataclass(frozen=True, eq=False)
@@ -75,6 +88,16 @@ class PathResult:
     @property
     def success(self) -> bool:
         return self.photo_from_render is not None
+
+    def images(self, scale: tuple[float, float]) -> PathImages:
+        """The matches for report panels, homography back in working pixels (``scale``: working
+        / original size)."""
+        from pgt_check.geometry.homography import scale_homography
+
+        h = None
+        if self.photo_from_render is not None:
+            h = scale_homography(self.photo_from_render, 1.0 / scale[0], 1.0 / scale[1])
+        return PathImages(self.kpts_render, self.kpts_photo, self.inliers, h)
 
     def measurement(
         self, kind: str, method: str, evidence: Evidence, camera: Camera,
@@ -120,6 +143,9 @@ class FrameChecker:
 
     config: RunConfig
     references: Mapping[str, tuple[Frame, ...]] = field(default_factory=dict)
+    #: called as ``panel_sink(measurement, images)`` after each frame (images kept for it; it
+    #: decides which frames get report panels, e.g. ``report.assets.PanelWriter``)
+    panel_sink: Callable[[FrameMeasurement, FrameImages], Any] | None = None
     _renderer: Any = field(default=None, init=False, repr=False)
     _matcher: Any = field(default=None, init=False, repr=False)
     _mesh: Any = field(default=None, init=False, repr=False)
@@ -176,6 +202,8 @@ class FrameChecker:
         """
         t_start = time.perf_counter()
         clock = _Clock()
+        if keep is None and self.panel_sink is not None:
+            keep = FrameImages()
         try:
             m = self._measure(frame, keep, clock)
         except InputError as err:
@@ -185,7 +213,15 @@ class FrameChecker:
                 raise
             logger.error("frame %s: internal error: %s", frame.frame_id, err)
             m = failed_measurement(frame, MeasureReason.INTERNAL_ERROR, format_exception(err))
-        return m.with_timings(clock.timings(time.perf_counter() - t_start))
+        m = m.with_timings(clock.timings(time.perf_counter() - t_start))
+        if self.panel_sink is not None:
+            try:
+                self.panel_sink(m, keep)
+            except Exception as err:  # panels are a convenience: the run goes on without them
+                if self.config.fail_fast:
+                    raise
+                logger.warning("frame %s: report panels not written: %s", frame.frame_id, err)
+        return m
 
     def _measure(self, frame: Frame, keep: FrameImages | None, clock: _Clock) -> FrameMeasurement:
         base = failed_measurement(frame, MeasureReason.NONE)
@@ -233,6 +269,9 @@ class FrameChecker:
         if keep is not None:
             keep.kpts_render, keep.kpts_photo = chosen.kpts_render, chosen.kpts_photo
             keep.inliers = chosen.inliers
+            for name, res in (("raw", raw), ("enhanced", enh)):
+                if res is not None:
+                    keep.paths[name] = res.images(scale)
         pose = None
         if chosen.success and self.config.pose.enabled:
             pose = self._pose_estimate(chosen, render.depth, cam_w, frame, clock)
@@ -386,10 +425,14 @@ def pick_references(
 
 
 def build_frame_checker(
-    config: RunConfig, references: Mapping[str, tuple[Frame, ...]] | None = None
+    config: RunConfig,
+    references: Mapping[str, tuple[Frame, ...]] | None = None,
+    panel_sink: Callable[[FrameMeasurement, FrameImages], Any] | None = None,
 ) -> FrameChecker:
-    """Worker-side factory: a FrameChecker with its mesh, renderer and matcher loaded."""
-    checker = FrameChecker(config, dict(references or {}))
+    """Worker-side factory: a FrameChecker with its mesh, renderer and matcher loaded.
+
+    ``panel_sink`` (picklable; one copy per worker) sees every measurement with its images."""
+    checker = FrameChecker(config, dict(references or {}), panel_sink)
     _ = checker.renderer
     _ = checker.matcher
     return checker
