@@ -274,7 +274,8 @@ def check_report(out: Path, records: list[dict]) -> dict:
             else:
                 assert str(v) == c, (key, v, c)
     # every referenced file exists (page links, plots, detail images)
-    refs = [r for r in page.refs if not r.startswith(("#", "data:"))]
+    # records.jsonl is the run's store (written by the runner, not by write_outputs)
+    refs = [r for r in page.refs if not r.startswith(("#", "data:")) and r != "records.jsonl"]
     refs += [p for kinds in data["assets"].values() for p in kinds.values()]
     assert refs
     for ref in refs:
