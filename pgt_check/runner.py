@@ -73,11 +73,10 @@ def log_progress(iterable, total: int, desc: str, interval_s: float | None = Non
     INFO every ``interval_s`` seconds (default ``PROGRESS_INTERVAL_S``) and once at the end."""
     interval = PROGRESS_INTERVAL_S if interval_s is None else interval_s
     t0 = last = clock()
-    done = 0
+    done = logged = 0
 
-    def line() -> None:
-        elapsed = max(clock() - t0, 1e-9)
-        rate = done / elapsed
+    def line(now: float) -> None:
+        rate = done / max(now - t0, 1e-9)
         left = f", about {(total - done) / rate:.0f} s left" if 0 < rate and done < total else ""
         pct = f" ({100.0 * done / total:.0f} %)" if total else ""
         logger.info("%s: %d/%d frames%s, %.2f frames/s%s", desc, done, total, pct, rate, left)
@@ -87,10 +86,10 @@ def log_progress(iterable, total: int, desc: str, interval_s: float | None = Non
         done += 1
         now = clock()
         if now - last >= interval:
-            last = now
-            line()
-    if done:
-        line()
+            last, logged = now, done
+            line(now)
+    if done and logged != done:
+        line(clock())
 
 
 def run(config: RunConfig) -> dict[str, Any]:
