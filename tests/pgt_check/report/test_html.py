@@ -16,6 +16,7 @@ from report_testdata import (
 )
 
 from pgt_check.config import RunConfig
+from pgt_check.measure import FrameImages
 from pgt_check.report.assets import select_detail_frames, write_frame_assets
 from pgt_check.report.cli import report_main
 from pgt_check.report.html import (
@@ -26,7 +27,6 @@ from pgt_check.report.html import (
     table_value,
 )
 from pgt_check.report.outputs import build_summary, write_outputs
-from pgt_check.measure import FrameImages
 
 
 def _images(seed: int) -> FrameImages:

@@ -14,10 +14,10 @@ import pytest
 from report_testdata import check_report, judged, read_csv, shared_data_dir, validate
 
 from pgt_check.config import RunConfig
+from pgt_check.measure import FrameImages
 from pgt_check.report.assets import PANEL_MAX, select_detail_frames, write_frame_assets
 from pgt_check.report.junit import junit_xml_text
 from pgt_check.report.outputs import write_outputs
-from pgt_check.measure import FrameImages
 
 pytestmark = pytest.mark.shared_data
 
