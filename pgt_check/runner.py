@@ -108,7 +108,9 @@ def run(config: RunConfig) -> dict[str, Any]:
     return check_frames(
         frames,
         config,
-        functools.partial(build_frame_checker, config, references, panel_writer(config)),
+        functools.partial(
+            build_frame_checker, config, references, panel_sink=panel_writer(config)
+        ),
         extra={"trajectory_format": traj.format},
         t0=t0,
     )
