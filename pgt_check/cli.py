@@ -15,6 +15,7 @@ import logging
 import signal
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 from pgt_check import __version__
@@ -266,7 +267,7 @@ def _print_summary(summary: dict[str, Any], out: str) -> None:
         print(f"pgt-check: {sysoff['message']}")
     gate = summary["gate"]
     print(f"pgt-check: gate {'PASSED' if gate['passed'] else 'FAILED'}: {gate['explanation']}")
-    print(f"pgt-check: outputs in {out}")
+    print(f"pgt-check: report: {Path(out) / 'report.html'} (all outputs in {out})")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

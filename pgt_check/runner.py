@@ -57,12 +57,46 @@ def load_trajectory(config: RunConfig) -> Trajectory:
     return traj
 
 
+#: seconds between progress lines when stderr is not a terminal (CI logs)
+PROGRESS_INTERVAL_S = 5.0
+
+
 def _progress(iterable, total: int, desc: str):
+    """A tqdm bar on a terminal; otherwise a log line every ``PROGRESS_INTERVAL_S``."""
+    import sys
+
+    if not sys.stderr.isatty():
+        return log_progress(iterable, total, desc)
     try:
         from tqdm import tqdm
     except ImportError:  # pragma: no cover - tqdm is a core dependency
         return iterable
-    return tqdm(iterable, total=total, desc=desc, unit="frame", disable=None)
+    return tqdm(iterable, total=total, desc=desc, unit="frame")
+
+
+def log_progress(iterable, total: int, desc: str, interval_s: float | None = None,
+                 clock: Callable[[], float] = time.monotonic):
+    """Yield from ``iterable``, logging ``desc: done/total frames (..%), rate, time left`` at
+    INFO every ``interval_s`` seconds (default ``PROGRESS_INTERVAL_S``) and once at the end."""
+    interval = PROGRESS_INTERVAL_S if interval_s is None else interval_s
+    t0 = last = clock()
+    done = logged = 0
+
+    def line(now: float) -> None:
+        rate = done / max(now - t0, 1e-9)
+        left = f", about {(total - done) / rate:.0f} s left" if 0 < rate and done < total else ""
+        pct = f" ({100.0 * done / total:.0f} %)" if total else ""
+        logger.info("%s: %d/%d frames%s, %.2f frames/s%s", desc, done, total, pct, rate, left)
+
+    for item in iterable:
+        yield item
+        done += 1
+        now = clock()
+        if now - last >= interval:
+            last, logged = now, done
+            line(now)
+    if done and logged != done:
+        line(clock())
 
 
 def run(config: RunConfig) -> dict[str, Any]:
@@ -80,8 +114,13 @@ def run(config: RunConfig) -> dict[str, Any]:
         frames = frames[: config.limit]
     logger.info("checking %d frames of %s (%s)", len(frames), traj.source, traj.format)
     references = pick_references(traj, frames, config)
-    factory = functools.partial(build_frame_checker, config, references)
-    checker = preflight(config, references)
+    t_hash = time.perf_counter()
+    inputs = {"mesh": content_hash(config.input.mesh)}
+    keys = frame_input_keys(frames, references)
+    logger.info("hashed the inputs in %.2f s", time.perf_counter() - t_hash)
+    sink = panel_writer(config, measurement_fingerprint(config, inputs))
+    factory = functools.partial(build_frame_checker, config, references, panel_sink=sink)
+    checker = preflight(config, references, panel_sink=sink)
     if config.executor == "serial":  # the serial executor reuses the checker built here
         factory = _ReuseFirst(checker, factory)
     else:
@@ -95,10 +134,6 @@ def run(config: RunConfig) -> dict[str, Any]:
             f"{outside[0]!r}): they were read and their thumbnails may appear in this report"
         ]
         logger.warning("%s", extra["warnings"][0])
-    t_hash = time.perf_counter()
-    inputs = {"mesh": content_hash(config.input.mesh)}
-    keys = frame_input_keys(frames, references)
-    logger.info("hashed the inputs in %.2f s", time.perf_counter() - t_hash)
     try:
         return check_frames(frames, config, factory, extra=extra, t0=t0, input_keys=keys,
                             inputs=inputs)
@@ -125,7 +160,7 @@ class _ReuseFirst:
             self._checker = None
 
 
-def preflight(config: RunConfig, references: Any = None) -> Any:
+def preflight(config: RunConfig, references: Any = None, panel_sink: Any = None) -> Any:
     """Build the frame checker once before the run: the mesh is loaded and validated, the
     renderer, matcher and (unless ``enhance.mode`` is never) the enhancer are built.
 
@@ -138,7 +173,7 @@ def preflight(config: RunConfig, references: Any = None) -> Any:
 
     from pgt_check.measure import FrameChecker
 
-    checker = FrameChecker(config, dict(references or {}))
+    checker = FrameChecker(config, dict(references or {}), panel_sink=panel_sink)
     mesh_path = config.input.mesh
     try:
         try:
@@ -255,6 +290,15 @@ def measurement_fingerprint(config: RunConfig, inputs: dict[str, str] | None = N
     return config.measurement_fingerprint(schema=SCHEMA_VERSION, inputs=inputs)
 
 
+def panel_writer(config: RunConfig, fingerprint: str):
+    """The checker's panel sink: report panels of likely detail frames from the main pass."""
+    if config.report_details <= 0:
+        return None
+    from pgt_check.report.assets import PanelWriter
+
+    return PanelWriter(config.out, fingerprint, config.verdict)
+
+
 def stored_measurements(records: Sequence[dict[str, Any]]) -> list[FrameMeasurement]:
     """Decode stored records; a record of another layout is an InputError naming the fix."""
     try:
@@ -336,7 +380,9 @@ def check_frames(
         measurements = stored_measurements(store.records_in_order(ids))
     judged = judge_run(measurements, config)
     rows = judged.rows
-    assets = write_report_assets(frames, rows, config, checker_factory)
+    assets = write_report_assets(
+        frames, rows, config, checker_factory, measurement_fingerprint(config, inputs)
+    )
     shadings = sorted({str(m.shading) for m in measurements if m.shading})
     summary_extra = {
         "shading": shadings[0] if len(shadings) == 1 else (shadings or None),
@@ -367,27 +413,45 @@ def write_report_assets(
     rows: list[dict[str, Any]],
     config: RunConfig,
     checker_factory: Callable[[], Any],
+    fingerprint: str | None = None,
 ) -> dict[str, dict[str, str]] | None:
-    """Thumbnails for the report's detail panels: the selected frames are measured again here
-    (in this process, keeping their images); other frames never keep images."""
-    from pgt_check.report.assets import select_detail_frames, write_frame_assets
+    """Panels for the report's detail frames: those written during the main pass
+    (``report.assets.PanelWriter``) are reused; only the selected frames still without panels
+    are measured again here (in this process, keeping their images). Panels of frames that
+    were not selected are deleted."""
+    from pgt_check.report.assets import (
+        main_pass_assets,
+        prune_panels,
+        select_detail_frames,
+        write_frame_assets,
+    )
 
     if config.report_details <= 0:
         return None
+    out = Path(config.out)
     chosen = select_detail_frames(rows, max_details=config.report_details)
-    if not chosen:
-        return None
+    fingerprint = fingerprint or measurement_fingerprint(config)
+    assets = main_pass_assets(out, chosen, fingerprint)
+    missing = [fid for fid in chosen if fid not in assets]
     by_id = {f.frame_id: f for f in frames}
-    row_by_id = {r["frame_id"]: r for r in rows}
-    checker = checker_factory()
-    assets: dict[str, dict[str, str]] = {}
-    try:
-        for fid in chosen:
-            images = FrameImages()
-            checker.measure(by_id[fid], keep=images)
-            if images.photo is None:
-                continue
-            assets[fid] = write_frame_assets(Path(config.out), row_by_id[fid], images)
-    finally:
-        checker.close()
-    return assets
+    missing = [fid for fid in missing if fid in by_id]
+    logger.info("report: %d detail frames, %d with panels from the main pass, %d measured again",
+                len(chosen), len(assets), len(missing))
+    if missing:
+        row_by_id = {r["frame_id"]: r for r in rows}
+        checker = checker_factory()
+        if getattr(checker, "panel_sink", None) is not None:
+            checker.panel_sink = None  # panels are written below, for these frames only
+        try:
+            for fid in missing:
+                images = FrameImages()
+                checker.measure(by_id[fid], keep=images)
+                if images.photo is None:
+                    continue
+                assets[fid] = write_frame_assets(out, row_by_id[fid], images)
+        finally:
+            checker.close()
+    removed = prune_panels(out, chosen)
+    if removed:
+        logger.debug("removed %d panel files of frames not shown", removed)
+    return {fid: assets[fid] for fid in chosen if fid in assets}

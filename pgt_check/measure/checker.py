@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 import time
 import traceback
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -91,6 +91,9 @@ class FrameChecker:
 
     config: RunConfig
     references: Mapping[str, tuple[Frame, ...]] = field(default_factory=dict)
+    #: called as ``panel_sink(measurement, images)`` after each frame (images kept for it; it
+    #: decides which frames get report panels, e.g. ``report.assets.PanelWriter``)
+    panel_sink: Callable[[FrameMeasurement, FrameImages], Any] | None = None
     _renderer: Any = field(default=None, init=False, repr=False)
     _matcher: Any = field(default=None, init=False, repr=False)
     _mesh: Any = field(default=None, init=False, repr=False)
@@ -147,6 +150,8 @@ class FrameChecker:
         """
         t_start = time.perf_counter()
         clock = _Clock()
+        if keep is None and self.panel_sink is not None:
+            keep = FrameImages()
         try:
             m = self._measure(frame, keep, clock)
         except InputError as err:
@@ -157,7 +162,15 @@ class FrameChecker:
                 raise
             logger.error("frame %s: internal error: %s", frame.frame_id, err)
             m = failed_measurement(frame, MeasureReason.INTERNAL_ERROR, format_exception(err))
-        return m.with_timings(clock.timings(time.perf_counter() - t_start))
+        m = m.with_timings(clock.timings(time.perf_counter() - t_start))
+        if self.panel_sink is not None:
+            try:
+                self.panel_sink(m, keep)
+            except Exception as err:  # panels are a convenience: the run goes on without them
+                if self.config.fail_fast:
+                    raise
+                logger.warning("frame %s: report panels not written: %s", frame.frame_id, err)
+        return m
 
     def _measure(self, frame: Frame, keep: FrameImages | None, clock: _Clock) -> FrameMeasurement:
         base = failed_measurement(frame, MeasureReason.NONE)
@@ -225,6 +238,9 @@ class FrameChecker:
         if keep is not None:
             keep.kpts_render, keep.kpts_photo = chosen.kpts_render, chosen.kpts_photo
             keep.inliers = chosen.inliers
+            for name, res in (("raw", raw), ("enhanced", enh)):
+                if res is not None:
+                    keep.paths[name] = res.images(w.scale)
         pose = None
         if chosen.success and self.config.pose.enabled:
             pose = self._pose_estimate(chosen, w.render.depth, w.cam_w, frame, clock)
@@ -462,10 +478,14 @@ def pick_references(
 
 
 def build_frame_checker(
-    config: RunConfig, references: Mapping[str, tuple[Frame, ...]] | None = None
+    config: RunConfig,
+    references: Mapping[str, tuple[Frame, ...]] | None = None,
+    panel_sink: Callable[[FrameMeasurement, FrameImages], Any] | None = None,
 ) -> FrameChecker:
-    """Worker-side factory: a FrameChecker with its mesh, renderer and matcher loaded."""
-    checker = FrameChecker(config, dict(references or {}))
+    """Worker-side factory: a FrameChecker with its mesh, renderer and matcher loaded.
+
+    ``panel_sink`` (picklable; one copy per worker) sees every measurement with its images."""
+    checker = FrameChecker(config, dict(references or {}), panel_sink)
     _ = checker.renderer
     _ = checker.matcher
     return checker

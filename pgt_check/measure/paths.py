@@ -4,7 +4,7 @@ the absolute evidence a frame adds to the run-level checks."""
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -13,12 +13,24 @@ from pgt_check.measure.record import AbsoluteEvidence, PathMeasurement
 from pgt_check.types import Camera
 
 
+@dataclass(frozen=True)
+class PathImages:
+    """Matches of one path for report panels: (N, 2) working pixels, (N,) bool inliers and the
+    photo_from_render homography in working pixels (None when it failed)."""
+
+    kpts_render: np.ndarray
+    kpts_photo: np.ndarray
+    inliers: np.ndarray
+    photo_from_render: np.ndarray | None = None
+
+
 @dataclass
 class FrameImages:
     """Working-resolution images and matches of one frame, filled on request for report panels.
 
     photo / render / enhanced: (h, w, 3) float32 RGB [0, 1]; kpts_*: (N, 2) working pixels;
-    inliers: (N,) bool of the homography of the deciding path.
+    inliers: (N,) bool of the homography of the deciding path. ``paths`` holds the matches of
+    each path that ran ("raw", "enhanced") with its homography in working pixels.
     """
 
     photo: np.ndarray | None = None
@@ -27,6 +39,7 @@ class FrameImages:
     kpts_render: np.ndarray | None = None
     kpts_photo: np.ndarray | None = None
     inliers: np.ndarray | None = None
+    paths: dict[str, PathImages] = field(default_factory=dict)
 
 
 @dataclass(frozen=True, eq=False)
@@ -53,6 +66,16 @@ class PathResult:
     @property
     def success(self) -> bool:
         return self.photo_from_render is not None
+
+    def images(self, scale: tuple[float, float]) -> PathImages:
+        """The matches for report panels, homography back in working pixels (``scale``: working
+        / original size)."""
+        from pgt_check.geometry.homography import scale_homography
+
+        h = None
+        if self.photo_from_render is not None:
+            h = scale_homography(self.photo_from_render, 1.0 / scale[0], 1.0 / scale[1])
+        return PathImages(self.kpts_render, self.kpts_photo, self.inliers, h)
 
     def measurement(
         self,

@@ -111,6 +111,7 @@ def timing_summary(records: list[dict[str, Any]]) -> dict[str, dict[str, float]]
 def build_summary(
     records: list[dict[str, Any]], config: RunConfig, extra: dict[str, Any] | None = None
 ) -> dict[str, Any]:
+    from pgt_check.report.paths import path_comparison
     from pgt_check.verdict import gate, run_statistics
     from pgt_check.verdict.decide import resolve_threshold_px
 
@@ -130,6 +131,7 @@ def build_summary(
         "threshold_px": threshold,
         "statistics": stats,
         "timing": timing_summary(records),
+        "raw_vs_enhanced": path_comparison(records),
         "settings": config.to_dict(),
         "fingerprint": config.measurement_fingerprint(),
         "versions": versions(),

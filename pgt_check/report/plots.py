@@ -37,8 +37,20 @@ def _num(rec: Mapping[str, Any], key: str) -> float:
 
 
 def has_enhanced(records: Sequence[Mapping[str, Any]]) -> bool:
-    """True when some frame has an enhanced measurement (else a raw-vs-enhanced plot is empty)."""
-    return any(r.get("corner_error_px_enhanced") is not None for r in records)
+    """True when some frame has both a raw and an enhanced value to compare (corner error or
+    inlier ratio): otherwise the raw-vs-enhanced plot would be empty and is left out."""
+    return any(
+        all(math.isfinite(_num(r, f"{key}_{p}")) for p in ("raw", "enhanced"))
+        for r in records
+        for key in ("corner_error_px", "inlier_ratio")
+    )
+
+
+def _integer_axis(axis) -> None:
+    """Ticks at whole numbers only (frame counts, frame indices)."""
+    from matplotlib.ticker import MaxNLocator
+
+    axis.set_major_locator(MaxNLocator(integer=True))
 
 
 def _save(fig, out_dir: Path, name: str) -> str:
@@ -89,6 +101,7 @@ def plot_histogram(records, summary, out_dir: Path) -> str:
     n_unv = sum(1 for r in records if r.get("verdict") == "UNVERIFIABLE")
     ax.set_xlabel("corner error [px] (log)")
     ax.set_ylabel("frames")
+    _integer_axis(ax.yaxis)
     ax.set_title(f"Corner error ({n_unv} UNVERIFIABLE frames not shown)", fontsize=10)
     ax.legend(fontsize=8)
     return _save(fig, out_dir, "error_hist")
@@ -134,6 +147,8 @@ def plot_error_along_trajectory(records, summary, out_dir: Path) -> str:
     if len(finite) or (math.isfinite(thr) and thr > 0):
         ax.set_yscale("log")
     ax.set_xlabel(xlabel)
+    if xlabel == "frame index":
+        _integer_axis(ax.xaxis)
     ax.set_ylabel("corner error [px] (log)")
     ax.set_title("Corner error along the trajectory", fontsize=10)
     ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0))
@@ -176,6 +191,47 @@ def plot_raw_vs_enhanced(records, summary, out_dir: Path) -> str:
         axes[0].text(0.5, 0.5, "no frame measured on both paths", ha="center",
                      transform=axes[0].transAxes)
     return _save(fig, out_dir, "raw_vs_enhanced")
+
+
+def drift_per_frame(summary: Mapping[str, Any]) -> list[Mapping[str, Any]]:
+    """``summary["shared_errors"]["drift"]["per_frame"]`` entries with a finite index and
+    effect, or [] when there are none."""
+    se = summary.get("shared_errors")
+    drift = se.get("drift") if isinstance(se, Mapping) else None
+    per = drift.get("per_frame") if isinstance(drift, Mapping) else None
+    if not isinstance(per, (list, tuple)):
+        return []
+    return [
+        e for e in per
+        if isinstance(e, Mapping) and math.isfinite(_num(e, "index"))
+        and math.isfinite(_num(e, "effect_px"))
+    ]
+
+
+def plot_drift(records, summary, out_dir: Path) -> str | None:
+    """Drift effect (and its lower bound) along the trajectory, with the threshold."""
+    per = sorted(drift_per_frame(summary), key=lambda e: _num(e, "index"))
+    if not per:
+        return None
+    plt = _pyplot()
+    thr = _threshold(records, summary)
+    x = np.array([_num(e, "index") for e in per])
+    eff = np.array([_num(e, "effect_px") for e in per])
+    lo = np.array([_num(e, "lo_px") for e in per])
+    fig, ax = plt.subplots(figsize=(6, 3.6), layout="constrained")
+    ax.plot(x, eff, color="#1565c0", lw=1.2, marker=".", ms=4, label="drift effect")
+    if np.isfinite(lo).any():
+        ax.fill_between(x, np.where(np.isfinite(lo), lo, eff), eff, color="#90caf9", alpha=0.5,
+                        label="lower bound .. estimate")
+    if math.isfinite(thr):
+        ax.axhline(thr, color="k", ls="--", lw=1.0, label=f"threshold {thr:.1f} px")
+    ax.set_xlabel("frame index")
+    _integer_axis(ax.xaxis)
+    ax.set_ylabel("drift effect [px]")
+    ax.set_ylim(bottom=0)
+    ax.set_title("Drift along the trajectory", fontsize=10)
+    ax.legend(fontsize=8)
+    return _save(fig, out_dir, "drift")
 
 
 def top_view_axes(centers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -245,11 +301,12 @@ def write_plots(
     if has_enhanced(records):
         specs.append(("raw_vs_enhanced", "Raw vs enhanced", plot_raw_vs_enhanced))
     specs.append(("top_view", "Camera centres (top view)", plot_top_view))
+    specs.append(("drift", "Drift along the trajectory", plot_drift))
     for name, title, fn in specs:
         path = fn(records, summary, out_dir)
         if path:
             plots.append({"name": name, "title": title, "path": path})
-    stale = {f"plot_{p}.png" for p in ("raw_vs_enhanced", "top_view")} - {
+    stale = {f"plot_{p}.png" for p in ("raw_vs_enhanced", "top_view", "drift")} - {
         Path(p["path"]).name for p in plots
     }
     for name in stale:  # a regenerated report must not show a plot of an older run

@@ -22,13 +22,15 @@ from report_testdata import (  # tests/pgt_check/report is on pythonpath (pyproj
     HOSTILE_NAME,
     PageParser,
     judged,
+    shared_errors_summary,
     synthetic_measurements,
+    with_verdict_columns,
 )
 
 from pgt_check.config import RunConfig  # noqa: E402
+from pgt_check.measure.checker import FrameImages, PathImages  # noqa: E402
 from pgt_check.report.assets import select_detail_frames, write_frame_assets  # noqa: E402
 from pgt_check.report.outputs import write_outputs  # noqa: E402
-from pgt_check.measure import FrameImages  # noqa: E402
 
 pytestmark = pytest.mark.browser
 
@@ -77,13 +79,22 @@ def _images(seed: int) -> FrameImages:
     photo = np.stack([base, 0.5 + 0.5 * np.sin(x / 15.0), y / 240.0], axis=2).astype(np.float32)
     render = np.roll(photo, 3 + seed % 7, axis=1) * 0.9
     k = rng.uniform(0, [320, 240], (120, 2))
+    inl = rng.uniform(size=120) < 0.7
+    shift = np.array([[1.0, 0, 3], [0, 1.0, 1], [0, 0, 1.0]])
     return FrameImages(
         photo=photo,
         render=render,
+        enhanced=render * 0.95,
         kpts_render=k,
         kpts_photo=k + [3, 1],
-        inliers=rng.uniform(size=120) < 0.7,
+        inliers=inl,
+        paths={"raw": PathImages(k, k + [3, 1], inl, shift),
+               "enhanced": PathImages(k, k + [2, 1], inl, shift * [1, 1, 0.7] + [0, 0, 0.3])},
     )
+
+
+def _records(config=None):
+    return with_verdict_columns(judged(synthetic_measurements(250, seed=1, enhanced=True), config))
 
 
 @pytest.fixture(scope="module")
@@ -92,19 +103,21 @@ def report(tmp_path_factory) -> Path:
     config = RunConfig.from_dict(
         {"input": {"trajectory": "redkitchen/trajectories.txt", "mesh": "redkitchen/mesh.ply"}}
     )
-    records = judged(synthetic_measurements(250, seed=1), config)
+    records = _records(config)
     by_id = {r["frame_id"]: r for r in records}
     assets = {
         fid: write_frame_assets(out, by_id[fid], _images(i))
         for i, fid in enumerate(select_detail_frames(records, n_worst=10, max_details=60))
     }
-    write_outputs(out, records, config, assets=assets)
+    write_outputs(out, records, config, assets=assets,
+                  extra={"shared_errors": shared_errors_summary(250)})
     return out
 
 
 def test_selftest_sorts_and_filters_without_console_errors(report, tmp_path):
     url = (report / "report.html").as_uri() + "#selftest"
-    proc = run_chromium(tmp_path, "--virtual-time-budget=5000", "--dump-dom", url)
+    proc = run_chromium(tmp_path, "--virtual-time-budget=5000", "--window-size=1400,1000",
+                        "--dump-dom", url)
     assert proc.returncode == 0, proc.stderr[-2000:]
     assert console_problems(proc.stderr) == []
     m = re.search(r'<pre id="selftest-result"[^>]*>(.*?)</pre>', proc.stdout, re.S)
@@ -120,13 +133,23 @@ def test_selftest_sorts_and_filters_without_console_errors(report, tmp_path):
         "filter_text",
         "page_next",
         "detail_opens",
+        "all_columns",
+        "lightbox_opens",
+        "lightbox_closes",
+        "flicker_swaps",
     ):
         assert result["checks"][name], name
     assert result["sorted_desc"] == sorted(result["sorted_desc"], reverse=True)
-    n_fail = sum(1 for r in judged(synthetic_measurements(250, seed=1)) if r["verdict"] == "FAIL")
+    n_fail = sum(1 for r in _records() if r["verdict"] == "FAIL")
     assert result["n_fail_shown"] == n_fail
     assert result["n_rows"] == 250
     assert result["n_inspect_panels"] == 6
+    # the default columns fit a 1400 px window; "all columns" shows the rest
+    assert result["window_width"] == 1400
+    assert result["table_overflow_px"] <= 0, result["table_overflow_px"]
+    assert result["n_cols_default"] < result["n_cols_all"]
+    assert result["n_disagree_rows"] == 50  # with_verdict_columns marks every 5th frame
+    assert result["flicker"]
 
 
 def test_hostile_file_name_renders_as_text(report, tmp_path):
@@ -137,7 +160,7 @@ def test_hostile_file_name_renders_as_text(report, tmp_path):
     assert console_problems(proc.stderr) == []
     page = PageParser()
     page.feed(proc.stdout)
-    imgs = [a.get("src") for tag, a in page.tags if tag == "img"]
+    imgs = [a.get("src") for tag, a in page.tags if tag == "img" and a.get("src")]  # lightbox: none
     assert imgs and all(str(src).startswith("assets/") for src in imgs), imgs
     outside_scripts = re.sub(r"<script\b.*?</script>", "", proc.stdout, flags=re.S)
     escaped = html.escape(HOSTILE_NAME, quote=False)

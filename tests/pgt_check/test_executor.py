@@ -142,7 +142,7 @@ def fake_load_trajectory(config: RunConfig) -> Trajectory:
     )
 
 
-def fake_build_checker(config: RunConfig, references=None) -> FakeChecker:
+def fake_build_checker(config: RunConfig, references=None, panel_sink=None) -> FakeChecker:
     return FakeChecker(**json.loads(os.environ.get("PGT_FAKE_CHECKER", "{}")))
 
 

@@ -9,9 +9,12 @@
   cols.forEach(function (c, i) { ci[c.key] = i; });
   const ID = ci.frame_id;
   const VERDICT = ci.verdict;
+  const DISAGREE = ci.disagree;
   const INSPECT_PAGE = 6;
+  const FLICKER_MS = 500;
+  const WIDE = { diff: true, arrows_raw: true, arrows_enhanced: true };
   const state = { sortKey: null, sortDir: 1, verdict: "", text: "", page: 0,
-                  pageSize: data.page_size || 100, open: null, inspectPage: 0 };
+                  pageSize: data.page_size || 100, open: null, inspectPage: 0, allCols: false };
   let view = rows.map(function (_, i) { return i; });
   const byId = {};
   rows.forEach(function (r, i) { byId[String(r[ID])] = i; });
@@ -39,7 +42,94 @@
       return v.toFixed(c.digits);
     }
     if (c.type === "bool") { return v ? "yes" : "no"; }
+    if (c.type === "flag") { return v ? "\u2260" : ""; }
     return String(v);
+  }
+
+  function shownCols() {
+    return cols.filter(function (c) { return state.allCols || !c.hidden; });
+  }
+
+  function isDisagree(i) { return DISAGREE !== undefined && rows[i][DISAGREE] === true; }
+
+  function renderHead() {
+    const tr = document.querySelector("#frame-table thead tr");
+    tr.textContent = "";
+    shownCols().forEach(function (c) {
+      const th = el("th", { "data-key": c.key, title: c.key }, c.label);
+      if (c.key === state.sortKey) { th.classList.add(state.sortDir > 0 ? "asc" : "desc"); }
+      th.addEventListener("click", function () {
+        if (state.sortKey === c.key) { state.sortDir = -state.sortDir; } else { state.sortKey = c.key; state.sortDir = 1; }
+        state.page = 0;
+        applyView();
+      });
+      tr.appendChild(th);
+    });
+  }
+
+  // ---- full-size panels: a lightbox, with render/photo flicker where both exist -------------
+  const lb = { box: document.getElementById("lightbox"), timer: null, pair: null, which: 0, caption: "" };
+  lb.img = lb.box.querySelector("img");
+  lb.cap = lb.box.querySelector("figcaption");
+
+  function lbShow(src, caption, pair) {
+    lbStop();
+    lb.pair = pair;
+    lb.caption = caption;
+    lb.which = 0;
+    lb.img.src = src;
+    lb.cap.textContent = caption;
+    lb.box.hidden = false;
+  }
+  function lbFlip() {
+    if (!lb.pair) { return; }
+    lb.which = 1 - lb.which;
+    lb.img.src = lb.pair[lb.which];
+    lb.cap.textContent = (lb.which ? "photo" : "render") + " (flicker; F stops)";
+  }
+  function lbStop() { if (lb.timer) { clearInterval(lb.timer); lb.timer = null; } }
+  function lbClose() { lbStop(); lb.box.hidden = true; lb.img.removeAttribute("src"); }
+  lb.box.addEventListener("click", lbClose);
+  document.addEventListener("keydown", function (e) {
+    if (lb.box.hidden) { return; }
+    if (e.key === "Escape") { lbClose(); }
+    if ((e.key === "f" || e.key === "F") && lb.pair) {
+      if (lb.timer) { lbStop(); } else { lb.timer = setInterval(lbFlip, FLICKER_MS); }
+    }
+  });
+
+  function flickerFigure(assets) {
+    // render and photo in one place, swapped by a button or automatically
+    const f = el("figure", { class: "flicker" });
+    const img = el("img", { loading: "lazy", alt: "render / photo flicker" });
+    const srcs = [assets.render, assets.photo];
+    let which = 0, timer = null;
+    img.src = srcs[0];
+    const cap = el("figcaption", null, "render");
+    function show(k) { which = k; img.src = srcs[k]; cap.textContent = k ? "photo" : "render"; }
+    const swap = el("button", { type: "button", "data-act": "swap" }, "render \u21c4 photo");
+    const auto = el("button", { type: "button", "data-act": "flicker" }, "\u25b6 flicker");
+    swap.addEventListener("click", function (e) { e.stopPropagation(); show(1 - which); });
+    auto.addEventListener("click", function (e) {
+      e.stopPropagation();
+      if (timer) { clearInterval(timer); timer = null; auto.textContent = "\u25b6 flicker"; return; }
+      timer = setInterval(function () {
+        if (!img.isConnected) { clearInterval(timer); timer = null; return; }
+        show(1 - which);
+      }, FLICKER_MS);
+      auto.textContent = "\u25a0 stop";
+    });
+    img.addEventListener("click", function (e) {
+      e.stopPropagation();
+      lbShow(srcs[which], "render / photo (press F to flicker)", srcs);
+    });
+    f.appendChild(img);
+    const bar = el("div", { class: "fbar" });
+    bar.appendChild(swap);
+    bar.appendChild(auto);
+    f.appendChild(bar);
+    f.appendChild(cap);
+    return f;
   }
 
   function compare(a, b) {
@@ -89,20 +179,35 @@
   function buildDetail(i) {
     const fid = String(rows[i][ID]);
     const d = el("div", { class: "detail", "data-frame": fid });
-    d.appendChild(el("h3", null, "frame " + fid + " \u2014 " + rows[i][VERDICT]));
+    const h = el("h3", null, "frame " + fid + " \u2014 " + rows[i][VERDICT]);
+    if (isDisagree(i)) {
+      h.appendChild(el("span", { class: "badge disagree", title: "raw and enhanced paths fall on different sides of the threshold" },
+                       "raw \u2260 enhanced"));
+    }
+    if (ci.evidence !== undefined && rows[i][ci.evidence]) {
+      h.appendChild(el("span", { class: "badge evidence" }, "evidence: " + rows[i][ci.evidence]));
+    }
+    d.appendChild(h);
     d.appendChild(numbersBlock(i));
     const extra = data.extra[fid];
     const assets = data.assets[fid];
     if (assets) {
       const imgs = el("div", { class: "imgs" });
+      const pair = assets.render && assets.photo ? [assets.render, assets.photo] : null;
       data.kinds.forEach(function (kind) {
         if (!assets[kind]) { return; }
-        const f = el("figure", kind === "matches" ? { class: "wide" } : null);
-        const img = el("img", { loading: "lazy", alt: kind });
+        const f = el("figure", WIDE[kind] ? { class: "wide", "data-kind": kind } : { "data-kind": kind });
+        const img = el("img", { loading: "lazy", alt: kind, title: "click: full size" });
         img.src = assets[kind];
+        const label = data.kind_labels[kind] || kind;
+        img.addEventListener("click", function (e) {
+          e.stopPropagation();
+          lbShow(assets[kind], label + " \u2014 frame " + fid, kind === "render" || kind === "photo" ? pair : null);
+        });
         f.appendChild(img);
-        f.appendChild(el("figcaption", null, data.kind_labels[kind] || kind));
+        f.appendChild(el("figcaption", null, label));
         imgs.appendChild(f);
+        if (kind === "photo" && pair) { imgs.appendChild(flickerFigure(assets)); }
       });
       d.appendChild(imgs);
     } else {
@@ -136,10 +241,11 @@
       const i = view[p];
       const r = rows[i];
       const fid = String(r[ID]);
-      const tr = el("tr", { class: "row" + (data.assets[fid] ? " has-assets" : ""), "data-row": String(i) });
-      cols.forEach(function (c) {
+      const tr = el("tr", { class: "row" + (data.assets[fid] ? " has-assets" : "") + (isDisagree(i) ? " disagree" : ""),
+                            "data-row": String(i) });
+      shownCols().forEach(function (c) {
         const v = r[ci[c.key]];
-        const cls = c.type === "verdict" ? "v-" + v : (c.type === "num" || c.type === "int" ? "num" : "");
+        const cls = c.type === "verdict" ? "v-" + v : (c.type === "num" || c.type === "int" ? "num" : (c.type === "flag" ? "flag" : ""));
         const td = el("td", cls ? { class: cls } : null, fmt(v, c));
         if (c.type === "str" && v) { td.title = String(v); }
         tr.appendChild(td);
@@ -154,15 +260,12 @@
     pager(document.getElementById("table-pager"), state.page, nPages, view.length,
           function (p) { state.page = p; renderTable(); });
     document.getElementById("f-count").textContent = view.length + " of " + rows.length + " frames";
-    document.querySelectorAll("#frame-table th").forEach(function (th) {
-      th.classList.remove("asc", "desc");
-      if (th.dataset.key === state.sortKey) { th.classList.add(state.sortDir > 0 ? "asc" : "desc"); }
-    });
+    renderHead();
   }
 
   function detailRow(i) {
     const tr = el("tr", { class: "detail-row" });
-    const td = el("td", { colspan: String(cols.length) });
+    const td = el("td", { colspan: String(shownCols().length) });
     td.appendChild(buildDetail(i));
     tr.appendChild(td);
     return tr;
@@ -190,13 +293,8 @@
           function (p) { state.inspectPage = p; renderInspect(); });
   }
 
-  document.querySelectorAll("#frame-table th").forEach(function (th) {
-    th.addEventListener("click", function () {
-      const k = th.dataset.key;
-      if (state.sortKey === k) { state.sortDir = -state.sortDir; } else { state.sortKey = k; state.sortDir = 1; }
-      state.page = 0;
-      applyView();
-    });
+  document.getElementById("f-allcols").addEventListener("change", function (e) {
+    state.allCols = e.target.checked; renderTable();
   });
   document.getElementById("f-verdict").addEventListener("change", function (e) {
     state.verdict = e.target.value; state.page = 0; applyView();
@@ -264,7 +362,35 @@
         check("detail_opens", !!document.querySelector("#frame-table tr.detail-row .detail"));
       }
       out.n_inspect_panels = document.querySelectorAll("#inspect-list .detail").length;
-      const imgs = Array.from(document.images);
+      const wrap = document.querySelector(".tablewrap");
+      out.table_overflow_px = wrap.scrollWidth - wrap.clientWidth;
+      out.window_width = window.innerWidth;
+      const nHead = document.querySelectorAll("#frame-table th").length;
+      const all = document.getElementById("f-allcols");
+      all.checked = true;
+      all.dispatchEvent(new Event("change"));
+      out.n_cols_default = nHead;
+      out.n_cols_all = document.querySelectorAll("#frame-table th").length;
+      check("all_columns", out.n_cols_all === cols.length && (nHead < cols.length || !cols.some(function (c) { return c.hidden; })));
+      all.checked = false;
+      all.dispatchEvent(new Event("change"));
+      out.n_disagree_rows = rows.filter(function (_, i) { return isDisagree(i); }).length;
+      out.n_disagree_badges = document.querySelectorAll("#inspect-list .badge.disagree").length;
+      const panel = document.querySelector('#inspect-list figure[data-kind] img');
+      if (panel) {
+        panel.click();
+        check("lightbox_opens", !lb.box.hidden && lb.img.getAttribute("src") === panel.getAttribute("src"));
+        document.dispatchEvent(new KeyboardEvent("keydown", { key: "Escape" }));
+        check("lightbox_closes", lb.box.hidden);
+      }
+      const fl = document.querySelector("#inspect-list figure.flicker");
+      if (fl) {
+        const before = fl.querySelector("img").getAttribute("src");
+        fl.querySelector('button[data-act="swap"]').click();
+        check("flicker_swaps", fl.querySelector("img").getAttribute("src") !== before);
+        out.flicker = true;
+      }
+      const imgs = Array.from(document.images).filter(function (im) { return im.getAttribute("src"); });
       out.n_images_loaded = imgs.filter(function (im) { return im.complete && im.naturalWidth > 0; }).length;
       out.broken_images = imgs.filter(function (im) { return im.complete && im.naturalWidth === 0; })
         .map(function (im) { return im.getAttribute("src"); });

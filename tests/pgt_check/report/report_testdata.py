@@ -274,7 +274,8 @@ def check_report(out: Path, records: list[dict]) -> dict:
             else:
                 assert str(v) == c, (key, v, c)
     # every referenced file exists (page links, plots, detail images)
-    refs = [r for r in page.refs if not r.startswith(("#", "data:"))]
+    # records.jsonl is the run's store (written by the runner, not by write_outputs)
+    refs = [r for r in page.refs if not r.startswith(("#", "data:")) and r != "records.jsonl"]
     refs += [p for kinds in data["assets"].values() for p in kinds.values()]
     assert refs
     for ref in refs:
@@ -290,3 +291,50 @@ def check_report(out: Path, records: list[dict]) -> dict:
         assert page.text_by_id[f"count-{v}"].strip() == str(summary["counts"][v])
     assert page.text_by_id["count-total"].strip() == str(len(records))
     return data
+
+
+def shared_errors_summary(n_frames: int = 40, seed: int = 0) -> dict[str, Any]:
+    """A ``summary["shared_errors"]`` as the run-level checks write it: registration passed,
+    similarity inconclusive, drift failed with a per-frame curve, calibration per camera."""
+    rng = np.random.default_rng(seed)
+    effect = np.cumsum(rng.uniform(0.0, 1.0, n_frames))
+    return {
+        "registration": {
+            "status": "passed", "message": "registration within 0.1 deg / 0.5 % of depth",
+            "angle_deg": 0.04, "angle_deg_ci": [0.01, 0.09], "translation": 0.0021,
+            "translation_rel_depth": 0.001, "effect_px": 0.8, "effect_px_ci": [0.3, 1.4],
+        },
+        "similarity": {"status": "inconclusive", "message": "too few frames for a scale",
+                       "scale": 1.004, "scale_ci": [0.97, 1.03]},
+        "drift": {
+            "status": "failed", "message": "poses drift by 12 px over the trajectory",
+            "effect_px": float(effect[-1]),
+            "per_frame": [
+                {"frame_id": f"frame-{i:06d}", "index": i, "effect_px": float(e),
+                 "lo_px": float(e) * 0.7}
+                for i, e in enumerate(effect)
+            ],
+        },
+        "calibration": {
+            "cam0": {"status": "finding", "message": "principal point off by (4.7, 0.6) px",
+                     "effect_px": 4.7},
+            "<b>cam1</b>": {"status": "not_checked", "message": "no frames"},
+        },
+    }
+
+
+def with_verdict_columns(rows: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Judged rows with the new per-frame columns of the lead's verdict work: ``evidence``,
+    ``raw_verdict``, ``enhanced_verdict``, ``disagree`` and ``drift_px``."""
+    out = []
+    for i, r in enumerate(rows):
+        r = dict(r)
+        thr = r.get("threshold_px") or 16.0
+        raw, enh = r.get("corner_error_px_raw"), r.get("corner_error_px_enhanced")
+        r["raw_verdict"] = None if raw is None else ("FAIL" if raw > thr else "PASS")
+        r["enhanced_verdict"] = None if enh is None else ("FAIL" if enh > thr else "PASS")
+        r["disagree"] = bool(i % 5 == 1)  # given explicitly: wins over the computed one
+        r["evidence"] = ("absolute", "relative", "relative+registration", "none")[i % 4]
+        r["drift_px"] = 0.1 * i
+        out.append(r)
+    return out

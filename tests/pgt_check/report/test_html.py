@@ -16,6 +16,7 @@ from report_testdata import (
 )
 
 from pgt_check.config import RunConfig
+from pgt_check.measure import FrameImages
 from pgt_check.report.assets import select_detail_frames, write_frame_assets
 from pgt_check.report.cli import report_main
 from pgt_check.report.html import (
@@ -26,7 +27,6 @@ from pgt_check.report.html import (
     table_value,
 )
 from pgt_check.report.outputs import build_summary, write_outputs
-from pgt_check.measure import FrameImages
 
 
 def _images(seed: int) -> FrameImages:
@@ -167,7 +167,23 @@ def test_enhanced_columns_and_plot_when_present(tmp_path, config):
     assert "assets/plot_raw_vs_enhanced.png" not in page.refs
 
 
+def _store(out: Path, config: RunConfig, flat: list[dict]) -> None:
+    """records.jsonl + run.json as a run writes them (``pgt-check report`` reads them)."""
+    from report_testdata import from_flat
+
+    from pgt_check.runner import measurement_fingerprint
+    from pgt_check.store import RecordStore
+
+    ms = [from_flat(r) for r in flat]
+    with RecordStore.open(out, measurement_fingerprint(config),
+                          settings=config.measurement_settings(),
+                          frame_ids=[m.frame_id for m in ms]) as store:
+        for m in ms:
+            store.append(m.to_json())
+
+
 def test_report_cli_regenerates_from_records_and_keeps_assets(tmp_path, config, records, capsys):
+    _store(tmp_path, config, synthetic_measurements())
     make_run(tmp_path, config, records)
     before = parse_report(tmp_path / "report.html")[1]
     (tmp_path / "report.html").unlink()

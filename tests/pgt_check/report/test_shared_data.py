@@ -14,10 +14,10 @@ import pytest
 from report_testdata import check_report, judged, read_csv, shared_data_dir, validate
 
 from pgt_check.config import RunConfig
-from pgt_check.report.assets import THUMB_MAX, select_detail_frames, write_frame_assets
+from pgt_check.measure import FrameImages
+from pgt_check.report.assets import PANEL_MAX, select_detail_frames, write_frame_assets
 from pgt_check.report.junit import junit_xml_text
 from pgt_check.report.outputs import write_outputs
-from pgt_check.measure import FrameImages
 
 pytestmark = pytest.mark.shared_data
 
@@ -111,7 +111,7 @@ def test_report_on_redkitchen_frames(tmp_path):
     data = check_report(tmp_path, records)
     assert set(data["assets"]) == set(assets)
     thumb = cv2.imread(str(tmp_path / next(iter(assets.values()))["photo"]))
-    assert max(thumb.shape[:2]) <= THUMB_MAX
+    assert max(thumb.shape[:2]) <= PANEL_MAX
     # the dataset's relative image paths are shown as written; no path of this machine
     html = (tmp_path / "report.html").read_text(encoding="utf-8")
     assert str(root) not in html and str(tmp_path) not in html
