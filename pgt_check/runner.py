@@ -77,6 +77,7 @@ def run(config: RunConfig) -> dict[str, Any]:
         functools.partial(build_frame_checker, config, references),
         extra={"trajectory_format": traj.format},
         t0=t0,
+        trajectory=traj,
     )
 
 
@@ -108,6 +109,7 @@ def check_frames(
     *,
     extra: dict[str, Any] | None = None,
     t0: float | None = None,
+    trajectory: Trajectory | None = None,
 ) -> dict[str, Any]:
     """Measure ``frames`` (skipping those already in the store), then write the outputs.
 
@@ -149,6 +151,12 @@ def check_frames(
                 raise RunInterrupted(n_done, len(ids), str(out))
         measurements = stored_measurements(store.records_in_order(ids))
     rows = apply_verdicts(measurements, config)
+    corrections: dict[str, Any] = {}
+    if config.correct.frames != "none":  # corrected poses (pgt_check.corrections)
+        from pgt_check.corrections import correct_run
+
+        traj = trajectory if trajectory is not None else Trajectory(tuple(frames))
+        rows, corrections = correct_run(traj, measurements, rows, config, checker_factory, out)
     assets = write_report_assets(frames, rows, config, checker_factory)
     shadings = sorted({str(m.shading) for m in measurements if m.shading})
     summary_extra = {
@@ -161,6 +169,7 @@ def check_frames(
             "worker_crashes": stats.worker_crashes,
         },
         **(extra or {}),
+        **corrections,
         "wall_time_s": time.perf_counter() - t0,
     }
     return write_outputs(out, rows, config, extra=summary_extra, assets=assets)

@@ -64,6 +64,15 @@ ENHANCED_COLUMNS: tuple[tuple[str, str, str, int | None], ...] = (
     ("enhanced_why", "enhanced why", "str", None),
     ("reference_id", "reference", "str", None),
 )
+#: shown only when some frame was corrected (``pgt_check.corrections``)
+CORRECTION_TABLE_COLUMNS: tuple[tuple[str, str, str, int | None], ...] = (
+    ("corr_applied", "corrected", "bool", None),
+    ("corr_drot_deg", "corr. rot [deg]", "num", 3),
+    ("corr_dt", "corr. shift [units]", "num", 4),
+    ("corr_sigma_rot_deg", "± rot [deg]", "num", 3),
+    ("corr_sigma_t", "± shift [units]", "num", 4),
+    ("corr_corner_error_px", "err after corr. [px]", "num", 2),
+)
 KIND_LABELS = {
     "render": "render",
     "enhanced": "enhanced render",
@@ -140,6 +149,7 @@ def table_columns(records: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
     cols = [*BASE_COLUMNS]
     present = set().union(*(r.keys() for r in records)) if records else set()
     cols += [c for c in ENHANCED_COLUMNS if c[0] in present]
+    cols += [c for c in CORRECTION_TABLE_COLUMNS if c[0] in present]
     return [{"key": k, "label": lbl, "type": t, "digits": d} for k, lbl, t, d in cols]
 
 

@@ -20,6 +20,7 @@ from pgt_check.measure import (
     Timings,
     failed_measurement,
 )
+from pgt_check.measure.correct import CORRECTION_COLUMNS
 from pgt_check.report.outputs import FRAME_COLUMNS
 from pgt_check.types import Camera, Frame
 
@@ -90,7 +91,8 @@ def test_row_reads_the_deciding_path_and_both_paths():
 def test_columns_are_declared_once_and_feed_frames_csv():
     names = [c.name for c in MEASUREMENT_COLUMNS]
     assert len(names) == len(set(names))
-    csv_measured = [n for n in FRAME_COLUMNS if n not in ("verdict", "reason", "threshold_px")]
+    csv_measured = [n for n in FRAME_COLUMNS if n not in ("verdict", "reason", "threshold_px")
+                    and n not in CORRECTION_COLUMNS]
     assert csv_measured == [c.name for c in MEASUREMENT_COLUMNS if c.csv]
     assert all(c.doc for c in MEASUREMENT_COLUMNS)
 
