@@ -55,8 +55,9 @@ class Correction:
     final update after it is part of the uncertainty). ``start``: "pnp_raw", "pnp_enhanced"
     (the measurement's PnP estimate and the path it came from) or "checked" (no estimate).
     ``depth``: median render depth (scene units), the scale for "1 % of scene depth".
-    ``applied``: written to the corrected trajectory (success and corner_error_px <= the
-    frame's threshold).
+    ``applied``: written to the corrected trajectory: success, corner_error_px <= the frame's
+    threshold and sigma_rot_deg <= max(0.1 deg, half the correction) (else ``reason`` is
+    "not_verified" or "uncertain").
     """
 
     frame_id: str
@@ -288,8 +289,10 @@ def refine_pose(
     sigma_t = math.hypot(boot_t, last_t)
     dt, dr = pose_difference(checked, final)
     err = rnd.corner_error_px
-    applied = err is not None and err <= thr and math.isfinite(sigma_r)
-    reason = "" if applied else ("not_verified" if err is None or err > thr else "unstable")
+    verified = err is not None and err <= thr
+    certain = math.isfinite(sigma_r) and sigma_r <= max(0.1, 0.5 * dr)
+    applied = verified and certain
+    reason = "" if applied else ("not_verified" if not verified else "uncertain")
     return Correction(
         frame.frame_id, True, reason,
         tuple(tuple(map(float, r)) for r in final), dr, dt, sigma_r, sigma_t,
