@@ -37,14 +37,20 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="pgt-check",
         description="Check pseudo-ground-truth camera poses frame by frame against a mesh.",
-        epilog="Subcommand: 'pgt-check report OUT_DIR' rebuilds the report of a finished run. "
-        "Exit codes: 0 checked and the gate passed, 1 checked and the gate failed, 2 usage, "
-        "input or setup error, 130 interrupted (resumable).",
+        epilog="Subcommands: 'pgt-check report OUT_DIR' rebuilds the report of a finished run "
+        "(re-judging with new verdict settings); 'pgt-check compare A B' compares two pose "
+        "sources of the same images. Exit codes: 0 checked and the gate passed, 1 checked and "
+        "the gate failed, 2 usage, input or setup error, 130 interrupted (resumable).",
     )
-    p.add_argument("trajectory", help="pose file or COLMAP model directory")
-    p.add_argument("--mesh", required=True, help="mesh (PLY/OBJ/GLB) in the poses' world frame")
+    p.add_argument("trajectory", nargs="?", default=None,
+                   help="pose file or COLMAP model directory (optional when --config gives it)")
+    p.add_argument("--mesh", default=None, help="mesh (PLY/OBJ/GLB) in the poses' world frame "
+                   "(required unless --config gives it)")
     p.add_argument("--out", default=None, help="output directory (default: pgt-check-out)")
-    p.add_argument("--config", default=None, help="JSON or TOML config file (CLI options win)")
+    p.add_argument("--config", default=None, help="JSON or TOML config file (CLI options win); "
+                   "a run's own config.json replays that run")
+    p.add_argument("--print-config", action="store_true",
+                   help="print the resolved config as JSON and exit")
     p.add_argument("--preset", default=None, choices=list(PRESETS),
                    help="named settings from the error-vs-runtime study (config file and CLI "
                    "options override them)")
@@ -85,6 +91,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="reference photo: nearest other frame (default); 'self' = the frame's "
                    "own photo (evaluation upper bound only: it hides pose errors)")
     g.add_argument("--no-pose-estimate", action="store_true", help="skip the PnP pose estimate")
+    g.add_argument("--correct", default=None, choices=["none", "fail", "all"],
+                   help="correct the poses of FAIL frames (default), all frames or none: "
+                   "render -> match -> PnP rounds; writes corrected_trajectory.txt (input's "
+                   "format) and bad_frames.txt")
+    g.add_argument("--correct-rounds", type=int, default=None,
+                   help="render -> match -> PnP rounds per corrected frame (default 3)")
     g = p.add_argument_group("verdict and gate")
     g.add_argument("--threshold-px", type=float, default=None,
                    help="PASS threshold on the corner error (default: 2%% of the image diagonal)")
@@ -149,6 +161,8 @@ def _cli_overrides(args: argparse.Namespace) -> dict[str, Any]:
         ("enhance", "iterations"): args.iterations,
         ("enhance", "reference", "mode"): args.reference,
         ("pose", "enabled"): False if args.no_pose_estimate else None,
+        ("correct", "frames"): args.correct,
+        ("correct", "rounds"): args.correct_rounds,
         ("report_details",): args.report_details,
         ("absolute_paths",): True if args.absolute_paths else None,
         # 0 = original size: MatchConfig turns it into None
@@ -276,6 +290,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         from pgt_check.report.cli import report_main
 
         return report_main(argv[1:])
+    if argv and argv[0] == "compare":
+        from pgt_check.compare import compare_main
+
+        return compare_main(argv[1:])
     parser = build_parser()
     try:
         args = parser.parse_args(argv)
@@ -287,6 +305,11 @@ def main(argv: Sequence[str] | None = None) -> int:
 
     try:
         config = load_config(args)
+        if args.print_config:
+            import json
+
+            print(json.dumps(config.to_dict(), indent=2))
+            return EXIT_PASSED
         summary = run(config)
     except (InputError, OSError) as err:
         # InputError covers ConfigError, FormatError, MissingExtraError and SetupError; an

@@ -282,6 +282,24 @@ class VerdictConfig:
 
 
 @dataclass(frozen=True)
+class CorrectConfig:
+    """Pose corrections after the verdicts (``pgt_check.corrections``): iterate render -> raw
+    match -> PnP from each frame's PnP estimate; writes corrected_trajectory.txt."""
+
+    #: which frames: "fail" (FAIL verdicts), "all" (every measured frame) or "none"
+    frames: Literal["none", "fail", "all"] = "fail"
+    rounds: int = 3
+    #: PnP bootstrap resamples for the uncertainty (0 = the last update only)
+    bootstrap: int = 12
+
+    def __post_init__(self) -> None:
+        if self.rounds < 1:
+            raise ValueError(f"correct.rounds must be >= 1, got {self.rounds}")
+        if self.bootstrap < 0:
+            raise ValueError(f"correct.bootstrap must be >= 0, got {self.bootstrap}")
+
+
+@dataclass(frozen=True)
 class RunConfig:
     input: InputConfig = field(default_factory=InputConfig)
     render: RenderConfig = field(default_factory=RenderConfig)
@@ -291,6 +309,7 @@ class RunConfig:
     edges: EdgeConfig = field(default_factory=EdgeConfig)
     pose: PoseConfig = field(default_factory=PoseConfig)
     verdict: VerdictConfig = field(default_factory=VerdictConfig)
+    correct: CorrectConfig = field(default_factory=CorrectConfig)
     #: frames that get image panels in the report (all FAIL/UNVERIFIABLE first, then the worst)
     report_details: int = 40
     out: str = "pgt-check-out"

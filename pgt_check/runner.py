@@ -136,7 +136,7 @@ def run(config: RunConfig) -> dict[str, Any]:
         logger.warning("%s", extra["warnings"][0])
     try:
         return check_frames(frames, config, factory, extra=extra, t0=t0, input_keys=keys,
-                            inputs=inputs)
+                            inputs=inputs, trajectory=traj)
     finally:
         if isinstance(factory, _ReuseFirst):
             factory.close_unused()
@@ -316,6 +316,7 @@ def check_frames(
     t0: float | None = None,
     input_keys: dict[str, str] | None = None,
     inputs: dict[str, str] | None = None,
+    trajectory: Trajectory | None = None,
 ) -> dict[str, Any]:
     """Measure ``frames`` (skipping those already in the store), then write the outputs.
 
@@ -380,6 +381,12 @@ def check_frames(
         measurements = stored_measurements(store.records_in_order(ids))
     judged = judge_run(measurements, config)
     rows = judged.rows
+    corrections: dict[str, Any] = {}
+    if config.correct.frames != "none":  # corrected poses (pgt_check.corrections)
+        from pgt_check.corrections import correct_run
+
+        traj = trajectory if trajectory is not None else Trajectory(tuple(frames))
+        rows, corrections = correct_run(traj, measurements, rows, config, checker_factory, out)
     assets = write_report_assets(
         frames, rows, config, checker_factory, measurement_fingerprint(config, inputs)
     )
@@ -395,6 +402,7 @@ def check_frames(
         },
         **(extra or {}),
         **judged.summary_extra(),
+        **corrections,
         "wall_time_s": time.perf_counter() - t0,
     }
     return write_outputs(out, rows, config, extra=summary_extra, assets=assets)

@@ -16,8 +16,8 @@ LAYERS = {
     "verdict": 3,
     "store": 3,
     "report": 4,
-    "executor": 5, "runner": 5,
-    "cli": 6, "__main__": 6,
+    "executor": 5, "runner": 5, "corrections": 5, "compare": 5,
+    "cli": 6, "__main__": 6, "api": 6,
 }
 
 

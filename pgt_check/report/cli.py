@@ -14,6 +14,7 @@ from pathlib import Path
 
 from pgt_check.config import RunConfig, merge
 from pgt_check.errors import InputError
+from pgt_check.measure.correct import add_correction_columns, load_corrections
 from pgt_check.measure.record import FrameMeasurement, OldRecordError
 from pgt_check.store import FINGERPRINT_KEY
 
@@ -95,14 +96,47 @@ def _old_summary(path: Path) -> dict:
     return old if isinstance(old, dict) else {}
 
 
+def _verdict_fields() -> list[tuple[str, type]]:
+    """(name, type) of every ``VerdictConfig`` field (the settings a re-judge may change)."""
+    import dataclasses
+    import typing
+
+    from pgt_check.config import VerdictConfig
+
+    hints = typing.get_type_hints(VerdictConfig)
+    out = []
+    for f in dataclasses.fields(VerdictConfig):
+        tp = hints[f.name]
+        args = [a for a in typing.get_args(tp) if a is not type(None)] or [tp]
+        out.append((f.name, args[0] if args[0] in (int, float, str, bool) else str))
+    return out
+
+
+def add_verdict_flags(p: argparse.ArgumentParser) -> None:
+    """One ``--name`` flag per ``VerdictConfig`` field (derived, so new fields come along)."""
+    from pgt_check.config import VerdictConfig
+
+    g = p.add_argument_group("verdict settings (re-judge without re-measuring)")
+    for name, tp in _verdict_fields():
+        default = getattr(VerdictConfig(), name)
+        flag = "--" + name.replace("_", "-")
+        if tp is bool:
+            g.add_argument(flag, default=None, type=lambda v: v.lower() in ("1", "true", "yes"),
+                           metavar="{true,false}", help=f"(default {default})")
+        else:
+            g.add_argument(flag, type=tp, default=None, help=f"(default {default})")
+
+
+def verdict_overrides(args: argparse.Namespace) -> dict:
+    return {n: getattr(args, n) for n, _ in _verdict_fields() if getattr(args, n) is not None}
+
+
 def report_main(argv: Sequence[str]) -> int:
     p = argparse.ArgumentParser(
         prog="pgt-check report", description="Rebuild outputs of a run from its stored records."
     )
     p.add_argument("out_dir")
-    p.add_argument("--threshold-px", type=float, default=None, help="re-judge with a new threshold")
-    p.add_argument("--max-fail-fraction", type=float, default=None)
-    p.add_argument("--max-unverifiable-fraction", type=float, default=None)
+    add_verdict_flags(p)
     p.add_argument(
         "--absolute-paths",
         action="store_true",
@@ -119,13 +153,7 @@ def report_main(argv: Sequence[str]) -> int:
     try:
         out = Path(args.out_dir)
         records, cfg = load_run(out)
-        override: dict = {"verdict": {}}
-        if args.threshold_px is not None:
-            override["verdict"]["threshold_px"] = args.threshold_px
-        if args.max_fail_fraction is not None:
-            override["verdict"]["max_fail_fraction"] = args.max_fail_fraction
-        if args.max_unverifiable_fraction is not None:
-            override["verdict"]["max_unverifiable_fraction"] = args.max_unverifiable_fraction
+        override: dict = {"verdict": verdict_overrides(args)}
         if args.absolute_paths:
             override["absolute_paths"] = True
         config = RunConfig.from_dict(merge(cfg, override))
@@ -138,11 +166,12 @@ def report_main(argv: Sequence[str]) -> int:
         extra = {
             k: old[k]
             for k in ("trajectory_format", "shading", "setup_s", "wall_time_s",
-                      "images_outside_dataset", "warnings", "executor")
+                      "images_outside_dataset", "warnings", "executor", "corrections")
             if k in old
         }
         judged = judge_run(records, config)
-        summary = write_outputs(out, judged.rows, config, {**extra, **judged.summary_extra()})
+        rows = add_correction_columns(judged.rows, load_corrections(out))
+        summary = write_outputs(out, rows, config, {**extra, **judged.summary_extra()})
     except (InputError, OSError) as err:
         print(f"pgt-check report: error: {err}", file=sys.stderr)
         return 2

@@ -77,6 +77,15 @@ ENHANCED_COLUMNS: tuple[Col, ...] = (
     ("enhanced_why", "why enhanced", "str", None, True),
     ("reference_id", "reference", "str", None, True),
 )
+#: shown only when some frame was corrected (``pgt_check.corrections``)
+CORRECTION_TABLE_COLUMNS: tuple[tuple[str, str, str, int | None], ...] = (
+    ("corr_applied", "corrected", "bool", None),
+    ("corr_drot_deg", "corr. rot [deg]", "num", 3),
+    ("corr_dt", "corr. shift [units]", "num", 4),
+    ("corr_sigma_rot_deg", "± rot [deg]", "num", 3),
+    ("corr_sigma_t", "± shift [units]", "num", 4),
+    ("corr_corner_error_px", "err after corr. [px]", "num", 2),
+)
 KIND_LABELS = {
     "render": "render",
     "enhanced": "enhanced render",
@@ -186,6 +195,8 @@ def table_columns(records: Sequence[Mapping[str, Any]]) -> list[dict[str, Any]]:
             c for c in ENHANCED_COLUMNS
             if c[0] == "disagree" or any(r.get(c[0]) is not None for r in records)
         ]
+    present = set().union(*(r.keys() for r in records)) if records else set()
+    cols += [(*c, False) for c in CORRECTION_TABLE_COLUMNS if c[0] in present]
     return [
         {"key": k, "label": lbl, "type": t, "digits": d, "hidden": h} for k, lbl, t, d, h in cols
     ]

@@ -42,7 +42,25 @@ def _frame_text(rec: Mapping[str, Any], path: str) -> str:
         f"{_fmt(rec.get('corner_error_px'))} px, threshold {_fmt(rec.get('threshold_px'))} px, "
         f"{_fmt(rec.get('n_inliers'), 'd')} inliers of {_fmt(rec.get('n_matches'), 'd')} matches, "
         f"coverage {_fmt(rec.get('coverage'), '.3f')}"
+    ) + _correction_text(rec)
+
+
+def _correction_text(rec: Mapping[str, Any]) -> str:
+    """'; correction 3.50 ± 0.01 deg, 0.2480 ± 0.0010 units (applied)' when one was made."""
+    if rec.get("corr_drot_deg") is None:
+        return ""
+    state = "applied" if rec.get("corr_applied") else f"not applied: {rec.get('corr_reason')}"
+    return (
+        f"; correction {_fmt(rec.get('corr_drot_deg'), '.3f')} ± "
+        f"{_fmt(rec.get('corr_sigma_rot_deg'), '.3f')} deg, {_fmt(rec.get('corr_dt'), '.4f')} ± "
+        f"{_fmt(rec.get('corr_sigma_t'), '.4f')} units, corner error after "
+        f"{_fmt(rec.get('corr_corner_error_px'))} px ({state})"
     )
+
+
+#: per-testcase JUnit properties of a corrected frame
+_CORRECTION_PROPERTIES = ("corr_applied", "corr_drot_deg", "corr_dt", "corr_sigma_rot_deg",
+                          "corr_sigma_t", "corr_corner_error_px")
 
 
 def junit_xml_text(
@@ -95,6 +113,10 @@ def junit_xml_text(
                 "time": _seconds(rec.get("time_s")),
             },
         )
+        if rec.get("corr_drot_deg") is not None:
+            cprops = ET.SubElement(case, "properties")
+            for key in _CORRECTION_PROPERTIES:
+                ET.SubElement(cprops, "property", {"name": key, "value": xml_text(rec.get(key))})
         verdict = rec.get("verdict")
         if verdict == "FAIL":
             el = ET.SubElement(

@@ -17,6 +17,7 @@ from typing import Any
 from pgt_check import __version__
 from pgt_check.config import RunConfig
 from pgt_check.measure.columns import MEASUREMENT_COLUMNS, TIMING_COLUMNS
+from pgt_check.measure.correct import CORRECTION_COLUMNS
 from pgt_check.report.files import atomic_write_text
 from pgt_check.verdict.apply import VERDICT_COLUMNS
 
@@ -32,8 +33,10 @@ def _frame_columns() -> tuple[str, ...]:
     return (*head, "verdict", "reason", *rest[:i], "threshold_px", *rest[i:], *extra)
 
 
-#: frames.csv columns, in order. ``corner_error_px`` is the one the verdict used.
-FRAME_COLUMNS = _frame_columns()
+#: frames.csv columns, in order. ``corner_error_px`` is the one the verdict used. The
+#: correction columns (``pgt_check.measure.correct``) are an optional tail: empty for frames
+#: that were not corrected.
+FRAME_COLUMNS = (*_frame_columns(), *CORRECTION_COLUMNS)
 
 #: timing columns (left out when comparing runs)
 STAGES = TIMING_COLUMNS

@@ -24,9 +24,9 @@ from report_testdata import judged, shared_data_dir  # noqa: E402
 from test_shared_data import redkitchen_records  # noqa: E402
 
 from pgt_check.config import RunConfig  # noqa: E402
+from pgt_check.measure import FrameImages  # noqa: E402
 from pgt_check.report.assets import select_detail_frames, write_frame_assets  # noqa: E402
 from pgt_check.report.outputs import write_outputs  # noqa: E402
-from pgt_check.measure import FrameImages  # noqa: E402
 
 
 def build(out: Path) -> None:

@@ -17,10 +17,10 @@ import numpy as np
 
 from pgt_check.config import RunConfig
 from pgt_check.geometry.transforms import make_rigid
-from pgt_check.render import MeshData, make_renderer, mesh_from_trimesh
 from pgt_check.measure import FrameChecker
-from pgt_check.verdict import apply_verdicts
+from pgt_check.render import MeshData, make_renderer, mesh_from_trimesh
 from pgt_check.types import Camera, Frame
+from pgt_check.verdict import apply_verdicts
 
 #: small working camera used by most cases (fast on two busy cores)
 CAM = Camera.pinhole(240, 180, 200.0, 200.0, 119.5, 89.5)

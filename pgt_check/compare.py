@@ -1,0 +1,368 @@
+"""``pgt-check compare A B``: two pose sources for the same images.
+
+Per frame (paired by frame id, else by image path): the rotation angle (deg) and camera-centre
+distance (scene units) between the sources, and their effect in pixels: the mean distance over
+the four image corners between where A sees a point at the scene depth and where B sees it
+(each source with its own intrinsics, so an intrinsics difference counts too). The scene depth
+is the median render depth when ``--mesh`` is given, else the median distance of the camera
+centres from their centroid (a scale proxy; stated in the summary).
+
+With ``--mesh``, the checker measures and judges every frame with both sources (as
+``pgt-check`` would, enhancement references taken from the same source) and the source with
+the smaller corner error is the one the image supports (a tie within ``--tie-px``, default
+0.5 px). The errors compared are those of the raw path (render vs photo: absolute evidence)
+when both sources have enough raw inliers (``verdict.min_inliers``), else those of each
+source's deciding path (column ``basis``; an UNVERIFIABLE source has no error). Writes ``compare.csv`` (``--out``) and prints a summary.
+Exit codes: 0 done, 2 input error.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import json
+import logging
+import math
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pgt_check.errors import InputError
+from pgt_check.types import Camera, Frame, Trajectory
+
+logger = logging.getLogger(__name__)
+
+COMPARE_COLUMNS = (
+    "frame_id",
+    "image_path",
+    "drot_deg",
+    "dt",
+    "shift_px",
+    "depth",
+    "verdict_a",
+    "verdict_b",
+    "corner_error_px_a",
+    "corner_error_px_b",
+    "n_inliers_a",
+    "n_inliers_b",
+    "basis",
+    "supported",
+)
+
+
+def pair_frames(a: Trajectory, b: Trajectory) -> list[tuple[Frame, Frame]]:
+    """Frames of A and B that show the same image: by frame id, else by image path."""
+    b_id = b.by_id()
+    pairs = [(f, b_id[f.frame_id]) for f in a if f.frame_id in b_id]
+    if pairs:
+        return pairs
+    b_path = {f.image_path: f for f in b if f.image_path}
+    return [(f, b_path[f.image_path]) for f in a if f.image_path in b_path]
+
+
+def _corners(camera: Camera) -> np.ndarray:
+    w, h = camera.width - 1.0, camera.height - 1.0
+    return np.array([[0.0, 0.0], [w, 0.0], [w, h], [0.0, h]])
+
+
+def pixel_effect(fa: Frame, fb: Frame, depth: float) -> float:
+    """Mean corner distance (A's pixels) between A's and B's projection of the points A's image
+    corners see at ``depth`` (B's projection rescaled to A's image size)."""
+    ka, kb = fa.camera.K, fb.camera.K
+    uv = _corners(fa.camera)
+    rays = np.linalg.solve(ka, np.c_[uv, np.ones(len(uv))].T).T  # z = 1
+    pts_cam_a = rays * depth
+    world = pts_cam_a @ fa.world_from_cam[:3, :3].T + fa.world_from_cam[:3, 3]
+    cam_b = fb.cam_from_world
+    pb = world @ cam_b[:3, :3].T + cam_b[:3, 3]
+    if np.any(pb[:, 2] <= 0):
+        return math.inf
+    proj = (pb / pb[:, 2:3]) @ kb.T
+    sx = fa.camera.width / fb.camera.width
+    sy = fa.camera.height / fb.camera.height
+    proj_a = np.c_[(proj[:, 0] + 0.5) * sx - 0.5, (proj[:, 1] + 0.5) * sy - 0.5]
+    return float(np.mean(np.linalg.norm(proj_a - uv, axis=1)))
+
+
+def scale_proxy(frames: Sequence[Frame]) -> float:
+    """Median distance of the camera centres from their centroid (1.0 for one frame)."""
+    c = np.array([f.center for f in frames])
+    if len(c) < 2:
+        return 1.0
+    d = np.linalg.norm(c - c.mean(axis=0), axis=1)
+    med = float(np.median(d))
+    return med if med > 0 else 1.0
+
+
+@dataclass(frozen=True)
+class CompareResult:
+    rows: list[dict[str, Any]]
+    summary: dict[str, Any]
+
+
+def _checker_config(mesh: str, extra: dict[str, Any] | None) -> Any:
+    from pgt_check.config import RunConfig, merge
+
+    base = {"input": {"mesh": mesh}, "pose": {"enabled": False}}
+    return RunConfig.from_dict(merge(base, extra or {}))
+
+
+def _measure_source(checker: Any, traj: Trajectory, frames: Sequence[Frame]) -> list[dict]:
+    """Verdict rows of ``frames`` (enhancement references from the same source)."""
+    from pgt_check.measure import pick_references
+    from pgt_check.verdict import apply_verdicts
+
+    checker.references = pick_references(traj, frames, checker.config)
+    return apply_verdicts([checker.measure(f) for f in frames], checker.config)
+
+
+def compare_trajectories(
+    a: Trajectory,
+    b: Trajectory,
+    mesh: str | None = None,
+    *,
+    tie_px: float = 0.5,
+    limit: int | None = None,
+    settings: dict[str, Any] | None = None,
+) -> CompareResult:
+    """Compare two pose sources (see the module docstring).
+
+    ``settings``: RunConfig overrides for the checker (e.g. ``{"match": {"method": "orb"}}``,
+    ``{"enhance": {"mode": "never"}}``); each source is checked as ``pgt-check`` would (its
+    enhancement references come from the same source) and judged with the same verdict
+    settings; the corner error of a source whose verdict is UNVERIFIABLE does not count.
+    """
+    from pgt_check.geometry.transforms import pose_difference
+
+    all_pairs = pair_frames(a, b)
+    if not all_pairs:
+        raise InputError(
+            f"{a.source} and {b.source} share no frame (compared by frame id, then image path)"
+        )
+    pairs = all_pairs[:limit] if limit is not None else all_pairs
+    proxy = scale_proxy([fa for fa, _ in all_pairs])
+    rows: list[dict[str, Any]] = []
+    for fa, fb in pairs:
+        dt, dr = pose_difference(fa.world_from_cam, fb.world_from_cam)
+        rows.append({"frame_id": fa.frame_id, "image_path": fa.image_path, "drot_deg": dr,
+                     "dt": dt, "depth": proxy})
+    if mesh:
+        if not Path(mesh).is_file():
+            raise InputError(f"mesh not found: {mesh}")
+        from pgt_check.measure import FrameChecker
+
+        checker = FrameChecker(_checker_config(mesh, settings))
+        try:
+            ra = _measure_source(checker, a, [fa for fa, _ in pairs])
+            rb = _measure_source(checker, b, [fb for _, fb in pairs])
+            min_inl = checker.config.verdict.min_inliers
+            for row, (fa, _), x, y in zip(rows, pairs, ra, rb, strict=True):
+                basis, ea, eb = _errors(x, y, min_inl)
+                row.update(
+                    basis=basis,
+                    corner_error_px_a=ea, corner_error_px_b=eb, verdict_a=x["verdict"],
+                    verdict_b=y["verdict"], n_inliers_a=x.get("n_inliers"),
+                    n_inliers_b=y.get("n_inliers"), supported=_winner(ea, eb, tie_px),
+                    depth=_render_depth(checker, fa) or proxy,
+                )
+        finally:
+            checker.close()
+    for row, (fa, fb) in zip(rows, pairs, strict=True):
+        row["shift_px"] = pixel_effect(fa, fb, row["depth"])
+    res_summary = _summary(rows, a, b, mesh, proxy, tie_px)
+    res_summary["n_only_a"] = len(a) - len(all_pairs)
+    res_summary["n_only_b"] = len(b) - len(all_pairs)
+    return CompareResult(rows, res_summary)
+
+
+def _render_depth(checker: Any, frame: Frame) -> float | None:
+    """Median render depth of ``frame`` at a small size (the scale of the pixel effect)."""
+    cam = frame.camera.scaled(min(1.0, 160 / max(frame.camera.width, frame.camera.height)))
+    depth = checker.renderer.render(cam, frame.world_from_cam).depth
+    d = depth[depth > 0]
+    return float(np.median(d)) if d.size else None
+
+
+def _raw_ok(r: dict[str, Any], min_inliers: int) -> bool:
+    return r.get("corner_error_px_raw") is not None and (r.get("n_inliers_raw") or 0) >= min_inliers
+
+
+def _errors(x: dict[str, Any], y: dict[str, Any], min_inliers: int
+            ) -> tuple[str, float | None, float | None]:
+    """(basis, error A, error B): the raw path (absolute evidence: mesh vs photo) when both
+    sources have at least ``min_inliers`` raw inliers, else each source's deciding path (an
+    UNVERIFIABLE source has no error)."""
+    if _raw_ok(x, min_inliers) and _raw_ok(y, min_inliers):
+        return "raw", x["corner_error_px_raw"], y["corner_error_px_raw"]
+    ea = x["corner_error_px"] if x["verdict"] != "UNVERIFIABLE" else None
+    eb = y["corner_error_px"] if y["verdict"] != "UNVERIFIABLE" else None
+    return "verdict_path", ea, eb
+
+
+def _winner(ea: float | None, eb: float | None, tie_px: float) -> str:
+    if ea is None and eb is None:
+        return "none"
+    if eb is None:
+        return "a"
+    if ea is None:
+        return "b"
+    if abs(ea - eb) <= tie_px:
+        return "tie"
+    return "a" if ea < eb else "b"
+
+
+def _stats(values: Sequence[float | None]) -> dict[str, float | None]:
+    v = np.array([x for x in values if x is not None and math.isfinite(x)], float)
+    if not v.size:
+        return {"median": None, "p90": None, "max": None}
+    return {"median": float(np.median(v)), "p90": float(np.percentile(v, 90)),
+            "max": float(v.max())}
+
+
+def _summary(rows: list[dict[str, Any]], a: Trajectory, b: Trajectory, mesh: str | None,
+             proxy: float, tie_px: float) -> dict[str, Any]:
+    out: dict[str, Any] = {
+        "a": a.source, "b": b.source, "n_frames": len(rows),
+        "n_only_a": len(a) - len(rows), "n_only_b": len(b) - len(rows),
+        "drot_deg": _stats([r["drot_deg"] for r in rows]),
+        "dt": _stats([r["dt"] for r in rows]),
+        "shift_px": _stats([r["shift_px"] for r in rows]),
+        "depth_source": "median render depth" if mesh else
+        f"median camera distance from the centroid ({proxy:.4g} scene units; no mesh)",
+    }
+    if mesh:
+        for src in ("a", "b"):
+            out[f"verdicts_{src}"] = {
+                v: sum(r[f"verdict_{src}"] == v for r in rows)
+                for v in ("PASS", "FAIL", "UNVERIFIABLE")
+            }
+        wins = {k: sum(r["supported"] == k for r in rows) for k in ("a", "b", "tie", "none")}
+        out["supported"] = wins
+        out["tie_px"] = tie_px
+        out["corner_error_px_a"] = _stats([r.get("corner_error_px_a") for r in rows])
+        out["corner_error_px_b"] = _stats([r.get("corner_error_px_b") for r in rows])
+    return out
+
+
+def rows_csv_text(rows: Sequence[dict[str, Any]]) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(COMPARE_COLUMNS)
+    for r in rows:
+        vals = []
+        for c in COMPARE_COLUMNS:
+            v = r.get(c)
+            if v is None or (isinstance(v, float) and not math.isfinite(v)):
+                vals.append("")
+            elif isinstance(v, float):
+                vals.append(f"{v:.6g}")
+            else:
+                vals.append(v)
+        w.writerow(vals)
+    return buf.getvalue()
+
+
+def _fmt(v: Any, spec: str) -> str:
+    return "-" if v is None else format(v, spec)
+
+
+def summary_lines(s: dict[str, Any]) -> list[str]:
+    lines = [
+        f"pgt-check compare: {s['n_frames']} frames in both sources "
+        f"({s['n_only_a']} only in A, {s['n_only_b']} only in B)",
+        f"pgt-check compare: rotation difference median {_fmt(s['drot_deg']['median'], '.3f')} "
+        f"deg (max {_fmt(s['drot_deg']['max'], '.3f')}); centre distance median "
+        f"{_fmt(s['dt']['median'], '.4g')} (max {_fmt(s['dt']['max'], '.4g')}) scene units; "
+        f"effect in the image median {_fmt(s['shift_px']['median'], '.2f')} px "
+        f"(max {_fmt(s['shift_px']['max'], '.2f')})",
+    ]
+    if "supported" in s:
+        w = s["supported"]
+        ea, eb = s["corner_error_px_a"]["median"], s["corner_error_px_b"]["median"]
+        lines.append(
+            f"pgt-check compare: the images support A on {w['a']}, B on {w['b']} frames "
+            f"({w['tie']} ties within {s['tie_px']} px, {w['none']} unmeasurable); median "
+            f"corner error A {_fmt(ea, '.2f')} px, B {_fmt(eb, '.2f')} px"
+        )
+        for src in ("a", "b"):
+            v = s[f"verdicts_{src}"]
+            lines.append(f"pgt-check compare: verdicts {src.upper()}: {v['PASS']} PASS, "
+                         f"{v['FAIL']} FAIL, {v['UNVERIFIABLE']} UNVERIFIABLE")
+    return lines
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from pgt_check.registry import FORMATS, MATCHERS
+
+    p = argparse.ArgumentParser(
+        prog="pgt-check compare",
+        description="Compare two pose sources for the same images: per-frame difference "
+        "(deg, scene units, px) and, with --mesh, which source the images support.",
+        epilog="Exit codes: 0 done, 2 usage or input error.",
+    )
+    p.add_argument("a", help="first pose file (or COLMAP model)")
+    p.add_argument("b", help="second pose file (or COLMAP model)")
+    p.add_argument("--mesh", default=None, help="mesh: measure both sources against the photos")
+    p.add_argument("--sensors-a", default=None, help="LaMAR sensors file of A")
+    p.add_argument("--sensors-b", default=None, help="LaMAR sensors file of B")
+    p.add_argument("--format-a", default="auto", choices=["auto", *FORMATS])
+    p.add_argument("--format-b", default="auto", choices=["auto", *FORMATS])
+    p.add_argument("--images", default=None, help="image folder or list (both sources)")
+    p.add_argument("--camera", default=None, help="intrinsics for TUM / hloc sources")
+    p.add_argument("--matcher", default=None, choices=list(MATCHERS))
+    p.add_argument("--shading", default=None, choices=["auto", "vertex", "texture", "shaded"])
+    p.add_argument("--enhance", default=None, choices=["never", "auto", "always"],
+                   help="enhanced path as in pgt-check (default auto)")
+    p.add_argument("--threshold-px", type=float, default=None,
+                   help="verdict threshold (default 2%% of the image diagonal)")
+    p.add_argument("--tie-px", type=float, default=0.5,
+                   help="corner errors closer than this are a tie (default 0.5 px)")
+    p.add_argument("--limit", type=int, default=None, help="compare only the first N frames")
+    p.add_argument("--out", default=".", help="folder for compare.csv and compare.json")
+    p.add_argument("-q", "--quiet", action="store_true")
+    return p
+
+
+def compare_main(argv: Sequence[str]) -> int:
+    p = build_parser()
+    try:
+        args = p.parse_args(list(argv))
+    except SystemExit as exc:
+        return int(exc.code or 0)
+    logging.getLogger("pgt_check").setLevel(logging.WARNING if args.quiet else logging.INFO)
+    from pgt_check.io import read_trajectory
+
+    settings: dict[str, Any] = {}
+    if args.matcher:
+        settings["match"] = {"method": args.matcher}
+    if args.shading:
+        settings["render"] = {"shading": args.shading}
+    if args.enhance:
+        settings["enhance"] = {"mode": args.enhance}
+    if args.threshold_px is not None:
+        settings["verdict"] = {"threshold_px": args.threshold_px}
+    try:
+        cam = {"camera": args.camera} if args.camera else {}
+        a = read_trajectory(args.a, args.format_a, images=args.images, sensors=args.sensors_a,
+                            **cam)
+        b = read_trajectory(args.b, args.format_b, images=args.images, sensors=args.sensors_b,
+                            **cam)
+        res = compare_trajectories(a, b, args.mesh, tie_px=args.tie_px, limit=args.limit,
+                                   settings=settings)
+    except (InputError, ValueError) as err:  # ValueError: a bad setting (ConfigError is one)
+        print(f"pgt-check compare: error: {err}", file=sys.stderr)
+        return 2
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "compare.csv").write_text(rows_csv_text(res.rows), encoding="utf-8")
+    (out / "compare.json").write_text(json.dumps(res.summary, indent=2, default=str) + "\n",
+                                      encoding="utf-8")
+    for line in summary_lines(res.summary):
+        print(line)
+    print(f"pgt-check compare: wrote {out / 'compare.csv'}")
+    return 0

@@ -1,0 +1,153 @@
+"""The correction step of a run (after the verdicts): corrected poses and the files built on them.
+
+For the frames chosen by ``config.correct.frames`` ("fail": FAIL verdicts; "all": every frame)
+``pgt_check.measure.correct.refine_pose`` iterates render -> raw match -> PnP from the
+measurement's PnP estimate (from the checked pose when there is none, or when the estimate's
+first round fails). Writes into the run directory:
+
+* ``corrected_trajectory.txt``: every frame of the trajectory in the input's own format (LaMAR
+  -> LaMAR trajectories file, COLMAP -> images.txt, TUM -> TUM, others -> LaMAR trajectories
+  file), with the corrected pose where the correction is *applied* (its raw corner error is
+  within the frame's threshold), the input pose elsewhere;
+* ``bad_frames.txt``: the FAIL frames, one id per line (``#`` comment lines say which of them
+  the corrected trajectory fixes);
+* ``corrections.json``: every correction (``pgt-check report`` puts them back in the rows).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pgt_check.config import RunConfig
+from pgt_check.measure.correct import (
+    Correction,
+    add_correction_columns,
+    refine_pose,
+    save_corrections,
+)
+from pgt_check.measure.record import FrameMeasurement
+from pgt_check.types import Frame, Trajectory
+
+logger = logging.getLogger(__name__)
+
+CORRECTED_NAME = "corrected_trajectory.txt"
+BAD_FRAMES_NAME = "bad_frames.txt"
+
+
+def chosen_frames(rows: Sequence[dict[str, Any]], mode: str) -> list[str]:
+    """Frame ids to correct: FAIL verdicts ("fail"), every frame ("all") or none.
+
+    With "fail", frames that FAIL only because a run-level check failed (reason
+    ``registration: ...`` / ``drift: ...``) are left out: their error is shared, and the
+    summary's ``shared_errors`` holds the one correction that fixes all of them
+    (``corrected_world_from_world``), which per-frame PnP on weak evidence would not beat."""
+    if mode == "none":
+        return []
+    if mode == "all":
+        return [str(r["frame_id"]) for r in rows]
+    return [
+        str(r["frame_id"]) for r in rows
+        if r.get("verdict") == "FAIL"
+        and not str(r.get("reason") or "").startswith(("registration:", "drift:"))
+    ]
+
+
+def correct_frame(checker: Any, frame: Frame, m: FrameMeasurement | None, config: RunConfig,
+                  threshold_px: float | None = None) -> Correction:
+    """One frame: start from the measurement's PnP estimate, else (or if that fails) the
+    checked pose."""
+    c = config.correct
+    start = kind = None
+    if m is not None and m.pose is not None and m.pose.world_from_cam is not None:
+        start, kind = np.asarray(m.pose.world_from_cam, float), f"pnp_{m.verdict_path or 'raw'}"
+    opts = {"rounds": c.rounds, "bootstrap": c.bootstrap, "threshold_px": threshold_px}
+    if start is not None:
+        res = refine_pose(checker, frame, start, start_kind=kind, **opts)
+        if res.success:
+            return res
+        logger.debug("frame %s: correction from the PnP estimate failed (%s); from the "
+                     "checked pose", frame.frame_id, res.reason)
+    return refine_pose(checker, frame, None, start_kind="checked", **opts)
+
+
+def corrected_trajectory(trajectory: Trajectory, corrections: dict[str, Correction]) -> Trajectory:
+    """``trajectory`` with the applied corrections' poses."""
+    frames = []
+    for f in trajectory.frames:
+        c = corrections.get(f.frame_id)
+        frames.append(f.with_pose(c.pose) if c is not None and c.applied else f)
+    return Trajectory(tuple(frames), trajectory.source, trajectory.format,
+                      dict(trajectory.metadata))
+
+
+def bad_frames_text(rows: Sequence[dict[str, Any]], corrections: dict[str, Correction]) -> str:
+    bad = [str(r["frame_id"]) for r in rows if r.get("verdict") == "FAIL"]
+    fixed = [f for f in bad if f in corrections and corrections[f].applied]
+    lines = [
+        "# pgt-check: frames whose pose FAILs the check, one id per line",
+        f"# {len(bad)} FAIL frames; {len(fixed)} of them have an applied correction in "
+        f"{CORRECTED_NAME}",
+    ]
+    lines += [f"# corrected: {f}" for f in fixed]
+    lines += bad
+    return "\n".join(lines) + "\n"
+
+
+def correct_run(
+    trajectory: Trajectory,
+    measurements: Sequence[FrameMeasurement],
+    rows: list[dict[str, Any]],
+    config: RunConfig,
+    checker_factory: Callable[[], Any],
+    out: str | Path,
+) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """Run the correction step; returns (rows with the correction columns, summary part)."""
+    from pgt_check.io.writers import write_trajectory_file
+    from pgt_check.report.files import atomic_write_text
+
+    out = Path(out)
+    ids = chosen_frames(rows, config.correct.frames)
+    by_id = trajectory.by_id()
+    m_by_id = {m.frame_id: m for m in measurements}
+    thr = {str(r["frame_id"]): r.get("threshold_px") for r in rows}
+    corrections: dict[str, Correction] = {}
+    if ids:
+        logger.info("correcting %d frame(s) (%d rounds of render -> match -> PnP)", len(ids),
+                    config.correct.rounds)
+        checker = checker_factory()
+        try:
+            for fid in ids:
+                if fid not in by_id:
+                    continue
+                try:
+                    corrections[fid] = correct_frame(checker, by_id[fid], m_by_id.get(fid),
+                                                     config, thr.get(fid))
+                except Exception as err:  # one frame must not stop the outputs
+                    if config.fail_fast:
+                        raise
+                    logger.error("frame %s: correction failed: %s", fid, err)
+                    corrections[fid] = Correction(fid, False, "internal_error")
+        finally:
+            checker.close()
+    save_corrections(out, corrections.values(), config.measurement_fingerprint())
+    fmt = write_trajectory_file(corrected_trajectory(trajectory, corrections),
+                                out / CORRECTED_NAME)
+    atomic_write_text(out / BAD_FRAMES_NAME, bad_frames_text(rows, corrections))
+    applied = [c for c in corrections.values() if c.applied]
+    summary = {
+        "corrections": {
+            "mode": config.correct.frames,
+            "attempted": len(corrections),
+            "succeeded": sum(c.success for c in corrections.values()),
+            "applied": len(applied),
+            "file": CORRECTED_NAME,
+            "format": fmt,
+            "bad_frames_file": BAD_FRAMES_NAME,
+        }
+    }
+    return add_correction_columns(rows, corrections), summary
