@@ -91,6 +91,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="reference photo: nearest other frame (default); 'self' = the frame's "
                    "own photo (evaluation upper bound only: it hides pose errors)")
     g.add_argument("--no-pose-estimate", action="store_true", help="skip the PnP pose estimate")
+    g.add_argument("--edges", default=None, choices=["never", "auto", "always"],
+                   help="geometric-edge path (mesh silhouettes and creases vs photo edges; "
+                   "absolute evidence without texture): auto (default: where the raw feature "
+                   "path is not decisive), always, never")
     g.add_argument("--correct", default=None, choices=["none", "fail", "all"],
                    help="correct the poses of FAIL frames (default), all frames or none: "
                    "render -> match -> PnP rounds; writes corrected_trajectory.txt (input's "
@@ -111,6 +115,16 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("--max-internal-errors", type=int, default=None,
                    help="gate: frames with internal errors or crashed workers allowed "
                    "(default 0)")
+    g.add_argument("--shared-threshold-px", type=float, default=None,
+                   help="threshold of the run-level registration / drift / calibration checks "
+                   "(default: a quarter of the per-frame threshold)")
+    g.add_argument("--no-shared-checks", action="store_true",
+                   help="skip the run-level checks (then a PASS resting on reprojected "
+                   "references alone is UNVERIFIABLE)")
+    g.add_argument("--remove-calibration", action="store_true",
+                   help="judge frames after removing the estimated per-camera calibration "
+                   "error (a shared principal-point / camera-to-rig / focal error; see the "
+                   "summary's shared_errors.calibration)")
     g = p.add_argument_group("run")
     g.add_argument("--limit", type=int, default=None,
                    help="check only the first N frames (N >= 1)")
@@ -161,6 +175,10 @@ def _cli_overrides(args: argparse.Namespace) -> dict[str, Any]:
         ("enhance", "iterations"): args.iterations,
         ("enhance", "reference", "mode"): args.reference,
         ("pose", "enabled"): False if args.no_pose_estimate else None,
+        ("edges", "mode"): args.edges,
+        ("verdict", "shared_threshold_px"): args.shared_threshold_px,
+        ("verdict", "shared_checks"): False if args.no_shared_checks else None,
+        ("verdict", "remove_calibration"): True if args.remove_calibration else None,
         ("correct", "frames"): args.correct,
         ("correct", "rounds"): args.correct_rounds,
         ("report_details",): args.report_details,
@@ -267,6 +285,16 @@ def configure_logging(verbose: int, quiet: bool) -> None:
     root.propagate = True  # library users and test log capture see the records too
 
 
+def shared_error_lines(shared: dict[str, Any]) -> list[str]:
+    """One line per run-level check worth reading: failed, inconclusive or a finding."""
+    entries = [shared.get(k) for k in ("registration", "similarity", "drift")]
+    entries += list((shared.get("calibration") or {}).values())
+    return [
+        str(e["message"]) for e in entries
+        if isinstance(e, dict) and e.get("status") in ("failed", "inconclusive", "finding")
+    ]
+
+
 def _print_summary(summary: dict[str, Any], out: str) -> None:
     c = summary["counts"]
     err = summary["statistics"]["corner_error_px"]
@@ -279,6 +307,8 @@ def _print_summary(summary: dict[str, Any], out: str) -> None:
     sysoff = summary["statistics"]["systematic_offset"]
     if sysoff.get("systematic"):
         print(f"pgt-check: {sysoff['message']}")
+    for line in shared_error_lines(summary.get("shared_errors") or {}):
+        print(f"pgt-check: {line}")
     gate = summary["gate"]
     print(f"pgt-check: gate {'PASSED' if gate['passed'] else 'FAILED'}: {gate['explanation']}")
     print(f"pgt-check: report: {Path(out) / 'report.html'} (all outputs in {out})")

@@ -304,8 +304,13 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
         else thr
     )
     ev = frame_evidence(measurements)
-    reg = _registration_entry(estimate_registration(ev), thr, "rigid")
-    sim = _registration_entry(estimate_registration(ev, similarity=True), thr, "similarity")
+    # --remove-calibration: the user states that the shared camera-frame error is calibration,
+    # so the registration is judged with a per-camera calibration fitted beside it
+    calib_mode = "joint" if config.verdict.remove_calibration else "auto"
+    reg = _registration_entry(estimate_registration(ev, calibration=calib_mode), thr, "rigid")
+    sim = _registration_entry(
+        estimate_registration(ev, similarity=True, calibration=calib_mode), thr, "similarity"
+    )
     ids = [e.frame_id for e in ev]
     drift, drift_px, flagged = _drift_entry(estimate_drift(ev, threshold_px=thr), ids, thr)
     calib, homs = {}, {}

@@ -20,11 +20,16 @@ def _rows(path: Path) -> list[dict[str, str]]:
         return list(csv.DictReader(f))
 
 
-def _assert_same(golden: Path, got: Path) -> None:
+#: columns the verdict stage writes (changed on purpose by issue #13: evidence kinds and the
+#: run-level checks); the measurement columns must stay as the first build measured them
+VERDICT_ONLY = {"verdict", "reason"}
+
+
+def _assert_same(golden: Path, got: Path, skip: set[str] = frozenset()) -> None:
     want, have = _rows(golden), _rows(got)
     assert [r["frame_id"] for r in have] == [r["frame_id"] for r in want]
     for w, h in zip(want, have, strict=True):
-        diff = {k: (v, h.get(k)) for k, v in w.items() if h.get(k) != v}
+        diff = {k: (v, h.get(k)) for k, v in w.items() if k not in skip and h.get(k) != v}
         assert not diff, (w["frame_id"], diff)
 
 
@@ -44,4 +49,7 @@ def test_7scenes_frames_csv_unchanged(shared_data, tmp_path, capsys):
     rc = main([str(root / "trajectories.txt"), "--mesh", str(root / "mesh.ply"), "--out",
                str(out), "--limit", "12", "--report-details", "0", "-q"])
     assert rc in (0, 1)
-    _assert_same(GOLDEN / "7scenes_12_frames.csv", out / "frames.csv")
+    # the verdicts of these 12 consecutive frames changed with #13: geometric edges show the
+    # real RGB-vs-depth-camera offset of the shared poses (~8 px, every frame), which these
+    # similar views cannot tell apart from a misregistration: the run-level check fails
+    _assert_same(GOLDEN / "7scenes_12_frames.csv", out / "frames.csv", skip=VERDICT_ONLY)
