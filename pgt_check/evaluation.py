@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -172,3 +173,95 @@ def time_offset_trajectory(traj: Trajectory, offset: int) -> Trajectory:
         for i, f in enumerate(traj.frames)
     ]
     return Trajectory(frames, traj.source, traj.format)
+
+
+# -- a generated textureless scene (plain boxes on a floor), for the geometric-edge path -------
+def _look_at(eye: np.ndarray, target: np.ndarray, up=(0.0, 0.0, 1.0)) -> np.ndarray:
+    z = np.asarray(target, np.float64) - eye
+    z /= np.linalg.norm(z)
+    x = np.cross(z, up)
+    x /= np.linalg.norm(x)
+    m = np.eye(4)
+    m[:3, :3] = np.stack([x, np.cross(z, x), z], axis=1)
+    m[:3, 3] = eye
+    return m
+
+
+def boxes_scene(seed: int = 0):
+    """Plain-coloured boxes of different sizes on a grey floor and a back wall (trimesh Scene):
+    no texture at all, only geometry."""
+    import trimesh
+
+    def coloured(mesh, rgb):
+        mesh.visual.vertex_colors = np.array([[*rgb, 255]] * len(mesh.vertices), np.uint8)
+        return mesh
+
+    floor = trimesh.Trimesh([[-6, -6, 0], [6, -6, 0], [6, 6, 0], [-6, 6, 0]],
+                            [[0, 1, 2], [0, 2, 3]], process=False)
+    wall = trimesh.Trimesh([[-6, 4, 0], [6, 4, 0], [6, 4, 3], [-6, 4, 3]],
+                           [[0, 1, 2], [0, 2, 3]], process=False)
+    parts = [coloured(floor, (150, 150, 150)), coloured(wall, (175, 175, 170))]
+    rng = np.random.default_rng(seed)
+    for x, y, sx, sy, sz in [(0, 0, 0.8, 0.6, 0.7), (1.3, 0.6, 0.5, 0.5, 1.2),
+                             (-1.2, 0.8, 0.6, 0.9, 0.5), (0.4, 1.8, 1.2, 0.4, 0.9),
+                             (-0.6, -1.0, 0.4, 0.4, 0.4), (-2.0, 2.5, 0.7, 0.7, 1.6)]:
+        box = trimesh.creation.box(extents=[sx, sy, sz])
+        box.apply_translation([x, y, sz / 2])
+        parts.append(coloured(box, tuple(int(c) for c in rng.integers(60, 200, 3))))
+    return trimesh.Scene(parts)
+
+
+def make_textureless_scene(out_dir: str | Path, n_frames: int = 24, seed: int = 0,
+                           size: tuple[int, int] = (320, 240)) -> Path:
+    """Write a textureless scene: ``mesh.ply`` (plain vertex colours), photos rendered at the
+    true poses (colours mixed with head-light shading, blur, noise, JPEG), and LaMAR files
+    (``sensors.txt``, ``images.txt``, ``trajectories.txt``) with the TRUE poses. Returns the
+    trajectory path. The camera circles the boxes at 3.5-4.5 m, looking at the centre."""
+    import cv2
+    import trimesh
+
+    from pgt_check.io.lamar import write_lamar
+    from pgt_check.render import make_renderer, mesh_from_trimesh
+    from pgt_check.types import Camera
+
+    out = Path(out_dir)
+    (out / "images").mkdir(parents=True, exist_ok=True)
+    scene = boxes_scene(seed)
+    mesh = trimesh.util.concatenate(list(scene.geometry.values()))
+    mesh.export(out / "mesh.ply")
+    w, h = size
+    cam = Camera.pinhole(w, h, 0.9 * w, 0.9 * w, (w - 1) / 2, (h - 1) / 2)
+    coloured = make_renderer(mesh_from_trimesh(scene))
+    shaded = make_renderer(mesh_from_trimesh(scene, shading="shaded"))
+    rng = np.random.default_rng(seed)
+    frames = []
+    try:
+        for i in range(n_frames):
+            a = -0.9 + 1.8 * i / max(n_frames - 1, 1)  # an arc in front of the wall
+            r = 4.0 + 0.5 * np.sin(3 * a)
+            eye = np.array([r * np.sin(a), -r * np.cos(a), 1.6 + 0.3 * np.cos(2 * a)])
+            pose = _look_at(eye, np.array([0.0, 0.6, 0.5]))
+            img = 0.4 * shaded.render(cam, pose).rgb + 0.65 * coloured.render(cam, pose).rgb
+            img = cv2.GaussianBlur(img, (0, 0), 0.7)
+            img = img + rng.normal(0, 0.015, img.shape).astype(np.float32)
+            name = f"images/{i:04d}.jpg"
+            cv2.imwrite(str(out / name),
+                        cv2.cvtColor((np.clip(img, 0, 1) * 255).astype(np.uint8),
+                                     cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 85])
+            frames.append(Frame(f"{i}", cam, pose, image_path=name, image_file=out / name,
+                                timestamp=float(i)))
+    finally:
+        coloured.close()
+        shaded.close()
+    write_lamar(Trajectory(tuple(frames), str(out), "lamar"), out)
+    return out / "trajectories.txt"
+
+
+def textureless_scene(out_dir: str | Path, n_frames: int = 24) -> tuple[Trajectory, Path]:
+    """The textureless scene in ``out_dir`` (written first if missing): (trajectory, mesh)."""
+    from pgt_check.io import read_trajectory
+
+    out = Path(out_dir)
+    if not (out / "trajectories.txt").is_file():
+        make_textureless_scene(out, n_frames)
+    return read_trajectory(out / "trajectories.txt"), out / "mesh.ply"

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from pgt_check.measure.checker import FrameChecker, build_frame_checker, pick_references
 from pgt_check.measure.columns import MEASUREMENT_COLUMNS, TIMING_COLUMNS
-from pgt_check.measure.paths import FrameImages, PathResult
+from pgt_check.measure.paths import FrameImages, PathImages, PathResult
 from pgt_check.measure.record import (
     SCHEMA_VERSION,
     AbsoluteEvidence,
@@ -33,6 +33,7 @@ __all__ = [
     "FrameMeasurement",
     "MeasureReason",
     "OldRecordError",
+    "PathImages",
     "PathMeasurement",
     "PathResult",
     "PoseEstimate",

@@ -140,6 +140,15 @@ def judge(m: FrameMeasurement, config: VerdictConfig, shared: Any = None) -> Jud
     if base is Verdict.UNVERIFIABLE and edge_v in (Verdict.PASS, Verdict.FAIL):
         base, why = out["edges"]
         evidence = Evidence.ABSOLUTE.value
+    absolute_pass = Verdict.PASS.value in (raw_v, edge_v and edge_v.value)
+    if base is Verdict.FAIL and evidence != Evidence.ABSOLUTE.value and absolute_pass:
+        # a FAIL of reprojected references (not confident) against a PASS of this frame's own
+        # render: the references' poses may be the wrong ones
+        return j(
+            Verdict.UNVERIFIABLE,
+            f"paths_disagree ({why} on the {m.verdict_path} path; an absolute path passes)",
+            evidence,
+        )
     if base is not Verdict.PASS:
         return j(base, why, evidence)
     if shared is not None and m.frame_id in shared.drift_flagged:
@@ -156,7 +165,7 @@ def judge(m: FrameMeasurement, config: VerdictConfig, shared: Any = None) -> Jud
         )
     if evidence == Evidence.ABSOLUTE.value:
         return j(Verdict.PASS, "", evidence)
-    if Verdict.PASS.value in (raw_v, edge_v and edge_v.value):  # an absolute path confirms
+    if absolute_pass:  # an absolute path confirms the relative PASS
         return j(Verdict.PASS, "", Evidence.ABSOLUTE.value)
     if reg == PASSED:
         return j(Verdict.PASS, "", "relative+registration")
@@ -197,7 +206,10 @@ def gate(
     if not fail <= config.max_fail_fraction:
         return False, f"FAIL fraction {fail:.3f} > max {config.max_fail_fraction:.3f}"
     if not unv <= config.max_unverifiable_fraction:
-        return False, f"UNVERIFIABLE fraction {unv:.3f} > max {config.max_unverifiable_fraction:.3f}"
+        return (
+            False,
+            f"UNVERIFIABLE fraction {unv:.3f} > max {config.max_unverifiable_fraction:.3f}",
+        )
     return True, (
         f"FAIL fraction {fail:.3f} <= max {config.max_fail_fraction:.3f}, UNVERIFIABLE fraction "
         f"{unv:.3f} <= max {config.max_unverifiable_fraction:.3f}"

@@ -289,6 +289,16 @@ def _drift_entry(est: Any, ids: list[str], threshold: float) -> tuple[dict, dict
     return entry, score, flagged
 
 
+def _without_calibration(e: Any, h_cal: np.ndarray | None) -> Any:
+    """The frame's evidence with the camera's calibration error taken out of its photo points."""
+    if h_cal is None:
+        return e
+    from dataclasses import replace
+
+    p = np.c_[e.pts2d, np.ones(len(e.pts2d))] @ np.linalg.inv(h_cal).T
+    return replace(e, pts2d=p[:, :2] / p[:, 2:3])
+
+
 def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfig) -> SharedChecks:
     """All run-level checks on the measurements (in trajectory order)."""
     from pgt_check.geometry.shared_errors import (
@@ -304,15 +314,6 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
         else thr
     )
     ev = frame_evidence(measurements)
-    # --remove-calibration: the user states that the shared camera-frame error is calibration,
-    # so the registration is judged with a per-camera calibration fitted beside it
-    calib_mode = "joint" if config.verdict.remove_calibration else "auto"
-    reg = _registration_entry(estimate_registration(ev, calibration=calib_mode), thr, "rigid")
-    sim = _registration_entry(
-        estimate_registration(ev, similarity=True, calibration=calib_mode), thr, "similarity"
-    )
-    ids = [e.frame_id for e in ev]
-    drift, drift_px, flagged = _drift_entry(estimate_drift(ev, threshold_px=thr), ids, thr)
     calib, homs = {}, {}
     intrinsics = {m.camera_id: m.intrinsics for m in measurements if m.intrinsics}
     for cam_id, est in estimate_calibration(ev).items():
@@ -326,4 +327,17 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
             "reason": "no_absolute_evidence",
             "message": "calibration not checked: no absolute evidence",
         }
+    mode = "auto"
+    if config.verdict.remove_calibration and homs:
+        # the user states that the shared camera-frame error is calibration: the evidence is
+        # corrected by it, and registration / drift are judged on what remains
+        ev, mode = [_without_calibration(e, homs.get(e.camera_id)) for e in ev], "none"
+    reg = _registration_entry(estimate_registration(ev, calibration=mode), thr, "rigid")
+    sim = _registration_entry(
+        estimate_registration(ev, similarity=True, calibration=mode), thr, "similarity"
+    )
+    ids = [e.frame_id for e in ev]
+    drift, drift_px, flagged = _drift_entry(
+        estimate_drift(ev, threshold_px=thr, calibration=mode), ids, thr
+    )
     return SharedChecks(thr, reg, sim, drift, calib, drift_px, flagged, homs)

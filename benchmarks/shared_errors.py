@@ -1,0 +1,214 @@
+"""Errors that neighbouring frames share (issue #13) and the geometric-edge path (issue #17).
+
+For each dataset the given trajectory and copies with a known error are checked with the
+default settings (and, where asked, with the edge path switched off):
+
+* per-frame: 40 % of the frames with an independent error (1-4 deg, 2-8 % of the scene depth);
+* moved: the whole trajectory moved by 2 deg + 4 % of the scene depth (and 1 deg alone);
+* similarity: scaled by 1.03 about the camera centroid;
+* drift: the last 40 % of the frames drift to 2 deg + 4 % of the depth;
+* focal +2 %, principal point +5 px, a time offset of one frame.
+
+Reported per case: the share of frames flagged (not PASS), the registration estimate against
+the injected transform, drift ROC-AUC, per-frame ROC-AUC (deciding corner error, failures as
+inf), the evidence kinds, and seconds per frame (measurement) and per run (run-level checks).
+Writes reports/shared_errors.md and reports/edge_evidence.md (+ .json).
+
+    python benchmarks/shared_errors.py [--frames 20] [--datasets 7s,7s-colourless,castle,boxes]
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from collections import Counter
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+from _common import REPORTS, command_line, machine, md_table, shared_data
+
+from pgt_check.config import RunConfig
+from pgt_check.evaluation import (
+    change_intrinsics,
+    drift_trajectory,
+    move_trajectory,
+    perturb_trajectory,
+    roc_auc,
+    shared_transform,
+    time_offset_trajectory,
+)
+from pgt_check.io import read_trajectory
+from pgt_check.measure import FrameChecker, pick_references
+from pgt_check.types import Trajectory
+from pgt_check.verdict import judge_run
+
+
+def _subset(traj: Trajectory, n: int) -> Trajectory:
+    step = max(1, len(traj.frames) // n)
+    return Trajectory(tuple(traj.frames[::step][:n]), traj.source, traj.format)
+
+
+def datasets(names: list[str], n: int) -> dict[str, tuple[Trajectory, Path, dict]]:
+    out = {}
+    if any(x.startswith("7s") or x == "castle" for x in names):
+        root = shared_data()
+    for name in names:
+        if name in ("7s", "7s-colourless"):
+            r = root / "7scenes_redkitchen"
+            cfg = {"render": {"shading": "shaded"}} if name == "7s-colourless" else {}
+            out[name] = (_subset(read_trajectory(r / "trajectories.txt"), n), r / "mesh.ply", cfg)
+        elif name == "castle":
+            r = root / "sceaux_castle"
+            out[name] = (read_trajectory(r / "trajectories.txt"), r / "mesh.ply", {})
+        elif name == "boxes":
+            from pgt_check.evaluation import textureless_scene
+
+            traj, mesh = textureless_scene(REPORTS.parent / "sample_data" / "boxes", n)
+            out[name] = (traj, mesh, {})
+    return out
+
+
+def measure(traj: Trajectory, mesh: Path, cfgd: dict) -> tuple[RunConfig, list, float]:
+    cfg = RunConfig.from_dict({"input": {"trajectory": str(mesh), "mesh": str(mesh)}, **cfgd})
+    checker = FrameChecker(cfg, pick_references(traj, traj.frames, cfg))
+    try:
+        checker.measure(traj.frames[0])  # warm-up (GL context, shaders)
+        t0 = time.perf_counter()
+        ms = [checker.measure(f) for f in traj.frames]
+        return cfg, ms, (time.perf_counter() - t0) / len(ms)
+    finally:
+        checker.close()
+
+
+def scene_depth(ms) -> float:
+    z = [np.median(np.asarray(m.evidence.pts_cam)[:, 2]) for m in ms if m.evidence is not None]
+    return float(np.median(z)) if z else float("nan")
+
+
+def cases(traj: Trajectory, depth: float) -> dict[str, tuple[Trajectory, dict]]:
+    """name -> (trajectory, truth) for every perturbation."""
+    out: dict[str, tuple[Trajectory, dict]] = {"given": (traj, {})}
+    bad, inj = perturb_trajectory(traj, 0.4, (1.0, 4.0), (0.02 * depth, 0.08 * depth), seed=3)
+    out["per-frame"] = (bad, {"labels": {p.frame_id for p in inj}})
+    for name, deg, frac in (("moved 2deg+4%", 2.0, 0.04), ("moved 1deg", 1.0, 0.0)):
+        m = shared_transform(traj, deg, frac * depth, seed=1)
+        out[name] = (move_trajectory(traj, m), {"deg": deg, "t": frac * depth, "all": True})
+    m = shared_transform(traj, 0.0, 0.0, scale=1.03, seed=1)
+    out["similarity x1.03"] = (move_trajectory(traj, m), {"scale": 1.03, "all": True})
+    dr, ids = drift_trajectory(traj, 0.6, 2.0, 0.04 * depth, seed=2)
+    out["drift (last 40 %)"] = (dr, {"labels": set(ids), "drift": True})
+    out["focal +2 %"] = (change_intrinsics(traj, focal_scale=1.02), {"all": True})
+    out["principal point +5 px"] = (change_intrinsics(traj, principal_shift=(5, 5)),
+                                    {"all": True})
+    out["time offset 1 frame"] = (time_offset_trajectory(traj, 1), {"all": True})
+    return out
+
+
+def evaluate(name: str, truth: dict, ms, cfg: RunConfig) -> dict:
+    t0 = time.perf_counter()
+    j = judge_run(ms, cfg)
+    t_run = time.perf_counter() - t0
+    rows = j.rows
+    flagged = np.array([r["verdict"] != "PASS" for r in rows])
+    out = {
+        "case": name,
+        "flagged": f"{int(flagged.sum())}/{len(rows)}",
+        "flagged_frac": float(flagged.mean()),
+        "verdicts": dict(Counter(r["verdict"] for r in rows)),
+        "evidence": dict(Counter(r["evidence"] for r in rows)),
+        "t_run_checks_s": t_run,
+    }
+    if j.shared is not None:
+        se = j.shared.summary()
+        reg = se["registration"]
+        out.update(
+            registration=reg["status"], reg_deg=reg.get("angle_deg"),
+            reg_t=reg.get("translation"), reg_px=reg.get("effect_px"),
+            similarity=se["similarity"]["status"], sim_scale=se["similarity"].get("scale"),
+            drift=se["drift"]["status"],
+            calibration=";".join(e["status"] for e in se["calibration"].values()),
+        )
+    if "labels" in truth:
+        labels = np.array([r["frame_id"] in truth["labels"] for r in rows])
+        if truth.get("drift") and j.shared is not None:
+            score = np.array([r.get("drift_px") or 0.0 for r in rows], float)
+            out["drift_auc"] = roc_auc(score, labels)
+        err = np.array([np.inf if r["corner_error_px"] is None else r["corner_error_px"]
+                        for r in rows])
+        out["frame_auc"] = roc_auc(err, labels)
+        out["flagged_bad"] = f"{int((flagged & labels).sum())}/{int(labels.sum())}"
+        out["flagged_good"] = f"{int((flagged & ~labels).sum())}/{int((~labels).sum())}"
+    return out
+
+
+def run_dataset(name: str, traj: Trajectory, mesh: Path, cfgd: dict, edges_off: bool) -> dict:
+    cfg, ms, tpf = measure(traj, mesh, cfgd)
+    depth = scene_depth(ms)
+    res = {"dataset": name, "frames": len(ms), "depth": depth, "s_per_frame": tpf, "rows": []}
+    for case, (t, truth) in cases(traj, depth).items():
+        if case == "given":
+            c_ms, c_cfg, c_tpf = ms, cfg, tpf
+        else:
+            c_cfg, c_ms, c_tpf = measure(t, mesh, cfgd)
+        row = evaluate(case, truth, c_ms, c_cfg)
+        row["s_per_frame"] = c_tpf
+        row["t_edges_s"] = float(np.median([m.timings.edges or 0.0 for m in c_ms]))
+        if truth.get("deg") and row.get("reg_deg") is not None:
+            row["reg_deg_err"] = abs(row["reg_deg"] - truth["deg"]) / truth["deg"]
+        res["rows"].append(row)
+        print(name, json.dumps(row), flush=True)
+        if edges_off and case in ("given", "per-frame", "moved 2deg+4%"):
+            off = {**cfgd, "edges": {"mode": "never"}}
+            o_cfg, o_ms, o_tpf = measure(t, mesh, off)
+            row_off = evaluate(case + " (no edges)", truth, o_ms, o_cfg)
+            row_off["s_per_frame"] = o_tpf
+            res["rows"].append(row_off)
+            print(name, json.dumps(row_off), flush=True)
+    return res
+
+
+def write_reports(results: list[dict], args: argparse.Namespace) -> None:
+    head = (f"Command: `{command_line()}`\n\nMachine: {machine()} (other jobs shared the cores; "
+            "absolute times are pessimistic).\n")
+    lines = ["# Errors that neighbouring frames share: detection\n", head,
+             "Flagged = frames not PASS (FAIL or UNVERIFIABLE). Default settings (SIFT 640 px, "
+             "auto reprojection, auto edges, run-level checks). Registration columns: the "
+             "run-level estimate (deg, scene units, px of image displacement).\n"]
+    for res in results:
+        lines.append(f"\n## {res['dataset']} ({res['frames']} frames, median depth "
+                     f"{res['depth']:.3g}, {res['s_per_frame']:.2f} s/frame measured)\n")
+        rows = [[r["case"], r["flagged"], r.get("flagged_bad", ""), r.get("flagged_good", ""),
+                 r.get("registration", ""), _f(r.get("reg_deg")), _f(r.get("reg_t"), ".3g"),
+                 _f(r.get("reg_px")), _f(r.get("sim_scale"), ".4f"), r.get("drift", ""),
+                 _f(r.get("drift_auc")), _f(r.get("frame_auc")), r.get("calibration", ""),
+                 ", ".join(f"{k} {v}" for k, v in r["evidence"].items()),
+                 _f(r.get("s_per_frame")), _f(r.get("t_run_checks_s"))]
+                for r in res["rows"]]
+        lines.append(md_table(["case", "flagged", "bad flagged", "good flagged", "registration",
+                               "deg", "transl.", "px", "scale", "drift", "drift AUC",
+                               "frame AUC", "calibration", "evidence", "s/frame",
+                               "run checks s"], rows))
+    (REPORTS / "shared_errors.md").write_text("\n".join(lines) + "\n")
+    (REPORTS / "shared_errors.json").write_text(json.dumps(results, indent=1, default=str))
+
+
+def _f(x, spec=".2f") -> str:
+    return "" if x is None or (isinstance(x, float) and not np.isfinite(x)) else format(x, spec)
+
+
+def main() -> None:
+    p = argparse.ArgumentParser()
+    p.add_argument("--frames", type=int, default=20)
+    p.add_argument("--datasets", default="castle,7s,7s-colourless")
+    p.add_argument("--edges-off", action="store_true", help="also run without the edge path")
+    args = p.parse_args()
+    results = []
+    for name, (traj, mesh, cfgd) in datasets(args.datasets.split(","), args.frames).items():
+        results.append(run_dataset(name, traj, mesh, cfgd, args.edges_off))
+        write_reports(results, args)
+
+
+if __name__ == "__main__":
+    main()
