@@ -90,17 +90,34 @@ class OpenCVMatcher:
             desc = np.sqrt(desc / (desc.sum(axis=1, keepdims=True) + 1e-7)).astype(np.float32)
         return np.array([k.pt for k in kpts], dtype=np.float64), desc
 
+    def _photo_features(self, image1: np.ndarray):
+        """Features of the photo; the raw and enhanced paths of a frame match the same photo
+        array, so its features are computed once (kept for the last photo object only)."""
+        cached = getattr(self, "_photo_cache", None)
+        if cached is not None and cached[0] is image1:
+            return cached[1]
+        feats = self._detect(to_gray_u8(image1), None)
+        self._photo_cache = (image1, feats)
+        return feats
+
+    def __getstate__(self) -> dict:
+        """Pickles without OpenCV objects or cached features (rebuilt on first use)."""
+        state = dict(self.__dict__)
+        state.pop("_photo_cache", None)
+        state["_detector"] = None
+        return state
+
     def match(
         self, image0: np.ndarray, image1: np.ndarray, mask0: np.ndarray | None = None
     ) -> Matches:
         """Match image0 (render) to image1 (photo); both (H, W, 3) RGB float32 in [0, 1]."""
         import cv2
 
-        g0, g1 = to_gray_u8(image0), to_gray_u8(image1)
+        g0 = to_gray_u8(image0)
         if mask0 is not None:
             check_shape("mask0", np.asarray(mask0), g0.shape)
         k0, d0 = self._detect(g0, mask0)
-        k1, d1 = self._detect(g1, None)
+        k1, d1 = self._photo_features(image1)
         if d0 is None or d1 is None or len(k0) < 2 or len(k1) < 2:
             return Matches(np.zeros((0, 2)), np.zeros((0, 2)), np.zeros(0), len(k0), len(k1))
         _, norm = self._detector_and_norm()
