@@ -324,6 +324,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         from pgt_check.compare import compare_main
 
         return compare_main(argv[1:])
+    if argv and argv[0] == "enhance":
+        from pgt_check.enhance_cli import enhance_main
+
+        return enhance_main(argv[1:])
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

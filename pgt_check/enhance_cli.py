@@ -1,0 +1,500 @@
+"""``pgt-check enhance RENDERS MODEL --out DIR``: enhance a folder of renders with the nearest
+training photos (MaRINeR's second application: better novel views of a NeRF / mesh).
+
+Inputs and the naming convention:
+
+* ``RENDERS``: a folder of rendered images (``.png``/``.jpg``/``.jpeg``, top level only), for
+  example a nerfstudio ``ns-render dataset`` output.
+* ``MODEL``: the training images with their poses: a nerfstudio ``transforms.json``, a COLMAP
+  model or any pose file ``pgt_check.io.read_trajectory`` reads (``--format``, ``--images``,
+  ``--sensors``, ``--camera``, ``--dataparser-transforms`` as for ``pgt-check``). Its frames
+  whose photo exists are the references.
+* The pose of a render: without ``--render-poses``, the render is named like a model image
+  (same file name without the extension, e.g. ``frame_00012.png`` for ``images/frame_00012.jpg``;
+  or the frame id) and takes that image's pose. With ``--render-poses FILE`` (any format
+  ``read_trajectory`` reads, ``--render-poses-format``), the render is named like an image or
+  frame id of that file. A render that matches no pose is skipped (listed in references.csv).
+* Reference: the model photo nearest to the render's pose, by the validator's distance
+  (``pgt_check.enhance.reference``): ``|dc| / translation_scale + angle / rotation_scale_deg``
+  (translation_scale default: 10 % of the extent of the training cameras), at most
+  ``--max-rotation-deg`` apart. The photo of the render's own view (same name, or same pose) is
+  the view's ground truth and is not used unless ``--allow-same-view`` (an upper bound).
+
+Methods: ``mariner`` (default; the learned enhancer, shipped weights unless ``--weights``; it
+works at ``--short-side`` and its result is resized back to the render's size) or ``reproject``
+(needs ``--mesh``: the reference photo projected through the mesh into the render's view; the
+render's size must have the aspect ratio of its camera).
+
+Outputs in ``--out``: ``images/<render name>.png`` (enhanced, render size), ``references.csv``
+(render, pose, reference, distances, status) and, with ``--gt DIR`` (photos named like the
+renders, resized to the render's size when they differ), ``metrics.csv`` (per render: PSNR-Y,
+SSIM-Y, LPIPS-Alex of the raw render and of the enhanced image against the photo) and
+``metrics.md`` (the same with means).
+
+Exit codes: 0 done; 2 usage, input or setup error (one line, no traceback).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import io
+import logging
+import math
+import sys
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pgt_check.errors import InputError
+from pgt_check.types import Camera, Frame, Trajectory
+
+logger = logging.getLogger(__name__)
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
+
+REFERENCE_COLUMNS = ("render", "pose", "reference", "reference_dt", "reference_drot_deg",
+                     "status")
+METRIC_COLUMNS = ("render", "reference", "psnr_y_raw", "psnr_y_enhanced", "ssim_y_raw",
+                  "ssim_y_enhanced", "lpips_raw", "lpips_enhanced")
+
+
+@dataclass(frozen=True)
+class RenderItem:
+    """One render file with the pose it was made at and its chosen reference (None: skipped)."""
+
+    name: str  # file name without extension
+    file: Path
+    frame: Frame | None
+    reference: Frame | None = None
+    reference_dt: float | None = None
+    reference_drot_deg: float | None = None
+    status: str = "ok"
+
+
+def find_renders(folder: str | Path) -> list[Path]:
+    """The image files directly inside ``folder``, sorted by name."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError(f"renders folder not found: {folder}")
+    files = sorted(p for p in folder.iterdir()
+                   if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
+    if not files:
+        raise InputError(f"{folder}: no .png/.jpg renders in this folder")
+    return files
+
+
+def _keys(frame: Frame) -> list[str]:
+    """Names a render may carry to take this frame's pose: the image's file name without its
+    extension, or the frame id."""
+    keys = [Path(frame.image_path).stem] if frame.image_path else []
+    return list(dict.fromkeys([*keys, frame.frame_id]))
+
+
+def frame_index(frames: Sequence[Frame]) -> dict[str, Frame]:
+    """name -> frame for every key of ``_keys``; a key two frames share is left out."""
+    index: dict[str, Frame] = {}
+    clash: set[str] = set()
+    for f in frames:
+        for k in _keys(f):
+            if k in index and index[k] is not f:
+                clash.add(k)
+            index.setdefault(k, f)
+    for k in clash:
+        del index[k]
+    return index
+
+
+def _angles_deg(rotations: np.ndarray, r: np.ndarray) -> np.ndarray:
+    rel = np.einsum("nji,jk->nik", rotations, r)
+    c = np.clip((np.trace(rel, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
+    return np.degrees(np.arccos(c))
+
+
+def nearest_references(
+    items: Sequence[RenderItem],
+    training: Sequence[Frame],
+    *,
+    translation_scale: float | None = None,
+    rotation_scale_deg: float = 10.0,
+    max_rotation_deg: float = 45.0,
+    max_translation: float | None = None,
+    allow_same_view: bool = False,
+) -> list[RenderItem]:
+    """Each posed render with its nearest training photo (the validator's distance, see the
+    module docstring). A training frame named like the render or at the render's own pose
+    (1e-6 of the translation scale, 1e-3 deg) is the view's ground truth and is excluded unless
+    ``allow_same_view`` (an upper bound: the enhancer then sees the answer)."""
+    from dataclasses import replace
+
+    if not training:
+        raise InputError("the model has no frame whose photo exists (nothing to take "
+                         "appearance from; check --images)")
+    centres = np.array([f.world_from_cam[:3, 3] for f in training])
+    rotations = np.array([f.world_from_cam[:3, :3] for f in training])
+    if translation_scale is None:
+        extent = float(np.linalg.norm(centres.max(0) - centres.min(0)))
+        translation_scale = max(0.1 * extent, 1e-9)
+    out = []
+    for it in items:
+        if it.frame is None:
+            out.append(it)
+            continue
+        names = set(_keys(it.frame)) | {it.name}
+        dt = np.linalg.norm(centres - it.frame.world_from_cam[:3, 3], axis=1)
+        dr = _angles_deg(rotations, it.frame.world_from_cam[:3, :3])
+        cost = dt / translation_scale + dr / rotation_scale_deg
+        ok = dr <= max_rotation_deg
+        if not allow_same_view:
+            ok &= ~np.array([bool(names & set(_keys(f))) for f in training])
+            ok &= ~((dt <= 1e-6 * translation_scale) & (dr <= 1e-3))
+        if max_translation is not None:
+            ok &= dt <= max_translation
+        if not ok.any():
+            out.append(replace(it, status="no_reference_within_limits"))
+            continue
+        cand = np.flatnonzero(ok)
+        j = int(cand[np.argmin(cost[cand])])
+        out.append(replace(it, reference=training[j], reference_dt=float(dt[j]),
+                           reference_drot_deg=float(dr[j])))
+    return out
+
+
+def pose_renders(files: Sequence[Path], poses: Trajectory) -> list[RenderItem]:
+    """Each render file with the frame of ``poses`` it is named like (None: no such frame)."""
+    index = frame_index(poses.frames)
+    items = [RenderItem(p.stem, p, index.get(p.stem), status="ok" if p.stem in index
+                        else "no_pose") for p in files]
+    for it in items:
+        if it.frame is None:
+            logger.warning("%s: no pose named %r in %s; skipped", it.file, it.name, poses.source)
+    if not any(it.frame for it in items):
+        examples = ", ".join(sorted(index)[:3])
+        raise InputError(
+            f"no render in {files[0].parent} is named like a posed image of {poses.source} "
+            f"(render names: {', '.join(p.stem for p in files[:3])}; pose names: {examples})"
+        )
+    return items
+
+
+def _render_camera(frame: Frame, image: np.ndarray) -> Camera:
+    """The render's pinhole camera at the render file's size (same aspect ratio required)."""
+    cam = frame.camera.as_pinhole()
+    h, w = image.shape[:2]
+    if (w, h) == (cam.width, cam.height):
+        return cam
+    if abs(w / h - cam.width / cam.height) > 0.01 * cam.width / cam.height:
+        raise InputError(f"render {w}x{h} does not have the aspect ratio of its camera "
+                         f"{cam.width}x{cam.height}")
+    return cam.scaled(w / cam.width, h / cam.height)
+
+
+class _Reprojector:
+    """The reprojection method for renders that come from files (the mesh gives the depth)."""
+
+    def __init__(self, mesh: str | Path, shading: str = "auto") -> None:
+        from pgt_check.render import load_mesh, make_renderer
+
+        if not Path(mesh).is_file():
+            raise InputError(f"mesh not found: {mesh}")
+        self.renderer = make_renderer(load_mesh(mesh, shading=shading))
+
+    def __call__(self, render: np.ndarray, frame: Frame, photo: np.ndarray,
+                 reference: Frame) -> np.ndarray:
+        from pgt_check.enhance.reproject import reproject_reference
+        from pgt_check.io.photo import prepare_photo
+
+        cam = _render_camera(frame, render)
+        depth = self.renderer.render(cam, frame.world_from_cam).depth
+        ref_photo, ref_cam = prepare_photo(photo, reference.camera)
+        ref_depth = self.renderer.render(ref_cam, reference.world_from_cam).depth
+        image, _ = reproject_reference(render, depth, cam, frame.world_from_cam, ref_photo,
+                                       ref_depth, ref_cam, reference.world_from_cam)
+        return image
+
+    def close(self) -> None:
+        self.renderer.close()
+
+
+class _Mariner:
+    def __init__(self, weights: str | None, device: str, short_side: int,
+                 iterations: int | None) -> None:
+        from pgt_check.enhance.mariner import MarinerEnhancer
+
+        self.enhancer = MarinerEnhancer(weights=weights, device=device, short_side=short_side,
+                                        iterations=iterations)
+        if weights is not None and not Path(weights).is_file():
+            raise InputError(f"MaRINeR weights not found: {weights}")
+        try:
+            model = self.enhancer._load()
+        except InputError:
+            raise
+        except Exception as err:  # a file that is not a MaRINeR checkpoint
+            raise InputError(f"cannot load MaRINeR weights {weights or '(shipped)'}: "
+                             f"{type(err).__name__}: {(str(err).splitlines() or [''])[0][:160]}") from err
+        minimum = model.model.cfg.min_reference_size
+        if short_side < minimum:
+            raise InputError(f"--short-side {short_side} is below MaRINeR's minimum {minimum}")
+        if iterations is not None and iterations < 1:
+            raise InputError(f"--iterations must be >= 1, got {iterations}")
+
+    def __call__(self, render: np.ndarray, frame: Frame, photo: np.ndarray,
+                 reference: Frame) -> np.ndarray:
+        return self.enhancer.enhance_image(render, photo)
+
+    def close(self) -> None:
+        pass
+
+
+class _Metrics:
+    """PSNR-Y / SSIM-Y (``mariner_core.metrics``) and LPIPS-Alex (optional)."""
+
+    def __init__(self, lpips: bool) -> None:
+        try:
+            from mariner_core import metrics
+        except ImportError as err:
+            from pgt_check.errors import MissingExtraError
+
+            raise MissingExtraError(err.name or "torch", "enhance") from err
+        self.metrics = metrics
+        self.lpips = None
+        if lpips:
+            try:
+                self.lpips = metrics.LPIPS.pretrained("alex")
+            except FileNotFoundError as err:
+                raise InputError(f"LPIPS weights unavailable ({err}); pass --no-lpips") from err
+
+    def __call__(self, image: np.ndarray, gt: np.ndarray) -> tuple[float, float, float | None]:
+        import torch
+
+        m = self.metrics
+        psnr = float(m.psnr_y(image, gt)[0])
+        ssim = float(m.ssim_y(image, gt)[0])
+        lp = None
+        if self.lpips is not None:
+            with torch.inference_mode():
+                a = torch.from_numpy(np.ascontiguousarray(image)).permute(2, 0, 1)[None].float()
+                b = torch.from_numpy(np.ascontiguousarray(gt)).permute(2, 0, 1)[None].float()
+                lp = float(self.lpips(a, b)[0])
+        return psnr, ssim, lp
+
+
+def find_gt(folder: Path, name: str) -> Path | None:
+    for suffix in (*IMAGE_SUFFIXES, *(s.upper() for s in IMAGE_SUFFIXES)):
+        p = folder / f"{name}{suffix}"
+        if p.is_file():
+            return p
+    return None
+
+
+def _fmt(v: float | None, digits: int = 4) -> str:
+    return "" if v is None or not math.isfinite(v) else f"{v:.{digits}f}"
+
+
+def _csv_text(columns: Sequence[str], rows: Sequence[dict[str, Any]]) -> str:
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=list(columns), lineterminator="\n")
+    w.writeheader()
+    w.writerows(rows)
+    return buf.getvalue()
+
+
+def _mean(values: Sequence[float | None]) -> float | None:
+    vals = [v for v in values if v is not None and math.isfinite(v)]
+    return float(np.mean(vals)) if vals else None
+
+
+def metrics_markdown(rows: Sequence[dict[str, Any]], method: str) -> str:
+    """The metrics table (one row per render, then the means) as Markdown."""
+    def num(r: dict[str, Any], k: str) -> float | None:
+        v = r.get(k)
+        return None if v in (None, "") else float(v)
+
+    lines = [
+        f"# Enhanced renders ({method}) against the photos",
+        "",
+        "PSNR-Y / SSIM-Y on 8-bit BT.601 luma, LPIPS v0.1 AlexNet; at the render's size.",
+        "",
+        "| render | reference | PSNR-Y raw | PSNR-Y enhanced | SSIM-Y raw | SSIM-Y enhanced "
+        "| LPIPS raw | LPIPS enhanced |",
+        "|---|---|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        lines.append(f"| {r['render']} | {r['reference']} | " + " | ".join(
+            _fmt(num(r, k), 2 if k.startswith("psnr") else 3) or "-" for k in METRIC_COLUMNS[2:]
+        ) + " |")
+    means = {k: _mean([num(r, k) for r in rows]) for k in METRIC_COLUMNS[2:]}
+    lines.append(f"| **mean ({len(rows)})** | | " + " | ".join(
+        _fmt(means[k], 2 if k.startswith("psnr") else 3) or "-" for k in METRIC_COLUMNS[2:]
+    ) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _save_png(path: Path, image: np.ndarray) -> None:
+    from PIL import Image
+
+    path.parent.mkdir(parents=True, exist_ok=True)
+    Image.fromarray(np.round(np.clip(image, 0, 1) * 255).astype(np.uint8)).save(path)
+
+
+def enhance_folder(args: argparse.Namespace) -> dict[str, Any]:
+    """Run the subcommand; returns a summary (counts and the metric means)."""
+    from pgt_check.io import load_image, read_trajectory
+    from pgt_check.io.images import resize_image
+
+    files = find_renders(args.renders)
+    if args.limit:
+        files = files[: args.limit]
+    gt_dir = None
+    if args.gt is not None:
+        gt_dir = Path(args.gt)
+        if not gt_dir.is_dir():
+            raise InputError(f"--gt folder not found: {gt_dir}")
+    if args.method == "reproject" and not args.mesh:
+        raise InputError("--method reproject needs --mesh")
+    extra = {"camera": args.camera} if args.camera else {}
+    model = read_trajectory(args.model, args.format, images=args.images, sensors=args.sensors,
+                            dataparser_transforms=args.dataparser_transforms, **extra)
+    poses = model
+    if args.render_poses:
+        poses = read_trajectory(args.render_poses, args.render_poses_format, **extra)
+    items = pose_renders(files, poses)
+    training = [f for f in model.frames if f.image_file is not None and f.image_file.is_file()]
+    items = nearest_references(items, training, translation_scale=args.translation_scale,
+                               max_rotation_deg=args.max_rotation_deg,
+                               allow_same_view=args.allow_same_view)
+    if not any(it.reference is not None for it in items):
+        raise InputError(f"no render has a model photo within {args.max_rotation_deg:g} deg "
+                         "(--max-rotation-deg) to take appearance from")
+    metrics = _Metrics(lpips=not args.no_lpips) if gt_dir is not None else None
+    if args.method == "mariner":
+        method: Any = _Mariner(args.weights, args.device, args.short_side, args.iterations)
+    else:
+        method = _Reprojector(args.mesh, args.shading)
+    out = Path(args.out)
+    ref_rows, metric_rows = [], []
+    try:
+        for it in items:
+            status = it.status
+            if it.reference is not None:
+                render = load_image(it.file)
+                photo = load_image(it.reference.image_file)
+                enhanced = method(render, it.frame, photo, it.reference)
+                _save_png(out / "images" / f"{it.name}.png", enhanced)
+                gt_file = find_gt(gt_dir, it.name) if gt_dir is not None else None
+                if gt_dir is not None and gt_file is None:
+                    status = "enhanced_no_gt"
+                if gt_file is not None:
+                    gt = load_image(gt_file)
+                    h, w = render.shape[:2]
+                    gt = resize_image(gt, (w, h), "area" if gt.shape[1] >= w else "cubic")
+                    raw_m = metrics(render, np.clip(gt, 0, 1))
+                    enh_m = metrics(enhanced, np.clip(gt, 0, 1))
+                    metric_rows.append({
+                        "render": it.name, "reference": it.reference.image_path,
+                        "psnr_y_raw": _fmt(raw_m[0]), "psnr_y_enhanced": _fmt(enh_m[0]),
+                        "ssim_y_raw": _fmt(raw_m[1]), "ssim_y_enhanced": _fmt(enh_m[1]),
+                        "lpips_raw": _fmt(raw_m[2]), "lpips_enhanced": _fmt(enh_m[2]),
+                    })
+            ref_rows.append({
+                "render": it.file.name,
+                "pose": "" if it.frame is None else it.frame.frame_id,
+                "reference": "" if it.reference is None else it.reference.image_path,
+                "reference_dt": _fmt(it.reference_dt), "reference_drot_deg":
+                _fmt(it.reference_drot_deg, 3), "status": status,
+            })
+    finally:
+        method.close()
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "references.csv").write_text(_csv_text(REFERENCE_COLUMNS, ref_rows), encoding="utf-8")
+    summary: dict[str, Any] = {
+        "renders": len(items), "enhanced": sum(it.reference is not None for it in items),
+        "method": args.method, "with_gt": len(metric_rows),
+    }
+    if metric_rows:
+        (out / "metrics.csv").write_text(_csv_text(METRIC_COLUMNS, metric_rows),
+                                         encoding="utf-8")
+        (out / "metrics.md").write_text(metrics_markdown(metric_rows, args.method),
+                                        encoding="utf-8")
+        for k in METRIC_COLUMNS[2:]:
+            summary[k] = _mean([float(r[k]) if r[k] else None for r in metric_rows])
+    return summary
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from pgt_check.io import FORMATS
+
+    p = argparse.ArgumentParser(
+        prog="pgt-check enhance",
+        description="Enhance a folder of renders with the nearest training photos (MaRINeR or "
+        "reprojection); with --gt, PSNR-Y/SSIM-Y/LPIPS of raw vs enhanced. Renders are named "
+        "like the model's images (or like the entries of --render-poses) to take their poses. "
+        "Exit codes: 0 done, 2 usage, input or setup error.",
+    )
+    p.add_argument("renders", help="folder of rendered images (.png/.jpg, top level)")
+    p.add_argument("model", help="training images with poses: transforms.json, COLMAP model or "
+                   "any pose file pgt-check reads")
+    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--format", default="auto", choices=["auto", *FORMATS],
+                   help="format of MODEL")
+    p.add_argument("--images", default=None, help="image folder of MODEL")
+    p.add_argument("--sensors", default=None, help="LaMAR sensors file of MODEL")
+    p.add_argument("--camera", default=None, help="intrinsics for TUM / hloc pose files")
+    p.add_argument("--dataparser-transforms", default=None,
+                   help="nerfstudio dataparser_transforms.json to undo (MODEL)")
+    p.add_argument("--render-poses", default=None,
+                   help="pose file for the renders (any format pgt-check reads); default: the "
+                   "renders are named like MODEL's images")
+    p.add_argument("--render-poses-format", default="auto", choices=["auto", *FORMATS])
+    p.add_argument("--method", default="mariner", choices=["mariner", "reproject"])
+    p.add_argument("--mesh", default=None, help="mesh for --method reproject")
+    p.add_argument("--shading", default="auto", choices=["auto", "vertex", "texture", "shaded"],
+                   help="mesh shading for --method reproject (depth only is used)")
+    p.add_argument("--weights", default=None, help="MaRINeR checkpoint (default: shipped)")
+    p.add_argument("--iterations", type=int, default=None,
+                   help="MaRINeR refinement iterations (default: the checkpoint's)")
+    p.add_argument("--short-side", type=int, default=160,
+                   help="MaRINeR working size, shorter side in px (default 160)")
+    p.add_argument("--device", default="cpu", help="torch device for MaRINeR (cpu, cuda, auto)")
+    p.add_argument("--max-rotation-deg", type=float, default=45.0,
+                   help="largest rotation between a render and its reference (default 45)")
+    p.add_argument("--translation-scale", type=float, default=None,
+                   help="scene units worth 10 deg in the reference distance (default: 10 %% of "
+                   "the training cameras' extent)")
+    p.add_argument("--allow-same-view", action="store_true",
+                   help="let a render take the model photo of its own view (same name or pose) "
+                   "as reference: an upper bound, the enhancer then sees the ground truth")
+    p.add_argument("--gt", default=None, help="folder of ground-truth photos named like the "
+                   "renders: writes metrics.csv and metrics.md")
+    p.add_argument("--no-lpips", action="store_true", help="skip LPIPS in the metrics")
+    p.add_argument("--limit", type=int, default=None, help="only the first N renders")
+    p.add_argument("-q", "--quiet", action="store_true")
+    return p
+
+
+def enhance_main(argv: Sequence[str]) -> int:
+    p = build_parser()
+    try:
+        args = p.parse_args(list(argv))
+    except SystemExit as exc:
+        return int(exc.code or 0)
+    logging.getLogger("pgt_check").setLevel(logging.WARNING if args.quiet else logging.INFO)
+    try:
+        summary = enhance_folder(args)
+    except (InputError, ValueError) as err:
+        print(f"pgt-check enhance: error: {err}", file=sys.stderr)
+        return 2
+    print(f"pgt-check enhance: {summary['enhanced']} of {summary['renders']} renders enhanced "
+          f"({summary['method']}) into {Path(args.out) / 'images'}")
+    if summary["with_gt"]:
+        print(f"pgt-check enhance: against {summary['with_gt']} photos: PSNR-Y "
+              f"{_fmt(summary['psnr_y_raw'], 2)} -> {_fmt(summary['psnr_y_enhanced'], 2)} dB, "
+              f"SSIM-Y {_fmt(summary['ssim_y_raw'], 3)} -> {_fmt(summary['ssim_y_enhanced'], 3)}"
+              + (f", LPIPS {_fmt(summary['lpips_raw'], 3)} -> "
+                 f"{_fmt(summary['lpips_enhanced'], 3)}" if summary["lpips_raw"] is not None
+                 else "")
+              + f" ({Path(args.out) / 'metrics.md'})")
+    return 0
