@@ -28,7 +28,7 @@ from report_testdata import (  # tests/pgt_check/report is on pythonpath (pyproj
 )
 
 from pgt_check.config import RunConfig  # noqa: E402
-from pgt_check.measure.checker import FrameImages, PathImages  # noqa: E402
+from pgt_check.measure.paths import FrameImages, PathImages  # noqa: E402
 from pgt_check.report.assets import select_detail_frames, write_frame_assets  # noqa: E402
 from pgt_check.report.outputs import write_outputs  # noqa: E402
 

@@ -8,7 +8,7 @@ import pytest
 from report_testdata import HOSTILE_NAME
 
 from pgt_check.config import RunConfig
-from pgt_check.measure.checker import FrameImages, PathImages
+from pgt_check.measure.paths import FrameImages, PathImages
 from pgt_check.report.assets import (
     PANEL_MAX,
     TILE_MAX,
