@@ -33,6 +33,7 @@ import logging
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -77,6 +78,27 @@ def _resize(img: np.ndarray, width: int, height: int) -> np.ndarray:
     return cv2.resize(img, (width, height), interpolation=interp)
 
 
+def _variant_meshes(base: Any, variants: Sequence[str], decimate_fraction: float) -> dict:
+    """The mesh rendered for each render variant (colourless meshes render shaded)."""
+    meshes = {}
+    coloured = base.shading != "shaded"
+    if "render" in variants:
+        meshes["render"] = base if coloured else base.without_colour()
+    if "render_decimated" in variants:
+        t0 = time.perf_counter()
+        dec = base.decimated(decimate_fraction)
+        meshes["render_decimated"] = dec if coloured else dec.without_colour()
+        logger.info(
+            "decimated %d -> %d faces in %.1f s",
+            base.num_faces,
+            dec.num_faces,
+            time.perf_counter() - t0,
+        )
+    if "render_colourless" in variants:
+        meshes["render_colourless"] = base.without_colour()
+    return meshes
+
+
 def build_frame_cache(
     trajectory: str | Path,
     mesh: str | Path,
@@ -111,22 +133,8 @@ def build_frame_cache(
     if max_frames is not None:
         frames = frames[:max_frames]
     base = load_mesh(mesh)
-    meshes = {}
     coloured = base.shading != "shaded"
-    if "render" in variants:
-        meshes["render"] = base if coloured else base.without_colour()
-    if "render_decimated" in variants:
-        t0 = time.perf_counter()
-        dec = base.decimated(decimate_fraction)
-        meshes["render_decimated"] = dec if coloured else dec.without_colour()
-        logger.info(
-            "decimated %d -> %d faces in %.1f s",
-            base.num_faces,
-            dec.num_faces,
-            time.perf_counter() - t0,
-        )
-    if "render_colourless" in variants:
-        meshes["render_colourless"] = base.without_colour()
+    meshes = _variant_meshes(base, variants, decimate_fraction)
     renderers = {k: make_renderer(m) for k, m in meshes.items()}
     records = []
     t0 = time.perf_counter()
