@@ -29,10 +29,6 @@ EXIT_PASSED, EXIT_FAILED, EXIT_INPUT = 0, 1, 2
 
 def build_parser() -> argparse.ArgumentParser:
     from pgt_check.config import PRESETS
-    from pgt_check.enhance import ENHANCERS
-    from pgt_check.io import FORMATS
-    from pgt_check.match import MATCHERS
-    from pgt_check.render import BACKENDS
 
     p = argparse.ArgumentParser(
         prog="pgt-check",
@@ -54,6 +50,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--preset", default=None, choices=list(PRESETS),
                    help="named settings from the error-vs-runtime study (config file and CLI "
                    "options override them)")
+    _add_input_args(p)
+    _add_method_args(p)
+    _add_verdict_args(p)
+    _add_run_args(p)
+    return p
+
+
+def _add_input_args(p: argparse.ArgumentParser) -> None:
+    """Options of the input, render and match sections."""
+    from pgt_check.io import FORMATS
+    from pgt_check.match import MATCHERS
+    from pgt_check.render import BACKENDS
+
     g = p.add_argument_group("input")
     g.add_argument("--format", default=None, choices=["auto", *FORMATS])
     g.add_argument("--images", default=None, help="image folder or list (TUM, pgt, COLMAP, hloc)")
@@ -78,6 +87,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="LoFTR checkpoint for --matcher loftr (none is bundled)")
     g.add_argument("--resize-max", type=int, default=None,
                    help="longest side used for matching, px (0 = original size)")
+
+
+def _add_method_args(p: argparse.ArgumentParser) -> None:
+    """Options of the enhanced and edge paths, the pose estimate and corrections."""
+    from pgt_check.enhance import ENHANCERS
+
     g = p.add_argument_group("enhance (MaRINeR) and pose estimate")
     g.add_argument("--enhance", default=None, choices=["never", "auto", "always"],
                    help="enhance renders with a reference photo: auto (default: only frames "
@@ -101,6 +116,10 @@ def build_parser() -> argparse.ArgumentParser:
                    "format) and bad_frames.txt")
     g.add_argument("--correct-rounds", type=int, default=None,
                    help="render -> match -> PnP rounds per corrected frame (default 3)")
+
+
+def _add_verdict_args(p: argparse.ArgumentParser) -> None:
+    """Verdict, gate and run-level (shared-error) options."""
     g = p.add_argument_group("verdict and gate")
     g.add_argument("--threshold-px", type=float, default=None,
                    help="PASS threshold on the corner error (default: 2%% of the image diagonal)")
@@ -125,6 +144,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="judge frames after removing the estimated per-camera calibration "
                    "error (a shared principal-point / camera-to-rig / focal error; see the "
                    "summary's shared_errors.calibration)")
+
+
+def _add_run_args(p: argparse.ArgumentParser) -> None:
+    """Run, output, scale and resume options."""
     g = p.add_argument_group("run")
     g.add_argument("--limit", type=int, default=None,
                    help="check only the first N frames (N >= 1)")
@@ -152,7 +175,6 @@ def build_parser() -> argparse.ArgumentParser:
     g.add_argument("-v", "--verbose", action="count", default=0)
     g.add_argument("-q", "--quiet", action="store_true")
     g.add_argument("--version", action="version", version=f"pgt-check {__version__}")
-    return p
 
 
 def _cli_overrides(args: argparse.Namespace) -> dict[str, Any]:

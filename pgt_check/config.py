@@ -12,13 +12,18 @@ import dataclasses
 import hashlib
 import json
 import math
-import types
-import typing
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Literal
 
-from pgt_check.errors import ConfigError
+from pgt_check.config_load import check_name as _check_name
+from pgt_check.config_load import check_range as _check_range
+from pgt_check.config_load import from_dict, load_config_file, merge  # re-exported
+
+__all__ = [
+    "MEASUREMENT_SECTIONS", "PRESETS", "CorrectConfig", "EdgeConfig", "EnhanceConfig",
+    "HomographyConfig", "InputConfig", "MatchConfig", "PoseConfig", "ReferenceConfig",
+    "RenderConfig", "RunConfig", "VerdictConfig", "from_dict", "load_config_file", "merge",
+]
 
 #: config sections whose change invalidates stored per-frame measurements
 MEASUREMENT_SECTIONS = ("input", "render", "match", "homography", "enhance", "edges", "pose")
@@ -73,41 +78,6 @@ class ReferenceConfig:
         _check_range(r + "max_rotation_deg", self.max_rotation_deg, 0, 180)
         _check_range(r + "min_frame_gap", self.min_frame_gap, 0)
         _check_range(r + "count", self.count, 1)
-
-
-def _check_range(
-    where: str,
-    value: float | int | None,
-    lo: float | None = None,
-    hi: float | None = None,
-    *,
-    lo_open: bool = False,
-    hi_open: bool = False,
-) -> None:
-    """``value`` (None = unset, allowed) must be finite and within [lo, hi] (open ends if asked).
-
-    The one range check of every numeric option (CLI and config files both end here); raises
-    ValueError, which ``from_dict`` turns into a ConfigError naming ``where``."""
-    if value is None:
-        return
-    if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ValueError(f"{where}: expected a number, got {value!r}")
-    if not math.isfinite(value):
-        raise ValueError(f"{where}: must be a finite number, got {value!r}")
-    below = lo is not None and (value <= lo if lo_open else value < lo)
-    above = hi is not None and (value >= hi if hi_open else value > hi)
-    if below or above:
-        left = "(" if lo_open else "["
-        right = ")" if hi_open else "]"
-        lo_s = "-inf" if lo is None else f"{lo:g}"
-        hi_s = "inf" if hi is None else f"{hi:g}"
-        raise ValueError(f"{where}: {value!r} is out of range {left}{lo_s}, {hi_s}{right}")
-
-
-def _check_name(section: str, key: str, value: str, table: Any) -> None:
-    """``value`` must be a key of the backend table ``table`` (the one source of the names)."""
-    if value not in table:
-        raise ValueError(f"{section}.{key}: unknown {value!r} (allowed: {', '.join(table)})")
 
 
 @dataclass(frozen=True)
@@ -386,101 +356,3 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 
-def _check_value(cls_name: str, name: str, tp: Any, value: Any) -> Any:
-    origin = typing.get_origin(tp)
-    if origin is Literal:
-        if value not in typing.get_args(tp):
-            raise ConfigError(
-                f"{cls_name}.{name}: {value!r} is not one of {list(typing.get_args(tp))}"
-            )
-        return value
-    if origin in (typing.Union, types.UnionType):
-        args = typing.get_args(tp)
-        if value is None and type(None) in args:
-            return None
-        for a in args:
-            if a is type(None):
-                continue
-            try:
-                return _check_value(cls_name, name, a, value)
-            except ConfigError:
-                continue
-        raise ConfigError(f"{cls_name}.{name}: {value!r} does not fit {tp}")
-    if dataclasses.is_dataclass(tp):
-        if isinstance(value, tp):
-            return value
-        if not isinstance(value, dict):
-            raise ConfigError(f"{cls_name}.{name}: expected a table, got {value!r}")
-        return from_dict(tp, value)
-    if tp is bool:
-        if not isinstance(value, bool):
-            raise ConfigError(f"{cls_name}.{name}: expected true/false, got {value!r}")
-        return value
-    if tp is int:
-        if isinstance(value, bool) or not isinstance(value, int):
-            raise ConfigError(f"{cls_name}.{name}: expected an integer, got {value!r}")
-        return value
-    if tp is float:
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(f"{cls_name}.{name}: expected a number, got {value!r}")
-        return float(value)
-    if tp is str:
-        if not isinstance(value, str):
-            raise ConfigError(f"{cls_name}.{name}: expected a string, got {value!r}")
-        return value
-    return value
-
-
-def from_dict(cls: type, data: dict[str, Any]):
-    """Build dataclass ``cls`` from ``data``; unknown keys and mistyped values raise ConfigError."""
-    if not isinstance(data, dict):
-        raise ConfigError(f"{cls.__name__}: expected a table, got {type(data).__name__}")
-    hints = typing.get_type_hints(cls)
-    fields = {f.name for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - fields)
-    if unknown:
-        raise ConfigError(
-            f"{cls.__name__}: unknown key {unknown[0]!r} (allowed: {', '.join(sorted(fields))})"
-        )
-    kwargs = {k: _check_value(cls.__name__, k, hints[k], v) for k, v in data.items()}
-    try:
-        return cls(**kwargs)
-    except ValueError as err:  # range and name checks name their key themselves
-        raise ConfigError(str(err)) from err
-    except TypeError as err:
-        raise ConfigError(f"{cls.__name__}: {err}") from err
-
-
-def load_config_file(path: str | Path) -> dict[str, Any]:
-    """Read a JSON or TOML config file into a dict (validated later by ``from_dict``)."""
-    path = Path(path)
-    if not path.is_file():
-        raise ConfigError(f"config file not found: {path}")
-    try:
-        text = path.read_text(encoding="utf-8")
-        if path.suffix == ".toml":
-            import tomllib
-
-            data = tomllib.loads(text)
-        else:
-            data = json.loads(text)
-    except OSError as err:
-        raise ConfigError(f"{path}: cannot read config: {err.strerror or err}") from err
-    except ValueError as err:  # JSON / TOML syntax, and undecodable bytes
-        raise ConfigError(f"{path}: cannot parse config: {err}") from err
-    if not isinstance(data, dict):
-        raise ConfigError(
-            f"{path}: expected a table of settings at the top level, got {type(data).__name__}"
-        )
-    return data
-
-
-def merge(base: dict[str, Any], override: dict[str, Any]) -> dict[str, Any]:
-    """Recursive dict merge: values in ``override`` win; nested tables merge."""
-    out = dict(base)
-    for k, v in override.items():
-        if isinstance(v, dict) and isinstance(out.get(k), dict):
-            out[k] = merge(out[k], v)
-        else:
-            out[k] = v
-    return out

@@ -9,19 +9,23 @@ frames.csv, summary.json, junit.xml and report.html from the verdict rows.
 from __future__ import annotations
 
 import functools
-import hashlib
-import json
 import logging
-import os
 import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
 from pgt_check.config import RunConfig
-from pgt_check.errors import InputError, MissingExtraError, SetupError
+from pgt_check.errors import InputError
+from pgt_check.inputs import (  # re-exported: tests and callers patch / import them here
+    content_hash,
+    frame_input_keys,
+    images_outside_dataset,
+    load_trajectory,
+    measurement_fingerprint,
+    preflight,
+)
 from pgt_check.measure import (
-    SCHEMA_VERSION,
     FrameImages,
     FrameMeasurement,
     OldRecordError,
@@ -33,28 +37,11 @@ from pgt_check.verdict import judge_run
 
 logger = logging.getLogger(__name__)
 
-
-def load_trajectory(config: RunConfig) -> Trajectory:
-    from pgt_check.io import read_trajectory
-
-    inp = config.input
-    if not inp.trajectory:
-        raise InputError("no trajectory given")
-    if not inp.mesh:
-        raise InputError("no mesh given (--mesh)")
-    if not Path(inp.mesh).is_file():
-        raise InputError(f"mesh not found: {inp.mesh}")
-    traj = read_trajectory(
-        inp.trajectory,
-        inp.format,
-        images=inp.images,
-        camera=inp.camera,
-        sensors=inp.sensors,
-        dataparser_transforms=inp.dataparser_transforms,
-    )
-    if len(traj) == 0:
-        raise InputError(f"{inp.trajectory}: no frames with both a pose and an image")
-    return traj
+__all__ = [
+    "RunInterrupted", "check_frames", "content_hash", "frame_input_keys",
+    "images_outside_dataset", "load_trajectory", "log_progress", "measurement_fingerprint",
+    "panel_writer", "preflight", "run", "stored_measurements", "write_report_assets",
+]
 
 
 #: seconds between progress lines when stderr is not a terminal (CI logs)
@@ -160,134 +147,12 @@ class _ReuseFirst:
             self._checker = None
 
 
-def preflight(config: RunConfig, references: Any = None, panel_sink: Any = None) -> Any:
-    """Build the frame checker once before the run: the mesh is loaded and validated, the
-    renderer, matcher and (unless ``enhance.mode`` is never) the enhancer are built.
-
-    Raises InputError for a mesh that cannot be loaded or is unusable (no faces, non-finite
-    vertices), MissingExtraError for an extra that is not installed and SetupError for a method
-    that cannot be built (missing weights, a backend that fails); nothing of this becomes a
-    per-frame outcome. Returns the checker (the caller closes it).
-    """
-    import numpy as np
-
-    from pgt_check.measure import FrameChecker
-
-    checker = FrameChecker(config, dict(references or {}), panel_sink=panel_sink)
-    mesh_path = config.input.mesh
-    try:
-        try:
-            mesh = checker.mesh
-        except (InputError, MemoryError):
-            raise
-        except Exception as err:  # trimesh raises many types for broken files
-            raise InputError(f"{mesh_path}: cannot load mesh ({type(err).__name__}: {err})") from err
-        vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
-        if faces.size == 0:
-            raise InputError(f"{mesh_path}: the mesh has no triangles (a point cloud?)")
-        if not np.isfinite(vertices).all():
-            n = int((~np.isfinite(vertices).all(axis=1)).sum())
-            raise InputError(f"{mesh_path}: {n} mesh vertices are not finite (NaN or inf)")
-        stages = [
-            (f"renderer {config.render.backend!r}", lambda: checker.renderer),
-            (f"matcher {config.match.method!r}", lambda: checker.matcher),
-        ]
-        if config.enhance.mode != "never":
-            stages.append((f"enhancer {config.enhance.method!r}", lambda: checker.enhancer))
-        for what, build in stages:
-            try:
-                built = build()
-                load = getattr(built, "_load", None)  # lazy model loaders (MaRINeR): load now
-                if callable(load):
-                    load()
-            except (InputError, MemoryError):
-                raise
-            except ImportError as err:
-                raise MissingExtraError(err.name or str(err), "enhance") from err
-            except Exception as err:
-                raise SetupError(f"cannot build the {what}: {type(err).__name__}: {err}") from err
-    except BaseException:
-        checker.close()
-        raise
-    return checker
-
-
-def images_outside_dataset(config: RunConfig, frames: Sequence[Frame]) -> list[str]:
-    """Image paths (as written) that lie outside the dataset folder: the trajectory's folder
-    (the model folder for COLMAP) or the ``--images`` folder. Such paths are read, not refused
-    (datasets often keep images elsewhere), but listed in the summary and the report."""
-    traj = Path(config.input.trajectory)
-    roots = [traj if traj.is_dir() else traj.parent]
-    if config.input.images and Path(config.input.images).is_dir():
-        roots.append(Path(config.input.images))
-    norm_roots = [os.path.normpath(os.path.abspath(r)) for r in roots]
-    out = []
-    for f in frames:
-        if f.image_file is None:
-            continue
-        p = os.path.normpath(os.path.abspath(f.image_file))
-        if not any(p == r or p.startswith(r.rstrip(os.sep) + os.sep) for r in norm_roots):
-            out.append(str(f.image_path or f.image_file))
-    return out
-
-
-def content_hash(path: str | Path) -> str:
-    from pgt_check.store import content_hash as _hash
-
-    return _hash(path)
-
-
-def frame_input_keys(
-    frames: Sequence[Frame], references: Any = None
-) -> dict[str, str]:
-    """Per-frame key of what the measurement reads besides the settings: the frame's pose,
-    camera, image path and image content hash (``store.content_hash``), and the same of its
-    reference frames. A stored record whose key differs is measured again (a pose edited in
-    place, a replaced photo)."""
-    import numpy as np
-
-    cache: dict[str, str] = {}
-
-    def part(f: Frame) -> dict[str, Any]:
-        image = "none"
-        if f.image_file is not None:
-            k = str(f.image_file)
-            if k not in cache:
-                cache[k] = content_hash(k)
-            image = cache[k]
-        cam = f.camera
-        return {
-            "id": f.frame_id,
-            "pose": np.asarray(f.world_from_cam, dtype=np.float64).tolist(),
-            "camera": [cam.model, cam.width, cam.height, [float(x) for x in cam.params]],
-            "image_path": str(f.image_path),
-            "image": image,
-        }
-
-    refs = dict(references or {})
-    keys = {}
-    for f in frames:
-        blob = {"frame": part(f), "refs": [part(r) for r in refs.get(f.frame_id, ())]}
-        text = json.dumps(blob, sort_keys=True, default=str).encode()
-        keys[f.frame_id] = hashlib.sha256(text).hexdigest()[:24]
-    return keys
-
-
 class RunInterrupted(Exception):
     """The run stopped on Ctrl-C; ``done`` of ``total`` frames are stored in ``out``."""
 
     def __init__(self, done: int, total: int, out: str) -> None:
         super().__init__(f"interrupted: {done}/{total} frames done")
         self.done, self.total, self.out = done, total, out
-
-
-def measurement_fingerprint(config: RunConfig, inputs: dict[str, str] | None = None) -> str:
-    """Fingerprint of the stored measurements: their settings, the record layout and the
-    content hashes of the run-wide inputs (``inputs``, e.g. the mesh). Per-frame inputs (pose,
-    camera, image bytes) are keyed per record (``frame_input_keys``)."""
-    if not inputs:
-        return config.measurement_fingerprint(schema=SCHEMA_VERSION)
-    return config.measurement_fingerprint(schema=SCHEMA_VERSION, inputs=inputs)
 
 
 def panel_writer(config: RunConfig, fingerprint: str):
@@ -327,19 +192,54 @@ def check_frames(
     outputs are built from the store in ``frames`` order, so a resumed run writes the same
     frames.csv as an uninterrupted one (timing columns aside).
     """
-    from pgt_check.executor import ExecutorStats, iter_results, stop_on_sigint
-    from pgt_check.report.outputs import remove_completion_marker, write_outputs
-    from pgt_check.store import RecordStore
+    from pgt_check.executor import ExecutorStats
+    from pgt_check.report.outputs import write_outputs
 
     t0 = time.perf_counter() if t0 is None else t0
     out = Path(config.out)
-    ids = [f.frame_id for f in frames]
     stats = ExecutorStats()
+    measurements, n_reused = _measure_into_store(
+        frames, config, checker_factory, stats, input_keys=input_keys, inputs=inputs
+    )
+    judged = judge_run(measurements, config)
+    rows = judged.rows
+    corrections: dict[str, Any] = {}
+    if config.correct.frames != "none":  # corrected poses (pgt_check.corrections)
+        from pgt_check.corrections import correct_run
+
+        traj = trajectory if trajectory is not None else Trajectory(tuple(frames))
+        rows, corrections = correct_run(traj, measurements, rows, config, checker_factory, out)
+    assets = write_report_assets(
+        frames, rows, config, checker_factory, measurement_fingerprint(config, inputs)
+    )
+    shadings = sorted({str(m.shading) for m in measurements if m.shading})
+    summary_extra = {
+        "shading": shadings[0] if len(shadings) == 1 else (shadings or None),
+        "executor": {
+            "kind": config.executor,
+            "workers": stats.workers,
+            "frames_measured": stats.yielded,
+            "frames_reused": n_reused,
+            "worker_crashes": stats.worker_crashes,
+        },
+        **(extra or {}),
+        **judged.summary_extra(),
+        **corrections,
+        "wall_time_s": time.perf_counter() - t0,
+    }
+    return write_outputs(out, rows, config, extra=summary_extra, assets=assets)
+
+
+def _open_store(config: RunConfig, ids: list[str], inputs: dict[str, str] | None) -> Any:
+    """The run's ``RecordStore`` context manager; an unusable ``--out`` is an InputError."""
+    from pgt_check.store import RecordStore
+
+    out = Path(config.out)
     settings = config.measurement_settings()
     if inputs:
         settings["inputs"] = dict(inputs)
     try:
-        store_cm = RecordStore.open(
+        return RecordStore.open(
             out,
             measurement_fingerprint(config, inputs),
             resume=config.resume,
@@ -352,7 +252,26 @@ def check_frames(
             f"--out {out}: cannot use it as the output directory "
             f"({err.strerror or type(err).__name__}{': ' + str(err.filename) if err.filename else ''})"
         ) from err
-    with store_cm as store:
+
+
+def _measure_into_store(
+    frames: Sequence[Frame],
+    config: RunConfig,
+    checker_factory: Callable[[], Any],
+    stats: Any,
+    *,
+    input_keys: dict[str, str] | None,
+    inputs: dict[str, str] | None,
+) -> tuple[list[FrameMeasurement], int]:
+    """Measure the frames not yet stored (streaming each record into the store) and return all
+    measurements in ``frames`` order plus the number of frames reused from the store. Raises
+    RunInterrupted when a Ctrl-C / SIGTERM stopped the run before every frame was done."""
+    from pgt_check.executor import iter_results, stop_on_sigint
+    from pgt_check.report.outputs import remove_completion_marker
+
+    out = Path(config.out)
+    ids = [f.frame_id for f in frames]
+    with _open_store(config, ids, inputs) as store:
         remove_completion_marker(out)  # the output set is incomplete from here on
         done = _done_ids(store, ids, input_keys)
         if done:
@@ -378,34 +297,7 @@ def check_frames(
                     "interrupted: %d/%d frames done, stored in %s", n_done, len(ids), out
                 )
                 raise RunInterrupted(n_done, len(ids), str(out))
-        measurements = stored_measurements(store.records_in_order(ids))
-    judged = judge_run(measurements, config)
-    rows = judged.rows
-    corrections: dict[str, Any] = {}
-    if config.correct.frames != "none":  # corrected poses (pgt_check.corrections)
-        from pgt_check.corrections import correct_run
-
-        traj = trajectory if trajectory is not None else Trajectory(tuple(frames))
-        rows, corrections = correct_run(traj, measurements, rows, config, checker_factory, out)
-    assets = write_report_assets(
-        frames, rows, config, checker_factory, measurement_fingerprint(config, inputs)
-    )
-    shadings = sorted({str(m.shading) for m in measurements if m.shading})
-    summary_extra = {
-        "shading": shadings[0] if len(shadings) == 1 else (shadings or None),
-        "executor": {
-            "kind": config.executor,
-            "workers": stats.workers,
-            "frames_measured": stats.yielded,
-            "frames_reused": len(done),
-            "worker_crashes": stats.worker_crashes,
-        },
-        **(extra or {}),
-        **judged.summary_extra(),
-        **corrections,
-        "wall_time_s": time.perf_counter() - t0,
-    }
-    return write_outputs(out, rows, config, extra=summary_extra, assets=assets)
+        return stored_measurements(store.records_in_order(ids)), len(done)
 
 
 def _done_ids(store: Any, ids: Sequence[str], input_keys: dict[str, str] | None) -> set[str]:

@@ -10,13 +10,13 @@ PKG = Path(__file__).resolve().parents[1] / "pgt_check"
 
 #: layer of each top-level part; a module may import only its own layer or lower ones
 LAYERS = {
-    "errors": 0, "_checks": 0, "types": 0, "config": 0, "registry": 0,
+    "errors": 0, "_checks": 0, "types": 0, "config": 0, "config_load": 0, "registry": 0,
     "io": 1, "render": 1, "match": 1, "geometry": 1, "enhance": 1, "evaluation": 1,
     "measure": 2,
     "verdict": 3,
     "store": 3,
     "report": 4,
-    "executor": 5, "runner": 5, "corrections": 5, "compare": 5,
+    "executor": 5, "inputs": 5, "runner": 5, "corrections": 5, "compare": 5,
     "enhance_cli": 5,
     "cli": 6, "__main__": 6, "api": 6,
 }

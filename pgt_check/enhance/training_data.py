@@ -33,6 +33,7 @@ import logging
 import time
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -77,6 +78,45 @@ def _resize(img: np.ndarray, width: int, height: int) -> np.ndarray:
     return cv2.resize(img, (width, height), interpolation=interp)
 
 
+def _variant_meshes(base: Any, variants: Sequence[str], decimate_fraction: float) -> dict:
+    """The mesh rendered for each render variant (colourless meshes render shaded)."""
+    meshes = {}
+    coloured = base.shading != "shaded"
+    if "render" in variants:
+        meshes["render"] = base if coloured else base.without_colour()
+    if "render_decimated" in variants:
+        t0 = time.perf_counter()
+        dec = base.decimated(decimate_fraction)
+        meshes["render_decimated"] = dec if coloured else dec.without_colour()
+        logger.info(
+            "decimated %d -> %d faces in %.1f s",
+            base.num_faces,
+            dec.num_faces,
+            time.perf_counter() - t0,
+        )
+    if "render_colourless" in variants:
+        meshes["render_colourless"] = base.without_colour()
+    return meshes
+
+
+def _write_frame(path: Path, frame: Any, size: tuple[int, int], renderers: dict) -> None:
+    """One cache file: the photo and each variant's render at ``size``, as uint8 arrays."""
+    from pgt_check.io import load_image
+
+    if frame.image_file is None:
+        raise ValueError(f"frame {frame.frame_id} has no image file")
+    w, h = size
+    cam = frame.camera
+    photo = load_image(frame.image_file)
+    data = {"photo": _to_uint8(_resize(photo, w, h))}
+    cam_w = cam.scaled(w / cam.width, h / cam.height)
+    for k, r in renderers.items():
+        data[k] = _to_uint8(r.render(cam_w, frame.world_from_cam).rgb)
+    tmp = path.with_name(path.name + ".tmp.npz")
+    np.savez(tmp, **data)
+    tmp.replace(path)
+
+
 def build_frame_cache(
     trajectory: str | Path,
     mesh: str | Path,
@@ -95,7 +135,7 @@ def build_frame_cache(
     Existing frame files are reused unless ``overwrite`` (the cache: renders are made once).
     ``variants`` selects which images to store ("photo" is always stored).
     """
-    from pgt_check.io import load_image, read_trajectory
+    from pgt_check.io import read_trajectory
     from pgt_check.render import load_mesh, make_renderer
 
     out = Path(out_dir)
@@ -111,22 +151,8 @@ def build_frame_cache(
     if max_frames is not None:
         frames = frames[:max_frames]
     base = load_mesh(mesh)
-    meshes = {}
     coloured = base.shading != "shaded"
-    if "render" in variants:
-        meshes["render"] = base if coloured else base.without_colour()
-    if "render_decimated" in variants:
-        t0 = time.perf_counter()
-        dec = base.decimated(decimate_fraction)
-        meshes["render_decimated"] = dec if coloured else dec.without_colour()
-        logger.info(
-            "decimated %d -> %d faces in %.1f s",
-            base.num_faces,
-            dec.num_faces,
-            time.perf_counter() - t0,
-        )
-    if "render_colourless" in variants:
-        meshes["render_colourless"] = base.without_colour()
+    meshes = _variant_meshes(base, variants, decimate_fraction)
     renderers = {k: make_renderer(m) for k, m in meshes.items()}
     records = []
     t0 = time.perf_counter()
@@ -148,16 +174,7 @@ def build_frame_cache(
             )
             if path.is_file() and not overwrite:
                 continue
-            if frame.image_file is None:
-                raise ValueError(f"frame {frame.frame_id} has no image file")
-            photo = load_image(frame.image_file)
-            data = {"photo": _to_uint8(_resize(photo, w, h))}
-            cam_w = cam.scaled(w / cam.width, h / cam.height)
-            for k, r in renderers.items():
-                data[k] = _to_uint8(r.render(cam_w, frame.world_from_cam).rgb)
-            tmp = out / (name + ".tmp.npz")
-            np.savez(tmp, **data)
-            tmp.replace(path)
+            _write_frame(path, frame, (w, h), renderers)
             if (n + 1) % 50 == 0:
                 logger.info("%d/%d frames (%.1f s)", n + 1, len(frames), time.perf_counter() - t0)
     finally:

@@ -13,8 +13,8 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
-from pgt_check.measure.checker import format_exception
 from pgt_check.measure.record import FrameMeasurement, MeasureReason, failed_measurement
+from pgt_check.measure.steps import format_exception
 from pgt_check.types import Frame
 
 logger = logging.getLogger(__name__)

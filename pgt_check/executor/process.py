@@ -30,8 +30,8 @@ from pgt_check.executor.common import (
     note_stop,
     worker_crashed,
 )
-from pgt_check.measure.checker import format_exception
 from pgt_check.measure.record import FrameMeasurement
+from pgt_check.measure.steps import format_exception
 from pgt_check.types import Frame
 
 logger = logging.getLogger(__name__)

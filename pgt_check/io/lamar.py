@@ -20,6 +20,7 @@ from __future__ import annotations
 import logging
 import os
 import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -219,16 +220,7 @@ def read_lamar(
         raise InputError(f"{images}: images folder or list file not found")
     files = find_lamar_files(path, sensors=sensors, images=images)
     cameras, sensor_ids = read_sensors(files.sensors)
-    rigs = read_rigs(files.rigs, sensor_ids) if files.rigs is not None else {}
-    rig_ids = {rig for rig, _ in rigs}
-    clash = rig_ids & sensor_ids
-    if clash and files.rigs is not None:
-        raise FormatError(
-            files.rigs,
-            None,
-            f"expected rig ids distinct from sensor ids; got {', '.join(sorted(clash))}",
-        )
-    poses = read_poses(files.trajectories, sensor_ids | rig_ids)
+    rigs, poses = _rigs_and_poses(files, sensor_ids)
     rigs_of: dict[str, list[str]] = {}
     for rig, sensor in rigs:
         rigs_of.setdefault(sensor, []).append(rig)
@@ -259,13 +251,8 @@ def read_lamar(
             raise FormatError(files.images, line, "expected an image path; got an empty field")
         frame_id = f"{stamp_text}/{sensor_id}"
         seen.add(frame_id, frame_id, line)
-        world_from_cam = poses.get((timestamp, sensor_id))
-        if world_from_cam is None:
-            for rig in rigs_of.get(sensor_id, ()):
-                world_from_rig = poses.get((timestamp, rig))
-                if world_from_rig is not None:
-                    world_from_cam = world_from_rig @ rigs[(rig, sensor_id)]
-                    break
+        world_from_cam = _camera_pose(poses, rigs, rigs_of.get(sensor_id, ()), timestamp,
+                                      sensor_id)
         if world_from_cam is None:
             unposed.append(frame_id)
             continue
@@ -290,6 +277,44 @@ def read_lamar(
     logger.info(
         "read %d frames from %s (sensors: %s)", len(frames), files.trajectories, files.sensors.name
     )
+    return Trajectory(
+        tuple(f for _, _, f in frames),
+        source=str(files.trajectories),
+        format="lamar",
+        metadata=_metadata(files, root),
+    )
+
+
+def _rigs_and_poses(files: LamarFiles, sensor_ids: set[str]) -> tuple[dict, dict]:
+    """The rigs file's ``{(rig, sensor): rig_from_sensor}`` (empty without one) and the poses
+    of the sensors and rigs; rig ids must differ from sensor ids."""
+    rigs = read_rigs(files.rigs, sensor_ids) if files.rigs is not None else {}
+    rig_ids = {rig for rig, _ in rigs}
+    clash = rig_ids & sensor_ids
+    if clash and files.rigs is not None:
+        raise FormatError(
+            files.rigs,
+            None,
+            f"expected rig ids distinct from sensor ids; got {', '.join(sorted(clash))}",
+        )
+    return rigs, read_poses(files.trajectories, sensor_ids | rig_ids)
+
+
+def _camera_pose(
+    poses: dict, rigs: dict, rigs_of_sensor: Sequence[str], timestamp: float, sensor_id: str
+) -> np.ndarray | None:
+    """world_from_cam of a sensor at a timestamp: its own pose, else through the first rig
+    with a pose at that timestamp; None if neither exists."""
+    world_from_cam = poses.get((timestamp, sensor_id))
+    if world_from_cam is None:
+        for rig in rigs_of_sensor:
+            world_from_rig = poses.get((timestamp, rig))
+            if world_from_rig is not None:
+                return world_from_rig @ rigs[(rig, sensor_id)]
+    return world_from_cam
+
+
+def _metadata(files: LamarFiles, root: Path) -> dict[str, str]:
     metadata = {
         "trajectories_file": str(files.trajectories),
         "sensors_file": str(files.sensors),
@@ -298,12 +323,7 @@ def read_lamar(
     }
     if files.rigs is not None:
         metadata["rigs_file"] = str(files.rigs)
-    return Trajectory(
-        tuple(f for _, _, f in frames),
-        source=str(files.trajectories),
-        format="lamar",
-        metadata=metadata,
-    )
+    return metadata
 
 
 def _fmt(value: float) -> str:

@@ -10,8 +10,7 @@ from __future__ import annotations
 
 import logging
 import time
-import traceback
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -20,16 +19,12 @@ import numpy as np
 
 from pgt_check.config import RunConfig
 from pgt_check.enhance.base import Evidence, ReferenceView, View
-from pgt_check.errors import (
-    ImageSizeMismatchError,
-    InputError,
-    PixelCapError,
-    ReferenceUnreadableError,
-)
+from pgt_check.errors import InputError, ReferenceUnreadableError
 from pgt_check.measure.edge_path import EdgePath, edge_evidence, measure_edges
 from pgt_check.measure.paths import (
     MAX_EVIDENCE_POINTS,
     FrameImages,
+    PathImages,
     PathResult,
     absolute_evidence,
 )
@@ -38,47 +33,27 @@ from pgt_check.measure.record import (
     FrameMeasurement,
     MeasureReason,
     PoseEstimate,
-    Timings,
     failed_measurement,
 )
-from pgt_check.types import Camera, Frame, Trajectory
+from pgt_check.measure.steps import (  # format_exception, pick_references: re-exported
+    ENHANCE,
+    INPUT_ERROR_REASONS,
+    NO_ENHANCE,
+    Clock,
+    Working,
+    enhance_decision,
+    format_exception,
+    pick_references,
+    replace_measurement,
+)
+from pgt_check.types import Camera, Frame
 
 logger = logging.getLogger(__name__)
 
-
-_ENHANCE = (
-    EnhanceWhy.MODE_ALWAYS,
-    EnhanceWhy.RAW_FAILED,
-    EnhanceWhy.RAW_FEW_INLIERS,
-    EnhanceWhy.RAW_NEAR_THRESHOLD,
-)
-_NO_ENHANCE = (EnhanceWhy.MODE_NEVER, EnhanceWhy.RAW_DECISIVE, EnhanceWhy.NO_REFERENCE)
-
-
-@dataclass(frozen=True, eq=False)
-class _Working:
-    """One frame at working resolution: photo, cameras (original and working), the size and
-    scale (working / original), and the render."""
-
-    photo: np.ndarray
-    camera: Camera
-    cam_w: Camera
-    size: tuple[int, int]
-    scale: tuple[float, float]
-    render: Any
-
-
-@dataclass
-class _Clock:
-    """Accumulates seconds per stage of one frame."""
-
-    spent: dict[str, float] = field(default_factory=dict)
-
-    def add(self, stage: str, seconds: float) -> None:
-        self.spent[stage] = self.spent.get(stage, 0.0) + seconds
-
-    def timings(self, total: float) -> Timings:
-        return Timings(**self.spent, total=total)
+__all__ = [
+    "FrameChecker", "FrameImages", "PathImages", "PathResult", "build_frame_checker",
+    "format_exception", "pick_references",
+]
 
 
 @dataclass
@@ -149,13 +124,13 @@ class FrameChecker:
         (for report panels); the measurement itself is the same.
         """
         t_start = time.perf_counter()
-        clock = _Clock()
+        clock = Clock()
         if keep is None and self.panel_sink is not None:
             keep = FrameImages()
         try:
             m = self._measure(frame, keep, clock)
         except InputError as err:
-            reason = _INPUT_ERROR_REASONS.get(type(err), MeasureReason.IMAGE_UNREADABLE)
+            reason = INPUT_ERROR_REASONS.get(type(err), MeasureReason.IMAGE_UNREADABLE)
             m = failed_measurement(frame, reason, str(err))
         except Exception as err:  # one frame must not kill the run: recorded and counted
             if self.config.fail_fast:
@@ -172,11 +147,11 @@ class FrameChecker:
                 logger.warning("frame %s: report panels not written: %s", frame.frame_id, err)
         return m
 
-    def _measure(self, frame: Frame, keep: FrameImages | None, clock: _Clock) -> FrameMeasurement:
+    def _measure(self, frame: Frame, keep: FrameImages | None, clock: Clock) -> FrameMeasurement:
         base = failed_measurement(frame, MeasureReason.NONE)
         t = time.perf_counter()
         if frame.image_file is None or not Path(frame.image_file).is_file():
-            return _replace(base, error=MeasureReason.IMAGE_MISSING)
+            return replace_measurement(base, error=MeasureReason.IMAGE_MISSING)
         photo, camera = self._load_photo(frame)
         from pgt_check.io.images import resize_image
         from pgt_check.io.photo import working_scale
@@ -189,7 +164,7 @@ class FrameChecker:
         t = time.perf_counter()
         render = self.renderer.render(cam_w, frame.world_from_cam)
         clock.add("render", time.perf_counter() - t)
-        m = _replace(
+        m = replace_measurement(
             base,
             width=camera.width,
             height=camera.height,
@@ -202,18 +177,18 @@ class FrameChecker:
         if keep is not None:
             keep.photo, keep.render = photo_w, render.rgb
         if m.coverage < self.config.verdict.min_coverage:
-            return _replace(m, error=MeasureReason.LOW_COVERAGE)
+            return replace_measurement(m, error=MeasureReason.LOW_COVERAGE)
 
-        ctx = _Working(photo_w, camera, cam_w, size, scale, render)
+        ctx = Working(photo_w, camera, cam_w, size, scale, render)
         return self._compare(frame, ctx, m, keep, clock)
 
     def _compare(
         self,
         frame: Frame,
-        w: _Working,
+        w: Working,
         m: FrameMeasurement,
         keep: FrameImages | None,
-        clock: _Clock,
+        clock: Clock,
     ) -> FrameMeasurement:
         """Raw path, then (where it is not decisive) the enhanced and geometric-edge paths."""
         raw = self._match_path(
@@ -222,7 +197,7 @@ class FrameChecker:
         threshold = self.config.verdict.threshold_for(w.camera.width, w.camera.height)
         why, detail = self._enhance_decision(raw, threshold)
         enh = ref_id = None
-        if why in _ENHANCE:
+        if why in ENHANCE:
             view = View(w.render, w.cam_w, frame.world_from_cam)
             enh, ref_id, enh_img, n_tried = self._enhanced_path(
                 frame, view, w.photo, w.size, w.scale, w.camera, clock
@@ -251,7 +226,7 @@ class FrameChecker:
         extra = []
         if edges is not None:
             extra.append((*edge_evidence(edges, w.cam_w, w.scale, MAX_EVIDENCE_POINTS), "edges"))
-        return _replace(
+        return replace_measurement(
             m,
             evidence=absolute_evidence(absolute, w.render.depth, w.cam_w, w.scale, extra=extra),
             raw=raw.measurement("raw", "render", Evidence.ABSOLUTE, w.camera),
@@ -259,7 +234,7 @@ class FrameChecker:
             if enh is None
             else enh.measurement("enhanced", method, self.enhancer.evidence, w.camera, ref_id),
             edges=None if edges is None else edges.measurement,
-            enhance_ran=why not in _NO_ENHANCE,
+            enhance_ran=why not in NO_ENHANCE,
             enhance_why=why,
             enhance_why_detail=detail,
             verdict_path=path_name,
@@ -268,7 +243,7 @@ class FrameChecker:
         )
 
     def _edge_path(
-        self, w: _Working, raw: PathResult, threshold: float, clock: _Clock
+        self, w: Working, raw: PathResult, threshold: float, clock: Clock
     ) -> EdgePath | None:
         """The geometric-edge path, where the config asks for it (auto: raw not decisive)."""
         e = self.config.edges
@@ -305,7 +280,7 @@ class FrameChecker:
         size: tuple[int, int],
         scale: tuple[float, float],
         camera: Camera,
-        clock: _Clock,
+        clock: Clock,
     ) -> PathResult:
         from pgt_check.geometry.homography import (
             corner_error,
@@ -345,18 +320,7 @@ class FrameChecker:
         )
 
     def _enhance_decision(self, raw: PathResult, threshold: float) -> tuple[EnhanceWhy, str]:
-        e = self.config.enhance
-        if e.mode == "never":
-            return EnhanceWhy.MODE_NEVER, ""
-        if e.mode == "always":
-            return EnhanceWhy.MODE_ALWAYS, ""
-        if not raw.success:
-            return EnhanceWhy.RAW_FAILED, raw.reason
-        if raw.n_inliers < e.auto_min_inliers:
-            return EnhanceWhy.RAW_FEW_INLIERS, ""
-        if abs(raw.corner_error_px - threshold) <= e.auto_margin * threshold:
-            return EnhanceWhy.RAW_NEAR_THRESHOLD, ""
-        return EnhanceWhy.RAW_DECISIVE, ""
+        return enhance_decision(raw, threshold, self.config.enhance)
 
     def _reference_view(self, frame: Frame, cam_w: Camera, ref: Frame) -> ReferenceView:
         """The reference photo at the same pixel scale as the frame's working image."""
@@ -381,7 +345,7 @@ class FrameChecker:
         size: tuple[int, int],
         scale: tuple[float, float],
         camera: Camera,
-        clock: _Clock,
+        clock: Clock,
     ) -> tuple[PathResult | None, str | None, np.ndarray | None, int]:
         """Enhance with each reference, match again; keep the result with the most inliers.
 
@@ -410,7 +374,7 @@ class FrameChecker:
         return best, best_id, best_img, len(refs)
 
     def _pose_estimate(
-        self, path: PathResult, depth: np.ndarray, cam_w: Camera, frame: Frame, clock: _Clock
+        self, path: PathResult, depth: np.ndarray, cam_w: Camera, frame: Frame, clock: Clock
     ) -> PoseEstimate:
         from pgt_check.geometry.pnp import estimate_pose_correction
 
@@ -435,46 +399,6 @@ class FrameChecker:
             corr.drot_deg,
             tuple(tuple(map(float, r)) for r in corr.world_from_cam),
         )
-
-
-#: per-frame reasons of the specific input errors (any other InputError: image_unreadable)
-_INPUT_ERROR_REASONS: dict[type, MeasureReason] = {
-    ImageSizeMismatchError: MeasureReason.IMAGE_SIZE_MISMATCH,
-    PixelCapError: MeasureReason.PIXEL_CAP_EXCEEDED,
-    ReferenceUnreadableError: MeasureReason.REFERENCE_UNREADABLE,
-}
-
-
-def _replace(m: FrameMeasurement, **changes: Any) -> FrameMeasurement:
-    from dataclasses import replace
-
-    return replace(m, **changes)
-
-
-def format_exception(err: BaseException) -> str:
-    """The last 2000 characters of a traceback (stored as an internal error's detail)."""
-    return "".join(traceback.format_exception(err))[-2000:]
-
-
-def pick_references(
-    traj: Trajectory, frames: Sequence[Frame], config: RunConfig
-) -> dict[str, tuple[Frame, ...]]:
-    """Reference frames per checked frame, best first (any frame of the trajectory may serve)."""
-    if config.enhance.mode == "never":
-        return {}
-    from pgt_check.enhance.reference import select_references
-
-    choices = select_references(traj.frames, config.enhance.reference)
-    by_id = traj.by_id()
-    refs = {f.frame_id: tuple(by_id[i] for i in choices[f.frame_id].frame_ids) for f in frames}
-    missing = sum(not r for r in refs.values())
-    if missing:
-        logger.warning(
-            "%d of %d frames have no usable reference and are checked raw only",
-            missing,
-            len(frames),
-        )
-    return refs
 
 
 def build_frame_checker(

@@ -61,7 +61,7 @@ def test_sample_run_keeps_panels_from_the_main_pass(tmp_path, capsys, sample_sce
 
 def test_missing_panels_are_measured_again(tmp_path, sample_scene, monkeypatch):
     """Frames without main-pass panels (here: a sink that writes none) are measured again."""
-    monkeypatch.setattr(runner, "panel_writer", lambda config: None)
+    monkeypatch.setattr(runner, "panel_writer", lambda config, fingerprint: None)
     calls: list[str] = []
     measure = FrameChecker.measure
 

@@ -1,0 +1,165 @@
+"""What a run reads, checked and keyed before any frame is measured: the trajectory
+(``load_trajectory``), the preflight build of the frame checker (mesh, renderer, matcher,
+enhancer: setup errors surface here, not per frame), image paths outside the dataset folder,
+and the content hashes that key the stored measurements (``measurement_fingerprint`` for the
+run, ``frame_input_keys`` per frame). Used by ``pgt_check.runner``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from pgt_check.config import RunConfig
+from pgt_check.errors import InputError, MissingExtraError, SetupError
+from pgt_check.measure import SCHEMA_VERSION
+from pgt_check.types import Frame, Trajectory
+
+
+def load_trajectory(config: RunConfig) -> Trajectory:
+    from pgt_check.io import read_trajectory
+
+    inp = config.input
+    if not inp.trajectory:
+        raise InputError("no trajectory given")
+    if not inp.mesh:
+        raise InputError("no mesh given (--mesh)")
+    if not Path(inp.mesh).is_file():
+        raise InputError(f"mesh not found: {inp.mesh}")
+    traj = read_trajectory(
+        inp.trajectory,
+        inp.format,
+        images=inp.images,
+        camera=inp.camera,
+        sensors=inp.sensors,
+        dataparser_transforms=inp.dataparser_transforms,
+    )
+    if len(traj) == 0:
+        raise InputError(f"{inp.trajectory}: no frames with both a pose and an image")
+    return traj
+
+
+def preflight(config: RunConfig, references: Any = None, panel_sink: Any = None) -> Any:
+    """Build the frame checker once before the run: the mesh is loaded and validated, the
+    renderer, matcher and (unless ``enhance.mode`` is never) the enhancer are built.
+
+    Raises InputError for a mesh that cannot be loaded or is unusable (no faces, non-finite
+    vertices), MissingExtraError for an extra that is not installed and SetupError for a method
+    that cannot be built (missing weights, a backend that fails); nothing of this becomes a
+    per-frame outcome. Returns the checker (the caller closes it).
+    """
+    import numpy as np
+
+    from pgt_check.measure import FrameChecker
+
+    checker = FrameChecker(config, dict(references or {}), panel_sink=panel_sink)
+    mesh_path = config.input.mesh
+    try:
+        try:
+            mesh = checker.mesh
+        except (InputError, MemoryError):
+            raise
+        except Exception as err:  # trimesh raises many types for broken files
+            raise InputError(f"{mesh_path}: cannot load mesh ({type(err).__name__}: {err})") from err
+        vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+        if faces.size == 0:
+            raise InputError(f"{mesh_path}: the mesh has no triangles (a point cloud?)")
+        if not np.isfinite(vertices).all():
+            n = int((~np.isfinite(vertices).all(axis=1)).sum())
+            raise InputError(f"{mesh_path}: {n} mesh vertices are not finite (NaN or inf)")
+        stages = [
+            (f"renderer {config.render.backend!r}", lambda: checker.renderer),
+            (f"matcher {config.match.method!r}", lambda: checker.matcher),
+        ]
+        if config.enhance.mode != "never":
+            stages.append((f"enhancer {config.enhance.method!r}", lambda: checker.enhancer))
+        for what, build in stages:
+            try:
+                built = build()
+                load = getattr(built, "_load", None)  # lazy model loaders (MaRINeR): load now
+                if callable(load):
+                    load()
+            except (InputError, MemoryError):
+                raise
+            except ImportError as err:
+                raise MissingExtraError(err.name or str(err), "enhance") from err
+            except Exception as err:
+                raise SetupError(f"cannot build the {what}: {type(err).__name__}: {err}") from err
+    except BaseException:
+        checker.close()
+        raise
+    return checker
+
+
+def images_outside_dataset(config: RunConfig, frames: Sequence[Frame]) -> list[str]:
+    """Image paths (as written) that lie outside the dataset folder: the trajectory's folder
+    (the model folder for COLMAP) or the ``--images`` folder. Such paths are read, not refused
+    (datasets often keep images elsewhere), but listed in the summary and the report."""
+    traj = Path(config.input.trajectory)
+    roots = [traj if traj.is_dir() else traj.parent]
+    if config.input.images and Path(config.input.images).is_dir():
+        roots.append(Path(config.input.images))
+    norm_roots = [os.path.normpath(os.path.abspath(r)) for r in roots]
+    out = []
+    for f in frames:
+        if f.image_file is None:
+            continue
+        p = os.path.normpath(os.path.abspath(f.image_file))
+        if not any(p == r or p.startswith(r.rstrip(os.sep) + os.sep) for r in norm_roots):
+            out.append(str(f.image_path or f.image_file))
+    return out
+
+
+def content_hash(path: str | Path) -> str:
+    from pgt_check.store import content_hash as _hash
+
+    return _hash(path)
+
+
+def frame_input_keys(
+    frames: Sequence[Frame], references: Any = None
+) -> dict[str, str]:
+    """Per-frame key of what the measurement reads besides the settings: the frame's pose,
+    camera, image path and image content hash (``store.content_hash``), and the same of its
+    reference frames. A stored record whose key differs is measured again (a pose edited in
+    place, a replaced photo)."""
+    import numpy as np
+
+    cache: dict[str, str] = {}
+
+    def part(f: Frame) -> dict[str, Any]:
+        image = "none"
+        if f.image_file is not None:
+            k = str(f.image_file)
+            if k not in cache:
+                cache[k] = content_hash(k)
+            image = cache[k]
+        cam = f.camera
+        return {
+            "id": f.frame_id,
+            "pose": np.asarray(f.world_from_cam, dtype=np.float64).tolist(),
+            "camera": [cam.model, cam.width, cam.height, [float(x) for x in cam.params]],
+            "image_path": str(f.image_path),
+            "image": image,
+        }
+
+    refs = dict(references or {})
+    keys = {}
+    for f in frames:
+        blob = {"frame": part(f), "refs": [part(r) for r in refs.get(f.frame_id, ())]}
+        text = json.dumps(blob, sort_keys=True, default=str).encode()
+        keys[f.frame_id] = hashlib.sha256(text).hexdigest()[:24]
+    return keys
+
+
+def measurement_fingerprint(config: RunConfig, inputs: dict[str, str] | None = None) -> str:
+    """Fingerprint of the stored measurements: their settings, the record layout and the
+    content hashes of the run-wide inputs (``inputs``, e.g. the mesh). Per-frame inputs (pose,
+    camera, image bytes) are keyed per record (``frame_input_keys``)."""
+    if not inputs:
+        return config.measurement_fingerprint(schema=SCHEMA_VERSION)
+    return config.measurement_fingerprint(schema=SCHEMA_VERSION, inputs=inputs)

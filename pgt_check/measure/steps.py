@@ -1,0 +1,117 @@
+"""Parts of one frame's measurement that hold no checker state: the per-frame stage clock,
+the frame at working resolution, the enhance decision, the reason of each input error, the
+reference choice per frame and the formatting of internal errors. Used by
+``pgt_check.measure.checker.FrameChecker`` (and the executors: ``format_exception``).
+"""
+
+from __future__ import annotations
+
+import logging
+import traceback
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from pgt_check.config import EnhanceConfig, RunConfig
+from pgt_check.errors import ImageSizeMismatchError, PixelCapError, ReferenceUnreadableError
+from pgt_check.measure.paths import PathResult
+from pgt_check.measure.record import EnhanceWhy, FrameMeasurement, MeasureReason, Timings
+from pgt_check.types import Camera, Frame, Trajectory
+
+logger = logging.getLogger(__name__)
+
+
+#: reasons for which the enhanced path runs / does not run
+ENHANCE = (
+    EnhanceWhy.MODE_ALWAYS,
+    EnhanceWhy.RAW_FAILED,
+    EnhanceWhy.RAW_FEW_INLIERS,
+    EnhanceWhy.RAW_NEAR_THRESHOLD,
+)
+NO_ENHANCE = (EnhanceWhy.MODE_NEVER, EnhanceWhy.RAW_DECISIVE, EnhanceWhy.NO_REFERENCE)
+
+
+@dataclass(frozen=True, eq=False)
+class Working:
+    """One frame at working resolution: photo, cameras (original and working), the size and
+    scale (working / original), and the render."""
+
+    photo: np.ndarray
+    camera: Camera
+    cam_w: Camera
+    size: tuple[int, int]
+    scale: tuple[float, float]
+    render: Any
+
+
+@dataclass
+class Clock:
+    """Accumulates seconds per stage of one frame."""
+
+    spent: dict[str, float] = field(default_factory=dict)
+
+    def add(self, stage: str, seconds: float) -> None:
+        self.spent[stage] = self.spent.get(stage, 0.0) + seconds
+
+    def timings(self, total: float) -> Timings:
+        return Timings(**self.spent, total=total)
+
+
+def enhance_decision(
+    raw: PathResult, threshold: float, e: EnhanceConfig
+) -> tuple[EnhanceWhy, str]:
+    """Why the enhanced path runs or not for this raw result (``enhance.mode`` and, in auto
+    mode, whether the raw result is decisive)."""
+    if e.mode == "never":
+        return EnhanceWhy.MODE_NEVER, ""
+    if e.mode == "always":
+        return EnhanceWhy.MODE_ALWAYS, ""
+    if not raw.success:
+        return EnhanceWhy.RAW_FAILED, raw.reason
+    if raw.n_inliers < e.auto_min_inliers:
+        return EnhanceWhy.RAW_FEW_INLIERS, ""
+    if abs(raw.corner_error_px - threshold) <= e.auto_margin * threshold:
+        return EnhanceWhy.RAW_NEAR_THRESHOLD, ""
+    return EnhanceWhy.RAW_DECISIVE, ""
+
+
+#: per-frame reasons of the specific input errors (any other InputError: image_unreadable)
+INPUT_ERROR_REASONS: dict[type, MeasureReason] = {
+    ImageSizeMismatchError: MeasureReason.IMAGE_SIZE_MISMATCH,
+    PixelCapError: MeasureReason.PIXEL_CAP_EXCEEDED,
+    ReferenceUnreadableError: MeasureReason.REFERENCE_UNREADABLE,
+}
+
+
+def replace_measurement(m: FrameMeasurement, **changes: Any) -> FrameMeasurement:
+    from dataclasses import replace
+
+    return replace(m, **changes)
+
+
+def format_exception(err: BaseException) -> str:
+    """The last 2000 characters of a traceback (stored as an internal error's detail)."""
+    return "".join(traceback.format_exception(err))[-2000:]
+
+
+def pick_references(
+    traj: Trajectory, frames: Sequence[Frame], config: RunConfig
+) -> dict[str, tuple[Frame, ...]]:
+    """Reference frames per checked frame, best first (any frame of the trajectory may serve)."""
+    if config.enhance.mode == "never":
+        return {}
+    from pgt_check.enhance.reference import select_references
+
+    choices = select_references(traj.frames, config.enhance.reference)
+    by_id = traj.by_id()
+    refs = {f.frame_id: tuple(by_id[i] for i in choices[f.frame_id].frame_ids) for f in frames}
+    missing = sum(not r for r in refs.values())
+    if missing:
+        logger.warning(
+            "%d of %d frames have no usable reference and are checked raw only",
+            missing,
+            len(frames),
+        )
+    return refs
