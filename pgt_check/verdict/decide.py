@@ -89,8 +89,12 @@ class Judgement:
     enhanced_verdict: str
 
     @property
-    def disagree(self) -> bool:
-        """Raw and enhanced paths both verifiable, with different verdicts."""
+    def disagree(self) -> bool | None:
+        """Raw and enhanced paths both verifiable, with different verdicts (None unless both
+        paths gave a PASS or FAIL)."""
+        verifiable = (Verdict.PASS.value, Verdict.FAIL.value)
+        if self.raw_verdict not in verifiable or self.enhanced_verdict not in verifiable:
+            return None
         both = {self.raw_verdict, self.enhanced_verdict}
         return both == {Verdict.PASS.value, Verdict.FAIL.value}
 

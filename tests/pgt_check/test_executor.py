@@ -153,6 +153,7 @@ def cli_main(argv: list[str], monkeypatch: pytest.MonkeyPatch | None = None) -> 
     setattr_ = monkeypatch.setattr if monkeypatch is not None else setattr
     setattr_(runner, "load_trajectory", fake_load_trajectory)
     setattr_(runner, "build_frame_checker", fake_build_checker)
+    setattr_(runner, "preflight", fake_build_checker)  # no mesh to validate on fake frames
     return cli.main(argv)
 
 
