@@ -23,17 +23,12 @@ import argparse
 import json
 import sys
 import time
-from pathlib import Path
 
 import numpy as np
+from _common import REPO, REPORTS, command_line, machine, md_table, shared_data
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-
-from _common import REPO, REPORTS, command_line, machine, md_table, shared_data  # noqa: E402
-
-from pgt_check.config import RunConfig  # noqa: E402
-from pgt_check.types import Trajectory  # noqa: E402
+from pgt_check.config import RunConfig
+from pgt_check.types import Trajectory
 
 
 def sample_truth() -> tuple[Trajectory, str, dict]:

@@ -18,14 +18,12 @@ import json
 import logging
 import os
 import statistics
-import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-from benchmarks._common import REPO, REPORTS, command_line, machine, md_table  # noqa: E402
+from benchmarks._common import REPO, REPORTS, command_line, machine, md_table
 
 BACKENDS = ("moderngl", "pyrender")
 
