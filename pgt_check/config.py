@@ -227,7 +227,7 @@ class VerdictConfig:
     #: threshold of the shared checks in photo px; None = shared_threshold_rel x the per-frame
     #: threshold (pooled evidence is precise, and an error all frames share matters more)
     shared_threshold_px: float | None = None
-    shared_threshold_rel: float = 0.25
+    shared_threshold_rel: float = 0.15
     #: judge frames after removing the estimated per-camera calibration error (absolute paths)
     remove_calibration: bool = False
 
