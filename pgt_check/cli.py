@@ -136,7 +136,7 @@ def _add_verdict_args(p: argparse.ArgumentParser) -> None:
                    "(default 0)")
     g.add_argument("--shared-threshold-px", type=float, default=None,
                    help="threshold of the run-level registration / drift / calibration checks "
-                   "(default: a quarter of the per-frame threshold)")
+                   "(default: 0.15 x the per-frame threshold, 0.3 %% of the diagonal)")
     g.add_argument("--no-shared-checks", action="store_true",
                    help="skip the run-level checks (then a PASS resting on reprojected "
                    "references alone is UNVERIFIABLE)")

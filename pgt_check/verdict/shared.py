@@ -14,7 +14,7 @@ one small model to all of it (``pgt_check.geometry.shared_errors``). Each check 
   per-frame threshold (reported, frames still judged; ``--remove-calibration`` judges them after
   removing it).
 
-The threshold (``VerdictConfig.shared_threshold_px``; default a quarter of the per-frame
+The threshold (``VerdictConfig.shared_threshold_px``; default 0.15 x the per-frame
 threshold) is lower than the per-frame one because pooled evidence is far more precise, and
 errors every frame shares matter more.
 """
