@@ -70,12 +70,10 @@ def _to_uint8(img: np.ndarray) -> np.ndarray:
 
 
 def _resize(img: np.ndarray, width: int, height: int) -> np.ndarray:
-    import cv2
+    """Area when shrinking, cubic when enlarging (the one resize helper of ``io.images``)."""
+    from pgt_check.io.images import resize_image
 
-    if img.shape[1] == width and img.shape[0] == height:
-        return img
-    interp = cv2.INTER_AREA if width < img.shape[1] else cv2.INTER_CUBIC
-    return cv2.resize(img, (width, height), interpolation=interp)
+    return resize_image(img, (width, height), "area" if width < img.shape[1] else "cubic")
 
 
 def _variant_meshes(base: Any, variants: Sequence[str], decimate_fraction: float) -> dict:
