@@ -31,9 +31,9 @@ def disagreement(row: Mapping[str, Any]) -> bool | None:
     """True when raw and enhanced verdicts differ: the row's ``disagree`` if it has one, else
     from ``raw_verdict`` / ``enhanced_verdict`` (PASS / FAIL), else from the raw and enhanced
     corner errors against ``threshold_px``. None when one path has no result."""
-    given = row.get("disagree")
-    if isinstance(given, bool):
-        return given
+    if "disagree" in row:  # judged by the verdict stage (None: a path was not verifiable)
+        given = row["disagree"]
+        return given if isinstance(given, bool) else None
     rv, ev = row.get("raw_verdict"), row.get("enhanced_verdict")
     if rv in ("PASS", "FAIL") and ev in ("PASS", "FAIL"):
         return rv != ev
