@@ -171,8 +171,10 @@ def judge(m: FrameMeasurement, config: VerdictConfig, shared: Any = None) -> Jud
         return j(Verdict.PASS, "", evidence)
     if absolute_pass:  # an absolute path confirms the relative PASS
         return j(Verdict.PASS, "", Evidence.ABSOLUTE.value)
-    if reg == PASSED:
+    if reg == PASSED and m.frame_id not in shared.left_out:
         return j(Verdict.PASS, "", "relative+registration")
+    if reg == PASSED:  # its own absolute evidence disagrees with the registered trajectory
+        reg = "passed, but this frame's absolute evidence disagrees with it"
     return j(Verdict.UNVERIFIABLE, f"relative_evidence_only (registration {reg})", evidence)
 
 

@@ -60,6 +60,9 @@ class SharedChecks:
     drift_px: dict[str, float] = field(default_factory=dict)
     drift_flagged: frozenset[str] = frozenset()
     calibration_homographies: dict[str, np.ndarray] = field(default_factory=dict)
+    #: frames whose absolute evidence disagrees with the shared correction (an error of their
+    #: own): left out of the pooled fits, and not covered by a passed registration check
+    left_out: frozenset[str] = frozenset()
 
     @property
     def registration_status(self) -> str:
@@ -299,6 +302,49 @@ def _without_calibration(e: Any, h_cal: np.ndarray | None) -> Any:
     return replace(e, pts2d=p[:, :2] / p[:, 2:3])
 
 
+def frame_residuals(ev: Sequence[Any], est: Any) -> np.ndarray:
+    """Median reprojection residual (px) of each frame's evidence after the world correction
+    ``est`` (a ``RegistrationEstimate``; identity when it failed)."""
+    out = []
+    for e in ev:
+        pose = e.world_from_cam
+        if est.success and est.corrected_world_from_world is not None:
+            pose = est.correct(e.world_from_cam)
+        xc = (e.pts3d - pose[:3, 3]) @ pose[:3, :3]
+        ok = xc[:, 2] > 1e-9
+        proj = (xc[ok] @ e.K.T)[:, :2] / xc[ok, 2:3]
+        d = np.linalg.norm(proj - e.pts2d[ok], axis=1)
+        out.append(float(np.median(d)) if len(d) else float("inf"))
+    return np.asarray(out)
+
+
+def consistent_frames(
+    ev: Sequence[Any], fit: Any, floor_px: float, ceiling_px: float, rounds: int = 3
+) -> tuple[list, list[str]]:
+    """The frames whose evidence agrees with one shared correction, and the ids of the others.
+
+    A frame with its own pose error (bad frames among good ones) keeps a large residual after
+    the correction that fits the others; pooling it would bias the shared estimate. A frame is
+    left out when its median residual exceeds the frames' median + 3 robust standard
+    deviations, clamped to [``floor_px``, ``ceiling_px``]; the correction is refitted on the
+    kept frames (``fit(frames) -> RegistrationEstimate``) and the test repeated."""
+    kept = list(ev)
+    for _ in range(rounds):
+        res = frame_residuals(ev, fit(kept))
+        finite = res[np.isfinite(res)]
+        if len(finite) < 3:
+            return list(ev), []
+        med = float(np.median(finite))
+        spread = 3.0 * 1.4826 * float(np.median(np.abs(finite - med)))
+        cut = min(max(med + spread, floor_px), max(ceiling_px, floor_px))
+        new = [e for e, r in zip(ev, res, strict=True) if r <= cut]
+        if len(new) < 3 or [e.frame_id for e in new] == [e.frame_id for e in kept]:
+            break
+        kept = new
+    ids = {e.frame_id for e in kept}
+    return kept, [e.frame_id for e in ev if e.frame_id not in ids]
+
+
 def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfig) -> SharedChecks:
     """All run-level checks on the measurements (in trajectory order)."""
     from pgt_check.geometry.shared_errors import (
@@ -314,6 +360,17 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
         else thr
     )
     ev = frame_evidence(measurements)
+    # frames with an error of their own are left out of the pooled fits
+    all_ev = ev
+    ev, left_out = consistent_frames(
+        ev, lambda fr: estimate_registration(fr, n_bootstrap=0), 0.5 * frame_thr, 0.5 * frame_thr
+    )
+    if left_out:
+        logger.info(
+            "run-level checks: %d frames with their own error left out (%s)",
+            len(left_out),
+            ", ".join(left_out[:5]),
+        )
     calib, homs = {}, {}
     intrinsics = {m.camera_id: m.intrinsics for m in measurements if m.intrinsics}
     for cam_id, est in estimate_calibration(ev).items():
@@ -332,12 +389,16 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
         # the user states that the shared camera-frame error is calibration: the evidence is
         # corrected by it, and registration / drift are judged on what remains
         ev, mode = [_without_calibration(e, homs.get(e.camera_id)) for e in ev], "none"
+        all_ev = [_without_calibration(e, homs.get(e.camera_id)) for e in all_ev]
     reg = _registration_entry(estimate_registration(ev, calibration=mode), thr, "rigid")
     sim = _registration_entry(
         estimate_registration(ev, similarity=True, calibration=mode), thr, "similarity"
     )
-    ids = [e.frame_id for e in ev]
+    # drift looks at every frame: a drifting segment is what the consistent frames leave out
+    ids = [e.frame_id for e in all_ev]
     drift, drift_px, flagged = _drift_entry(
-        estimate_drift(ev, threshold_px=thr, calibration=mode), ids, thr
+        estimate_drift(all_ev, threshold_px=thr, calibration=mode), ids, thr
     )
-    return SharedChecks(thr, reg, sim, drift, calib, drift_px, flagged, homs)
+    for entry in (reg, sim):
+        entry["frames_left_out"] = left_out
+    return SharedChecks(thr, reg, sim, drift, calib, drift_px, flagged, homs, frozenset(left_out))
