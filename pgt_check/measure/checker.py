@@ -41,6 +41,7 @@ from pgt_check.measure.steps import (  # format_exception, pick_references: re-e
     NO_ENHANCE,
     Clock,
     Working,
+    edges_decisive,
     enhance_decision,
     format_exception,
     pick_references,
@@ -51,8 +52,13 @@ from pgt_check.types import Camera, Frame
 logger = logging.getLogger(__name__)
 
 __all__ = [
-    "FrameChecker", "FrameImages", "PathImages", "PathResult", "build_frame_checker",
-    "format_exception", "pick_references",
+    "FrameChecker",
+    "FrameImages",
+    "PathImages",
+    "PathResult",
+    "build_frame_checker",
+    "format_exception",
+    "pick_references",
 ]
 
 
@@ -196,6 +202,16 @@ class FrameChecker:
         )
         threshold = self.config.verdict.threshold_for(w.camera.width, w.camera.height)
         why, detail = self._enhance_decision(raw, threshold)
+        edges = self._edge_path(w, raw, threshold, clock)
+        if (
+            why in ENHANCE
+            and why is not EnhanceWhy.MODE_ALWAYS
+            and edges is not None
+            and edges_decisive(edges.measurement, threshold, self.config.enhance)
+        ):
+            # the geometric edges already decide with absolute evidence: leave out the
+            # enhancement (colourless meshes where the edges line up clearly)
+            why, detail = EnhanceWhy.EDGES_DECISIVE, ""
         enh = ref_id = None
         if why in ENHANCE:
             view = View(w.render, w.cam_w, frame.world_from_cam)
@@ -206,7 +222,6 @@ class FrameChecker:
                 why, detail = EnhanceWhy.NO_REFERENCE, ""
             if keep is not None:
                 keep.enhanced = enh_img
-        edges = self._edge_path(w, raw, threshold, clock)
         chosen, path_name = raw, "raw"
         if enh is not None and enh.success and (not raw.success or enh.n_inliers >= raw.n_inliers):
             chosen, path_name = enh, "enhanced"  # the path with more geometric support decides

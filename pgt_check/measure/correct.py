@@ -129,8 +129,9 @@ def add_correction_columns(
     return out
 
 
-def save_corrections(out_dir: str | Path, corrections: Iterable[Correction],
-                     fingerprint: str = "") -> Path:
+def save_corrections(
+    out_dir: str | Path, corrections: Iterable[Correction], fingerprint: str = ""
+) -> Path:
     path = Path(out_dir) / CORRECTIONS_FILE
     doc = {"fingerprint": fingerprint, "corrections": [c.to_json() for c in corrections]}
     tmp = path.with_name(path.name + ".tmp")
@@ -164,8 +165,14 @@ class _Round:
     cam_w: Any
 
 
-def _round(checker: Any, frame: Frame, pose: np.ndarray, photo_w: np.ndarray,
-           camera: Any, size: tuple[int, int]) -> _Round:
+def _round(
+    checker: Any,
+    frame: Frame,
+    pose: np.ndarray,
+    photo_w: np.ndarray,
+    camera: Any,
+    size: tuple[int, int],
+) -> _Round:
     """Render at ``pose``, match raw render vs photo, homography corner error, PnP."""
     from pgt_check.geometry.homography import corner_error, estimate_homography, scale_homography
     from pgt_check.geometry.pnp import estimate_pose_correction
@@ -181,21 +188,33 @@ def _round(checker: Any, frame: Frame, pose: np.ndarray, photo_w: np.ndarray,
     h = estimate_homography(matches.kpts0, matches.kpts1, size[0], size[1], cfg.homography)
     err = (
         corner_error(scale_homography(h.photo_from_render, *scale), camera.width, camera.height)
-        if h.success else None
+        if h.success
+        else None
     )
     corr = estimate_pose_correction(
-        matches.kpts0, matches.kpts1, render.depth, cam_w, pose,
-        max_error_px=cfg.pose.max_error_px, min_inliers=cfg.pose.min_inliers,
+        matches.kpts0,
+        matches.kpts1,
+        render.depth,
+        cam_w,
+        pose,
+        max_error_px=cfg.pose.max_error_px,
+        min_inliers=cfg.pose.min_inliers,
     )
     return _Round(
-        err, corr.world_from_cam if corr.success else None,
-        "" if corr.success else corr.reason.value, corr.n_inliers,
-        np.asarray(matches.kpts0), np.asarray(matches.kpts1), render.depth, cam_w,
+        err,
+        corr.world_from_cam if corr.success else None,
+        "" if corr.success else corr.reason.value,
+        corr.n_inliers,
+        np.asarray(matches.kpts0),
+        np.asarray(matches.kpts1),
+        render.depth,
+        cam_w,
     )
 
 
-def _bootstrap(rnd: _Round, start: np.ndarray, final: np.ndarray, n: int, seed: int,
-               cfg: Any) -> tuple[float, float]:
+def _bootstrap(
+    rnd: _Round, start: np.ndarray, final: np.ndarray, n: int, seed: int, cfg: Any
+) -> tuple[float, float]:
     """RMS (rotation deg, centre distance) of PnP on resampled correspondences vs ``final``."""
     from pgt_check.geometry.pnp import estimate_pose_correction
     from pgt_check.geometry.transforms import pose_difference
@@ -208,8 +227,13 @@ def _bootstrap(rnd: _Round, start: np.ndarray, final: np.ndarray, n: int, seed: 
     for _ in range(n):
         idx = rng.integers(0, m, size=m)
         c = estimate_pose_correction(
-            rnd.kpts_render[idx], rnd.kpts_photo[idx], rnd.depth, rnd.cam_w, start,
-            max_error_px=cfg.pose.max_error_px, min_inliers=cfg.pose.min_inliers,
+            rnd.kpts_render[idx],
+            rnd.kpts_photo[idx],
+            rnd.depth,
+            rnd.cam_w,
+            start,
+            max_error_px=cfg.pose.max_error_px,
+            min_inliers=cfg.pose.min_inliers,
         )
         if c.success:
             dt, dr = pose_difference(final, c.world_from_cam)
@@ -250,8 +274,11 @@ def refine_pose(
     photo, camera = prepare_photo(load_image(frame.image_file), frame.camera)
     size = working_scale(camera.width, camera.height, checker.config.match.resize_max)
     photo_w = resize_image(photo, size)
-    thr = (checker.config.verdict.threshold_for(camera.width, camera.height)
-           if threshold_px is None else threshold_px)
+    thr = (
+        checker.config.verdict.threshold_for(camera.width, camera.height)
+        if threshold_px is None
+        else threshold_px
+    )
 
     first_err: float | None = None
     steps: list[tuple[float, float]] = []
@@ -269,9 +296,16 @@ def refine_pose(
             depth_scale = float(np.median(d)) if d.size else None
         if rnd.pose is None:
             if k == 0:
-                return Correction(frame.frame_id, False, rnd.reason or "pnp_failed",
-                                  corner_error_px_before=first_err, n_inliers=rnd.n_inliers,
-                                  rounds=n_done, start=start_kind, depth=depth_scale)
+                return Correction(
+                    frame.frame_id,
+                    False,
+                    rnd.reason or "pnp_failed",
+                    corner_error_px_before=first_err,
+                    n_inliers=rnd.n_inliers,
+                    rounds=n_done,
+                    start=start_kind,
+                    depth=depth_scale,
+                )
             rnd = prev  # keep the last round whose PnP succeeded
             n_done -= 1
             break
@@ -294,8 +328,20 @@ def refine_pose(
     applied = verified and certain
     reason = "" if applied else ("not_verified" if not verified else "uncertain")
     return Correction(
-        frame.frame_id, True, reason,
-        tuple(tuple(map(float, r)) for r in final), dr, dt, sigma_r, sigma_t,
-        first_err, err, rnd.n_inliers, n_done, start_kind, depth_scale, applied,
+        frame.frame_id,
+        True,
+        reason,
+        tuple(tuple(map(float, r)) for r in final),
+        dr,
+        dt,
+        sigma_r,
+        sigma_t,
+        first_err,
+        err,
+        rnd.n_inliers,
+        n_done,
+        start_kind,
+        depth_scale,
+        applied,
         tuple((float(a), float(b)) for a, b in steps),
     )

@@ -54,6 +54,8 @@ class EnhanceWhy(str, Enum):
     RAW_NEAR_THRESHOLD = "raw_near_threshold"
     RAW_DECISIVE = "raw_decisive"
     NO_REFERENCE = "no_reference"
+    #: the geometric-edge path was clear (absolute evidence), so the enhancement was left out
+    EDGES_DECISIVE = "edges_decisive"
 
 
 class OldRecordError(ValueError):

@@ -30,7 +30,27 @@ ENHANCE = (
     EnhanceWhy.RAW_FEW_INLIERS,
     EnhanceWhy.RAW_NEAR_THRESHOLD,
 )
-NO_ENHANCE = (EnhanceWhy.MODE_NEVER, EnhanceWhy.RAW_DECISIVE, EnhanceWhy.NO_REFERENCE)
+NO_ENHANCE = (
+    EnhanceWhy.MODE_NEVER,
+    EnhanceWhy.RAW_DECISIVE,
+    EnhanceWhy.NO_REFERENCE,
+    EnhanceWhy.EDGES_DECISIVE,
+)
+
+#: the edge path decides alone when its share of supported render edges is at least this
+EDGES_DECISIVE_SUPPORT = 0.5
+
+
+def edges_decisive(path: Any, threshold: float, enhance_cfg: Any) -> bool:
+    """The edge path (a ``PathMeasurement``) gives a clear PASS: aligned, not ambiguous, well
+    supported, and its corner error below the ``auto_margin`` band around the threshold (the
+    band that makes the raw path not decisive). A clear FAIL still runs the enhanced path: its
+    PnP estimate is what corrects the pose where the raw render cannot be matched."""
+    if not path.success or path.corner_error_px is None:
+        return False
+    if path.inlier_ratio < EDGES_DECISIVE_SUPPORT:
+        return False
+    return path.corner_error_px < (1.0 - enhance_cfg.auto_margin) * threshold
 
 
 @dataclass(frozen=True, eq=False)
@@ -59,9 +79,7 @@ class Clock:
         return Timings(**self.spent, total=total)
 
 
-def enhance_decision(
-    raw: PathResult, threshold: float, e: EnhanceConfig
-) -> tuple[EnhanceWhy, str]:
+def enhance_decision(raw: PathResult, threshold: float, e: EnhanceConfig) -> tuple[EnhanceWhy, str]:
     """Why the enhanced path runs or not for this raw result (``enhance.mode`` and, in auto
     mode, whether the raw result is decisive)."""
     if e.mode == "never":
