@@ -225,6 +225,8 @@ class FrameChecker:
         chosen, path_name = raw, "raw"
         if enh is not None and enh.success and (not raw.success or enh.n_inliers >= raw.n_inliers):
             chosen, path_name = enh, "enhanced"  # the path with more geometric support decides
+        if not chosen.success and edges is not None and edges.measurement.success:
+            path_name = "edges"  # no feature path aligned: the geometric edges decide
         if keep is not None:
             keep.kpts_render, keep.kpts_photo = chosen.kpts_render, chosen.kpts_photo
             keep.inliers = chosen.inliers

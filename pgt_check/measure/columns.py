@@ -162,7 +162,11 @@ MEASUREMENT_COLUMNS: tuple[Column, ...] = (
     ),
     Column("enhanced", "whether the enhanced path ran", lambda m: m.enhance_ran),
     Column("enhanced_why", "why it ran or not", lambda m: m.enhanced_why),
-    Column("verdict_path", "path with more inliers (raw / enhanced)", lambda m: m.verdict_path),
+    Column(
+        "verdict_path",
+        "deciding path: more inliers (raw / enhanced), or edges when no feature path aligned",
+        lambda m: m.verdict_path,
+    ),
     Column(
         "reference_id",
         "reference frame of the enhanced path",

@@ -218,8 +218,9 @@ class AbsoluteEvidence:
 class FrameMeasurement:
     """Everything stage 1 measured for one frame (see the module docstring).
 
-    ``verdict_path`` names the path with more geometric support ("raw" / "enhanced"; None when
-    no path was measured); the PnP estimate ran on it. ``auto_threshold_px`` is the threshold the
+    ``verdict_path`` names the path with more geometric support ("raw" / "enhanced"; "edges"
+    when no feature path aligned and the geometric edges did; None when no path was
+    measured); the PnP estimate ran on a feature path. ``auto_threshold_px`` is the threshold the
     ``--enhance auto`` decision used (a later re-judgement with another threshold can see that
     the decision was made under different settings).
     """
@@ -265,6 +266,8 @@ class FrameMeasurement:
             return self.enhanced
         if self.verdict_path == "raw":
             return self.raw
+        if self.verdict_path == "edges":
+            return self.edges
         return None
 
     @property
