@@ -43,141 +43,45 @@ import logging
 import math
 import sys
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from pgt_check.enhance_refs import (  # re-exported: the subcommand's public helpers
+    IMAGE_SUFFIXES,
+    RenderItem,
+    find_renders,
+    frame_index,
+    nearest_references,
+    pose_renders,
+)
 from pgt_check.errors import InputError
-from pgt_check.types import Camera, Frame, Trajectory
+from pgt_check.types import Camera, Frame
+
+__all__ = [
+    "IMAGE_SUFFIXES",
+    "METRIC_COLUMNS",
+    "REFERENCE_COLUMNS",
+    "RenderItem",
+    "build_parser",
+    "enhance_folder",
+    "enhance_main",
+    "find_gt",
+    "find_renders",
+    "frame_index",
+    "metrics_markdown",
+    "nearest_references",
+    "pose_renders",
+]
 
 logger = logging.getLogger(__name__)
 
-IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
 REFERENCE_COLUMNS = ("render", "pose", "reference", "reference_dt", "reference_drot_deg",
                      "status")
 METRIC_COLUMNS = ("render", "reference", "psnr_y_raw", "psnr_y_enhanced", "ssim_y_raw",
                   "ssim_y_enhanced", "lpips_raw", "lpips_enhanced")
-
-
-@dataclass(frozen=True)
-class RenderItem:
-    """One render file with the pose it was made at and its chosen reference (None: skipped)."""
-
-    name: str  # file name without extension
-    file: Path
-    frame: Frame | None
-    reference: Frame | None = None
-    reference_dt: float | None = None
-    reference_drot_deg: float | None = None
-    status: str = "ok"
-
-
-def find_renders(folder: str | Path) -> list[Path]:
-    """The image files directly inside ``folder``, sorted by name."""
-    folder = Path(folder)
-    if not folder.is_dir():
-        raise InputError(f"renders folder not found: {folder}")
-    files = sorted(p for p in folder.iterdir()
-                   if p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES)
-    if not files:
-        raise InputError(f"{folder}: no .png/.jpg renders in this folder")
-    return files
-
-
-def _keys(frame: Frame) -> list[str]:
-    """Names a render may carry to take this frame's pose: the image's file name without its
-    extension, or the frame id."""
-    keys = [Path(frame.image_path).stem] if frame.image_path else []
-    return list(dict.fromkeys([*keys, frame.frame_id]))
-
-
-def frame_index(frames: Sequence[Frame]) -> dict[str, Frame]:
-    """name -> frame for every key of ``_keys``; a key two frames share is left out."""
-    index: dict[str, Frame] = {}
-    clash: set[str] = set()
-    for f in frames:
-        for k in _keys(f):
-            if k in index and index[k] is not f:
-                clash.add(k)
-            index.setdefault(k, f)
-    for k in clash:
-        del index[k]
-    return index
-
-
-def _angles_deg(rotations: np.ndarray, r: np.ndarray) -> np.ndarray:
-    rel = np.einsum("nji,jk->nik", rotations, r)
-    c = np.clip((np.trace(rel, axis1=1, axis2=2) - 1.0) / 2.0, -1.0, 1.0)
-    return np.degrees(np.arccos(c))
-
-
-def nearest_references(
-    items: Sequence[RenderItem],
-    training: Sequence[Frame],
-    *,
-    translation_scale: float | None = None,
-    rotation_scale_deg: float = 10.0,
-    max_rotation_deg: float = 45.0,
-    max_translation: float | None = None,
-    allow_same_view: bool = False,
-) -> list[RenderItem]:
-    """Each posed render with its nearest training photo (the validator's distance, see the
-    module docstring). A training frame named like the render or at the render's own pose
-    (1e-6 of the translation scale, 1e-3 deg) is the view's ground truth and is excluded unless
-    ``allow_same_view`` (an upper bound: the enhancer then sees the answer)."""
-    from dataclasses import replace
-
-    if not training:
-        raise InputError("the model has no frame whose photo exists (nothing to take "
-                         "appearance from; check --images)")
-    centres = np.array([f.world_from_cam[:3, 3] for f in training])
-    rotations = np.array([f.world_from_cam[:3, :3] for f in training])
-    if translation_scale is None:
-        extent = float(np.linalg.norm(centres.max(0) - centres.min(0)))
-        translation_scale = max(0.1 * extent, 1e-9)
-    out = []
-    for it in items:
-        if it.frame is None:
-            out.append(it)
-            continue
-        names = set(_keys(it.frame)) | {it.name}
-        dt = np.linalg.norm(centres - it.frame.world_from_cam[:3, 3], axis=1)
-        dr = _angles_deg(rotations, it.frame.world_from_cam[:3, :3])
-        cost = dt / translation_scale + dr / rotation_scale_deg
-        ok = dr <= max_rotation_deg
-        if not allow_same_view:
-            ok &= ~np.array([bool(names & set(_keys(f))) for f in training])
-            ok &= ~((dt <= 1e-6 * translation_scale) & (dr <= 1e-3))
-        if max_translation is not None:
-            ok &= dt <= max_translation
-        if not ok.any():
-            out.append(replace(it, status="no_reference_within_limits"))
-            continue
-        cand = np.flatnonzero(ok)
-        j = int(cand[np.argmin(cost[cand])])
-        out.append(replace(it, reference=training[j], reference_dt=float(dt[j]),
-                           reference_drot_deg=float(dr[j])))
-    return out
-
-
-def pose_renders(files: Sequence[Path], poses: Trajectory) -> list[RenderItem]:
-    """Each render file with the frame of ``poses`` it is named like (None: no such frame)."""
-    index = frame_index(poses.frames)
-    items = [RenderItem(p.stem, p, index.get(p.stem), status="ok" if p.stem in index
-                        else "no_pose") for p in files]
-    for it in items:
-        if it.frame is None:
-            logger.warning("%s: no pose named %r in %s; skipped", it.file, it.name, poses.source)
-    if not any(it.frame for it in items):
-        examples = ", ".join(sorted(index)[:3])
-        raise InputError(
-            f"no render in {files[0].parent} is named like a posed image of {poses.source} "
-            f"(render names: {', '.join(p.stem for p in files[:3])}; pose names: {examples})"
-        )
-    return items
 
 
 def _render_camera(frame: Frame, image: np.ndarray) -> Camera:
