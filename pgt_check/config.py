@@ -230,6 +230,10 @@ class VerdictConfig:
     shared_threshold_rel: float = 0.15
     #: judge frames after removing the estimated per-camera calibration error (absolute paths)
     remove_calibration: bool = False
+    #: a trusted run's summary.json: its per-camera calibration estimate is removed instead of
+    #: one estimated on this run (which views that cannot separate calibration from
+    #: registration would let absorb a misregistration)
+    calibration_from: str | None = None
 
     def __post_init__(self) -> None:
         _check_range("verdict.threshold_px", self.threshold_px, 0, lo_open=True)

@@ -125,7 +125,8 @@ def judge(m: FrameMeasurement, config: VerdictConfig, shared: Any = None) -> Jud
     out = {}
     for name in ("raw", "enhanced", "edges"):
         p = getattr(m, name)
-        h = _calibrated(m, p, shared) if config.remove_calibration else None
+        removing = config.remove_calibration or config.calibration_from
+        h = _calibrated(m, p, shared) if removing else None
         out[name] = None if p is None else path_outcome(m, p, config, h)
     raw_v = "" if out["raw"] is None else out["raw"][0].value
     enh_v = "" if out["enhanced"] is None else out["enhanced"][0].value

@@ -222,6 +222,8 @@ def _calibration_entry(est: Any, shared_thr: float, frame_thr: float) -> dict[st
         "focal_scale_ci": _ci(est.focal_scale_ci),
         "n_frames": est.n_frames,
         "separable_from_registration": bool(est.separable),
+        # true_cam_from_checked_cam: what --calibration-from applies to another run
+        "rotation": None if est.rotation is None else np.asarray(est.rotation).tolist(),
     }
     if status == NOT_CHECKED:
         entry["message"] = f"calibration not checked: no absolute evidence ({est.reason})"
@@ -241,12 +243,20 @@ def _calibration_homography(est: Any, intrinsics: tuple[float, ...]) -> np.ndarr
     """photo_from_render of a calibration error: K_zoom @ R @ K^-1 (see shared_errors)."""
     if not est.success or est.rotation is None or not math.isfinite(est.focal_scale):
         return None
+    return calibration_homography(np.asarray(est.rotation), est.focal_scale, intrinsics)
+
+
+def calibration_homography(
+    rotation: np.ndarray, focal_scale: float, intrinsics: tuple[float, ...]
+) -> np.ndarray:
+    """(3, 3) photo_from_render of a camera-frame rotation ``rotation`` (true_cam_from_checked)
+    and a focal scale, for a pinhole camera with ``intrinsics`` (fx, fy, cx, cy)."""
     fx, fy, cx, cy = intrinsics
     k = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]], np.float64)
     kz = k.copy()
-    kz[0, 0] *= est.focal_scale
-    kz[1, 1] *= est.focal_scale
-    return kz @ np.asarray(est.rotation, np.float64) @ np.linalg.inv(k)
+    kz[0, 0] *= focal_scale
+    kz[1, 1] *= focal_scale
+    return kz @ np.asarray(rotation, np.float64) @ np.linalg.inv(k)
 
 
 def _drift_entry(est: Any, ids: list[str], threshold: float) -> tuple[dict, dict, frozenset]:
@@ -345,6 +355,47 @@ def consistent_frames(
     return kept, [e.frame_id for e in ev if e.frame_id not in ids]
 
 
+def trusted_calibration(
+    path: str, intrinsics: dict[str, tuple[float, ...]]
+) -> dict[str, np.ndarray]:
+    """Calibration homographies per camera from a trusted run's summary.json
+    (``shared_errors.calibration``), for this run's cameras (``--calibration-from``)."""
+    import json
+    from pathlib import Path
+
+    from pgt_check.errors import InputError
+
+    try:
+        se = json.loads(Path(path).read_text(encoding="utf-8"))["shared_errors"]["calibration"]
+    except (OSError, ValueError, KeyError, TypeError) as err:
+        raise InputError(
+            f"{path}: no shared_errors.calibration of a pgt-check run ({err})"
+        ) from err
+    out = {}
+    usable = {
+        c: e
+        for c, e in se.items()
+        if isinstance(e, dict)
+        and e.get("rotation") is not None
+        and e.get("focal_scale") is not None
+    }
+    for cam_id, k in intrinsics.items():
+        e = usable.get(cam_id)
+        if e is None and len(usable) == 1 and len(intrinsics) == 1:
+            # one camera on both sides whose parameters changed (e.g. re-calibrated intrinsics)
+            ((other, e),) = usable.items()
+            logger.warning(
+                "--calibration-from: camera %r not in %s; using its only camera %r",
+                cam_id,
+                path,
+                other,
+            )
+        if e is None:
+            raise InputError(f"{path}: no calibration estimate for camera {cam_id!r}")
+        out[cam_id] = calibration_homography(np.asarray(e["rotation"]), e["focal_scale"], k)
+    return out
+
+
 def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfig) -> SharedChecks:
     """All run-level checks on the measurements (in trajectory order)."""
     from pgt_check.geometry.shared_errors import (
@@ -385,7 +436,11 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
             "message": "calibration not checked: no absolute evidence",
         }
     mode = "auto"
-    if config.verdict.remove_calibration and homs:
+    if config.verdict.calibration_from:
+        # a calibration known from a trusted run (same cameras): removed before judging, so
+        # this run's own shared error cannot be taken for calibration
+        homs = trusted_calibration(config.verdict.calibration_from, intrinsics)
+    if (config.verdict.remove_calibration or config.verdict.calibration_from) and homs:
         # the user states that the shared camera-frame error is calibration: the evidence is
         # corrected by it, and registration / drift are judged on what remains
         ev, mode = [_without_calibration(e, homs.get(e.camera_id)) for e in ev], "none"

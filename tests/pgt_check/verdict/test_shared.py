@@ -169,3 +169,30 @@ def test_calibration_is_a_finding_and_can_be_removed(truth):
     assert cal["principal_point_shift_px"][0] == pytest.approx(5.0, rel=0.3)
     j2 = judge_run(ms, RunConfig.from_dict({"verdict": {"remove_calibration": True}}))
     assert j2.shared.summary()["registration"]["status"] == "passed"
+
+
+def test_calibration_from_a_trusted_run_keeps_misregistration_visible(truth, tmp_path):
+    """A calibration estimated on the same run may absorb a misregistration where views
+    cannot separate them; one from a trusted run (same camera) cannot."""
+    import json
+
+    shift = 5.0
+
+    def with_pp_shift(ms):
+        return [m.__class__(**{**m.__dict__, "evidence": AbsoluteEvidence(
+            ("raw",), tuple((u + shift, v) for u, v in m.evidence.pts2d), m.evidence.pts_cam)})
+            for m in ms]
+
+    trusted = judge_run(with_pp_shift(measurements(truth, truth)), RunConfig())
+    path = tmp_path / "summary.json"
+    path.write_text(json.dumps({"shared_errors": trusted.shared.summary()}))
+    moved = _move(truth, 2.0, 0.0)
+    ms = with_pp_shift(measurements(truth, moved))
+    cfg = RunConfig.from_dict({"verdict": {"calibration_from": str(path)}})
+    reg = judge_run(ms, cfg).shared.summary()["registration"]
+    assert reg["status"] == "failed"
+    assert reg["angle_deg"] == pytest.approx(2.0, rel=0.3)
+    # the given trajectory with the trusted calibration passes
+    ok = judge_run(with_pp_shift(measurements(truth, truth)), cfg)
+    assert ok.shared.summary()["registration"]["status"] == "passed"
+    assert all(r["verdict"] == "PASS" for r in ok.rows)
