@@ -30,6 +30,16 @@ class Render:
     coverage: np.ndarray
     shading: str
 
+    @classmethod
+    def empty(cls, height: int, width: int, shading: str) -> Render:
+        """A view in which nothing of the mesh is visible."""
+        return cls(
+            rgb=np.zeros((height, width, 3), dtype=np.float32),
+            depth=np.zeros((height, width), dtype=np.float32),
+            coverage=np.zeros((height, width), dtype=bool),
+            shading=shading,
+        )
+
     @property
     def coverage_fraction(self) -> float:
         return float(self.coverage.mean()) if self.coverage.size else 0.0

@@ -17,8 +17,8 @@ import numpy as np
 from pgt_check.geometry.transforms import invert_rigid
 from pgt_check.render.base import Render
 from pgt_check.render.mesh import MeshData
-from pgt_check.render.projection import near_far_from_bounds, opengl_projection
-from pgt_check.types import Camera, check_shape
+from pgt_check.render.projection import centred_view, opengl_projection
+from pgt_check.types import Camera
 
 logger = logging.getLogger(__name__)
 
@@ -178,24 +178,12 @@ class ModernGLRenderer:
         Distorted cameras are rendered with ``camera.as_pinhole()`` (the IO layer undistorts
         photos to the same pinhole model).
         """
-        world_from_cam = np.asarray(world_from_cam, dtype=np.float64)
-        check_shape("world_from_cam", world_from_cam, (4, 4))
-        if not np.all(np.isfinite(world_from_cam)):
-            raise ValueError("world_from_cam is not finite")
-        if camera.is_distorted:
-            logger.debug("rendering distorted %s camera as its pinhole model", camera.model)
-        camera = camera.as_pinhole()
-        w, h = camera.width, camera.height
-
-        # recentre in float64: the camera centre moves by the same offset as the vertices
-        centred_from_cam = world_from_cam.copy()
-        centred_from_cam[:3, 3] -= self.mesh.offset
-        cam_from_centred = invert_rigid(centred_from_cam)
-        planes = near_far_from_bounds(
-            cam_from_centred, self._bounds_centred, camera, self.near_ratio
+        camera, centred_from_cam, planes = centred_view(
+            camera, world_from_cam, self.mesh.offset, self._bounds_centred, self.near_ratio
         )
+        w, h = camera.width, camera.height
         if planes is None or self.mesh.num_faces == 0:
-            return _empty(h, w, self.shading)
+            return Render.empty(h, w, self.shading)
         znear, zfar = planes
         proj = opengl_projection(camera, znear, zfar)
 
@@ -203,7 +191,7 @@ class ModernGLRenderer:
             self._init_gl()
         # several renderers may live in one process: make this context current for the draw
         with self._ctx:
-            rgba, depth = self._draw(w, h, cam_from_centred, proj)
+            rgba, depth = self._draw(w, h, invert_rigid(centred_from_cam), proj)
         # row 0 of the read-back is the image top (see opengl_projection): no flip needed
         coverage = depth > 0.0
         depth[~coverage] = 0.0
@@ -261,10 +249,3 @@ class ModernGLRenderer:
         self.close()
 
 
-def _empty(h: int, w: int, shading: str) -> Render:
-    return Render(
-        rgb=np.zeros((h, w, 3), dtype=np.float32),
-        depth=np.zeros((h, w), dtype=np.float32),
-        coverage=np.zeros((h, w), dtype=bool),
-        shading=shading,
-    )

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from pgt_check.geometry.transforms import invert_rigid
 from pgt_check.types import Camera, check_shape
 
 
@@ -74,3 +75,36 @@ def near_far_from_bounds(
     if znear >= zfar:
         znear = zfar * 0.5
     return znear, zfar
+
+
+def centred_view(
+    camera: Camera,
+    world_from_cam: np.ndarray,
+    offset: np.ndarray,
+    bounds_centred: np.ndarray,
+    near_ratio: float,
+) -> tuple[Camera, np.ndarray, tuple[float, float] | None]:
+    """What every backend does before drawing one view.
+
+    Checks ``world_from_cam`` (4x4, finite), renders a distorted camera as its pinhole model
+    (the IO layer undistorts photos to the same model), recentres the pose by the mesh's
+    float64 ``offset`` (the camera centre moves with the vertices) and finds the clip planes.
+    Returns (pinhole camera, centred_from_cam (4, 4), (znear, zfar) or None when nothing of
+    the mesh can be in front of the camera).
+    """
+    import logging
+
+    world_from_cam = np.asarray(world_from_cam, dtype=np.float64)
+    check_shape("world_from_cam", world_from_cam, (4, 4))
+    if not np.all(np.isfinite(world_from_cam)):
+        raise ValueError("world_from_cam is not finite")
+    if camera.is_distorted:
+        logging.getLogger(__name__).debug(
+            "rendering distorted %s camera as its pinhole model", camera.model
+        )
+    camera = camera.as_pinhole()
+    centred_from_cam = world_from_cam.copy()
+    centred_from_cam[:3, 3] -= offset
+    planes = near_far_from_bounds(invert_rigid(centred_from_cam), bounds_centred, camera,
+                                  near_ratio)
+    return camera, centred_from_cam, planes

@@ -34,11 +34,10 @@ from typing import Any
 
 import numpy as np
 
-from pgt_check.geometry.transforms import invert_rigid
 from pgt_check.render.base import Render
 from pgt_check.render.mesh import MeshData
-from pgt_check.render.projection import near_far_from_bounds
-from pgt_check.types import Camera, check_shape
+from pgt_check.render.projection import centred_view
+from pgt_check.types import Camera
 
 logger = logging.getLogger(__name__)
 
@@ -221,22 +220,12 @@ class PyrenderRenderer:
     def render(self, camera: Camera, world_from_cam: np.ndarray) -> Render:
         """Render at ``world_from_cam`` (4x4 float64, OpenCV axes); distorted cameras are
         rendered with ``camera.as_pinhole()`` (as the moderngl backend)."""
-        world_from_cam = np.asarray(world_from_cam, dtype=np.float64)
-        check_shape("world_from_cam", world_from_cam, (4, 4))
-        if not np.all(np.isfinite(world_from_cam)):
-            raise ValueError("world_from_cam is not finite")
-        if camera.is_distorted:
-            logger.debug("rendering distorted %s camera as its pinhole model", camera.model)
-        camera = camera.as_pinhole()
-        w, h = camera.width, camera.height
-
-        centred_from_cam = world_from_cam.copy()
-        centred_from_cam[:3, 3] -= self.mesh.offset
-        planes = near_far_from_bounds(
-            invert_rigid(centred_from_cam), self._bounds_centred, camera, self.near_ratio
+        camera, centred_from_cam, planes = centred_view(
+            camera, world_from_cam, self.mesh.offset, self._bounds_centred, self.near_ratio
         )
+        w, h = camera.width, camera.height
         if planes is None or self.mesh.num_faces == 0:
-            return _empty(h, w, self.shading)
+            return Render.empty(h, w, self.shading)
         znear, zfar = planes
 
         if self._renderer is None:
@@ -327,13 +316,6 @@ def _release_offscreen(offscreen: Any) -> None:
         offscreen._platform = None
 
 
-def _empty(h: int, w: int, shading: str) -> Render:
-    return Render(
-        rgb=np.zeros((h, w, 3), dtype=np.float32),
-        depth=np.zeros((h, w), dtype=np.float32),
-        coverage=np.zeros((h, w), dtype=bool),
-        shading=shading,
-    )
 
 
 def _noop() -> None:
