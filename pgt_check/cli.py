@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from pgt_check import __version__
+from pgt_check._cli import parse_args
 from pgt_check.config import RunConfig, load_config_file, merge
 from pgt_check.errors import ConfigError, InputError
 
@@ -354,11 +355,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         from pgt_check.enhance_cli import enhance_main
 
         return enhance_main(argv[1:])
-    parser = build_parser()
-    try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:  # argparse exits 2 on usage errors, 0 on --help/--version
-        return int(exc.code or 0)
+    args = parse_args(build_parser(), argv)
+    if isinstance(args, int):  # argparse's code: 2 on usage errors, 0 on --help/--version
+        return args
     configure_logging(args.verbose, args.quiet)
     install_sigterm_handler()
     from pgt_check.runner import RunInterrupted, run

@@ -32,6 +32,7 @@ from typing import Any
 
 import numpy as np
 
+from pgt_check._cli import parse_args
 from pgt_check.errors import InputError
 from pgt_check.types import Camera, Frame, Trajectory
 
@@ -329,11 +330,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def compare_main(argv: Sequence[str]) -> int:
-    p = build_parser()
-    try:
-        args = p.parse_args(list(argv))
-    except SystemExit as exc:
-        return int(exc.code or 0)
+    args = parse_args(build_parser(), argv)
+    if isinstance(args, int):
+        return args
     logging.getLogger("pgt_check").setLevel(logging.WARNING if args.quiet else logging.INFO)
     from pgt_check.io import read_trajectory
 

@@ -48,6 +48,7 @@ from typing import Any
 
 import numpy as np
 
+from pgt_check._cli import parse_args
 from pgt_check.enhance_refs import (  # re-exported: the subcommand's public helpers
     IMAGE_SUFFIXES,
     RenderItem,
@@ -380,11 +381,9 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def enhance_main(argv: Sequence[str]) -> int:
-    p = build_parser()
-    try:
-        args = p.parse_args(list(argv))
-    except SystemExit as exc:
-        return int(exc.code or 0)
+    args = parse_args(build_parser(), argv)
+    if isinstance(args, int):
+        return args
     logging.getLogger("pgt_check").setLevel(logging.WARNING if args.quiet else logging.INFO)
     try:
         summary = enhance_folder(args)

@@ -17,6 +17,7 @@ from typing import Any
 from pgt_check.config import RunConfig
 from pgt_check.errors import InputError, MissingExtraError, SetupError
 from pgt_check.measure import SCHEMA_VERSION
+from pgt_check.store import content_hash
 from pgt_check.types import Frame, Trajectory
 
 
@@ -112,12 +113,6 @@ def images_outside_dataset(config: RunConfig, frames: Sequence[Frame]) -> list[s
         if not any(p == r or p.startswith(r.rstrip(os.sep) + os.sep) for r in norm_roots):
             out.append(str(f.image_path or f.image_file))
     return out
-
-
-def content_hash(path: str | Path) -> str:
-    from pgt_check.store import content_hash as _hash
-
-    return _hash(path)
 
 
 def frame_input_keys(

@@ -12,6 +12,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
+from pgt_check._cli import parse_args
 from pgt_check.config import RunConfig, merge
 from pgt_check.errors import InputError
 from pgt_check.measure.correct import add_correction_columns, load_corrections
@@ -143,10 +144,9 @@ def report_main(argv: Sequence[str]) -> int:
         default=None,
         help="show absolute paths of this machine in the report (default: shortened)",
     )
-    try:
-        args = p.parse_args(list(argv))
-    except SystemExit as exc:
-        return int(exc.code or 0)
+    args = parse_args(p, argv)
+    if isinstance(args, int):
+        return args
     from pgt_check.report.outputs import outputs_complete, write_outputs
     from pgt_check.verdict import judge_run
 
