@@ -213,7 +213,7 @@ def boxes_scene(seed: int = 0):
 
 def make_textureless_scene(out_dir: str | Path, n_frames: int = 24, seed: int = 0,
                            size: tuple[int, int] = (320, 240)) -> Path:
-    """Write a textureless scene: ``mesh.ply`` (plain vertex colours), photos rendered at the
+    """Write a textureless scene: ``boxes.ply`` (plain vertex colours), photos rendered at the
     true poses (colours mixed with head-light shading, blur, noise, JPEG), and LaMAR files
     (``sensors.txt``, ``images.txt``, ``trajectories.txt``) with the TRUE poses. Returns the
     trajectory path. The camera circles the boxes at 3.5-4.5 m, looking at the centre."""
@@ -228,7 +228,7 @@ def make_textureless_scene(out_dir: str | Path, n_frames: int = 24, seed: int = 
     (out / "images").mkdir(parents=True, exist_ok=True)
     scene = boxes_scene(seed)
     mesh = trimesh.util.concatenate(list(scene.geometry.values()))
-    mesh.export(out / "mesh.ply")
+    mesh.export(out / "boxes.ply")  # generated here: not a copy of any shared dataset
     w, h = size
     cam = Camera.pinhole(w, h, 0.9 * w, 0.9 * w, (w - 1) / 2, (h - 1) / 2)
     coloured = make_renderer(mesh_from_trimesh(scene))
@@ -264,4 +264,4 @@ def textureless_scene(out_dir: str | Path, n_frames: int = 24) -> tuple[Trajecto
     out = Path(out_dir)
     if not (out / "trajectories.txt").is_file():
         make_textureless_scene(out, n_frames)
-    return read_trajectory(out / "trajectories.txt"), out / "mesh.ply"
+    return read_trajectory(out / "trajectories.txt"), out / "boxes.ply"
