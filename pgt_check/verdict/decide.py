@@ -116,8 +116,9 @@ def judge(m: FrameMeasurement, config: VerdictConfig, shared: Any = None) -> Jud
     Otherwise the deciding feature path (more inliers) gives the verdict; where no feature path
     is verifiable, the geometric-edge path does. A PASS needs absolute evidence (an absolute
     path decided, or the raw or edge path also passes), or relative evidence plus a passed
-    registration check; a relative-only PASS is UNVERIFIABLE (``relative_evidence_only``). A
-    failed registration check or a flagged drift segment turns the frames' PASS into FAIL.
+    registration check whose drift score at this frame stays within the shared threshold; a
+    relative-only PASS is UNVERIFIABLE (``relative_evidence_only``). A failed registration check
+    or a flagged drift segment turns the frames' PASS into FAIL.
     """
     base, why = decide(m, config)
     if m.error is not MeasureReason.NONE or why == MeasureReason.LOW_COVERAGE.value:
@@ -172,9 +173,14 @@ def judge(m: FrameMeasurement, config: VerdictConfig, shared: Any = None) -> Jud
         return j(Verdict.PASS, "", evidence)
     if absolute_pass:  # an absolute path confirms the relative PASS
         return j(Verdict.PASS, "", Evidence.ABSOLUTE.value)
-    if reg == PASSED and m.frame_id not in shared.left_out:
+    drift = np.nan if shared is None else shared.drift_px.get(m.frame_id, np.nan)
+    if reg == PASSED and m.frame_id not in shared.left_out and not drift > shared.threshold_px:
         return j(Verdict.PASS, "", "relative+registration")
-    if reg == PASSED:  # its own absolute evidence disagrees with the registered trajectory
+    if reg == PASSED and drift > shared.threshold_px:
+        # the run-level checks do not vouch for this part of the trajectory: its drift score
+        # is above the threshold, only not significantly
+        reg = f"passed, but the trajectory here drifts by {drift:.1f} px, not confirmed"
+    elif reg == PASSED:  # its own absolute evidence disagrees with the registered trajectory
         reg = "passed, but this frame's absolute evidence disagrees with it"
     return j(Verdict.UNVERIFIABLE, f"relative_evidence_only (registration {reg})", evidence)
 

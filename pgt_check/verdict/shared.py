@@ -259,7 +259,46 @@ def calibration_homography(
     return kz @ np.asarray(rotation, np.float64) @ np.linalg.inv(k)
 
 
+def _drift_coverage(
+    est: Any, ids: list[str], threshold: float
+) -> tuple[dict, dict, list[tuple[int, int]], set]:
+    """Per trajectory frame (``ids``, trajectory order = ``FrameEvidence.index``): drift score
+    and lower bound, and the flagged segments as (first, last) positions.
+
+    Drift is a property of the trajectory segment, not of one frame's evidence: a frame without
+    evidence of its own between the first and last frame with evidence gets the score
+    interpolated along the trajectory; it is flagged when it lies in a flagged segment, and a
+    segment grows over adjacent such frames whose interpolated lower bound exceeds the
+    threshold. Returns (score, low, segments, ids with interpolated values)."""
+    index = np.asarray(est.frame_index, np.float64)
+    own = {fid: k for k, fid in enumerate(est.frame_ids)}
+    score, low, interpolated = {}, {}, set()
+    for i, fid in enumerate(ids):
+        if fid in own:
+            score[fid] = float(est.frame_score_px[own[fid]])
+            low[fid] = float(est.frame_score_low_px[own[fid]])
+        elif len(index) and index[0] <= i <= index[-1]:
+            score[fid] = float(np.interp(i, index, est.frame_score_px))
+            low[fid] = float(np.interp(i, index, est.frame_score_low_px))
+            interpolated.add(fid)
+
+    def grows(i: int) -> bool:
+        return 0 <= i < len(ids) and ids[i] in interpolated and low[ids[i]] > threshold
+
+    segments = []
+    for a, b in est.segments:
+        a, b = int(a), min(int(b), len(ids) - 1)
+        while grows(a - 1):
+            a -= 1
+        while grows(b + 1):
+            b += 1
+        segments.append((a, b))
+    return score, low, segments, interpolated
+
+
 def _drift_entry(est: Any, ids: list[str], threshold: float) -> tuple[dict, dict, frozenset]:
+    """The drift section of the summary, the per-frame scores and the flagged frame ids;
+    ``ids``: every frame of the run in trajectory order (with or without evidence)."""
     if not est.success:
         return (
             {
@@ -270,12 +309,10 @@ def _drift_entry(est: Any, ids: list[str], threshold: float) -> tuple[dict, dict
             {},
             frozenset(),
         )
-    score = {fid: float(s) for fid, s in zip(est.frame_ids, est.frame_score_px, strict=True)}
-    low = {fid: float(s) for fid, s in zip(est.frame_ids, est.frame_score_low_px, strict=True)}
-    flagged = frozenset(fid for fid, f in zip(est.frame_ids, est.frame_flagged, strict=True) if f)
-    segments = [
-        [ids[a] if a < len(ids) else a, ids[b] if b < len(ids) else b] for a, b in est.segments
-    ]
+    score, low, runs, interpolated = _drift_coverage(est, ids, threshold)
+    flagged = {fid for fid, f in zip(est.frame_ids, est.frame_flagged, strict=True) if f}
+    flagged = frozenset(flagged.union(*({ids[i] for i in range(a, b + 1)} for a, b in runs)))
+    segments = [[ids[a], ids[b]] for a, b in runs]
     status = FAILED if flagged else PASSED
     entry = {
         "status": status,
@@ -285,12 +322,14 @@ def _drift_entry(est: Any, ids: list[str], threshold: float) -> tuple[dict, dict
         "per_frame": [
             {
                 "frame_id": fid,
-                "index": int(i),
+                "index": i,
                 "effect_px": _f(score[fid]),
                 "lo_px": _f(low[fid]),
                 "flagged": fid in flagged,
+                "own_evidence": fid not in interpolated,
             }
-            for fid, i in zip(est.frame_ids, est.frame_index, strict=True)
+            for i, fid in enumerate(ids)
+            if fid in score
         ],
         "message": (
             f"drift FAILED: {len(segments)} segment(s) move away from the mesh by more than "
@@ -449,8 +488,9 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
     sim = _registration_entry(
         estimate_registration(ev, similarity=True, calibration=mode), thr, "similarity"
     )
-    # drift looks at every frame: a drifting segment is what the consistent frames leave out
-    ids = [e.frame_id for e in all_ev]
+    # drift looks at every frame: a drifting segment is what the consistent frames leave out;
+    # frames without evidence of their own are covered by the segment they lie in
+    ids = [m.frame_id for m in measurements]
     drift, drift_px, flagged = _drift_entry(
         estimate_drift(all_ev, threshold_px=thr, calibration=mode), ids, thr
     )

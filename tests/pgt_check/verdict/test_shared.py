@@ -152,6 +152,41 @@ def test_drifting_segment_is_separated(truth):
                    if not lab and r["frame_id"] < "f010")
 
 
+def test_drift_covers_frames_without_evidence_of_their_own(truth):
+    """Drifting frames whose own absolute evidence is missing (their raw render found too few
+    inliers; a reprojected neighbour, which shares the drift, passes them) lie in the flagged
+    segment: they are scored along the trajectory and FAIL, not PASS on relative evidence."""
+    from pgt_check.evaluation import drift_trajectory
+
+    drifted, ids = drift_trajectory(truth, 0.6, 2.0, 0.12, seed=5)
+    absolute = measurements(truth, drifted)
+    relative = measurements(truth, drifted, relative=True)
+    blind = {absolute[k].frame_id for k in (22, 23, 25)}
+    assert blind <= set(ids)
+    ms = [
+        r.__class__(**{**r.__dict__, "evidence": None}) if a.frame_id in blind else a
+        for a, r in zip(absolute, relative, strict=True)
+    ]
+    j = judge_run(ms, RunConfig())
+    rows = {r["frame_id"]: r for r in j.rows}
+    drift = j.shared.summary()["drift"]
+    assert drift["status"] == "failed"
+    for fid in blind:
+        assert rows[fid]["verdict"] != "PASS", rows[fid]
+        assert rows[fid]["drift_px"] > j.shared.threshold_px
+    # inside the segment (or next to it, its interpolated bound above the threshold): FAIL;
+    # where the drift there is only not significant, the frame is not verified
+    assert rows["f025"]["verdict"] == "FAIL" and rows["f025"]["reason"].startswith("drift")
+    assert rows["f023"]["verdict"] == "FAIL"
+    assert rows["f022"]["reason"].startswith("relative_evidence_only")
+    assert "drifts by" in rows["f022"]["reason"]
+    covered = {e["frame_id"]: e["own_evidence"] for e in drift["per_frame"]}
+    assert all(covered[fid] is False for fid in blind)
+    assert sum(covered.values()) == len(ms) - len(blind)
+    # segments name the frames (first, last) of the trajectory
+    assert all(a in rows and b in rows for a, b in drift["segments"])
+
+
 def test_calibration_is_a_finding_and_can_be_removed(truth):
     """Photos taken with a principal point 5 px off (every frame shifted the same way)."""
     from pgt_check.evaluation import change_intrinsics
