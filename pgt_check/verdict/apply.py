@@ -8,7 +8,7 @@ from typing import Any
 
 from pgt_check.config import RunConfig
 from pgt_check.measure.record import FrameMeasurement
-from pgt_check.verdict.decide import judge
+from pgt_check.verdict.decide import judge, own_outcomes
 from pgt_check.verdict.shared import SharedChecks, run_shared_checks
 
 #: the verdict columns every row gets beside the measurement columns, with their meaning
@@ -41,9 +41,10 @@ def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> Ru
     Measurements are not changed (records.jsonl stays as measured)."""
     ms = list(measurements)
     shared = run_shared_checks(ms, config) if config.verdict.shared_checks and ms else None
+    own = own_outcomes(ms, config.verdict, shared)
     rows = []
     for m in ms:
-        j = judge(m, config.verdict, shared)
+        j = judge(m, config.verdict, shared, own)
         row = m.row()
         row.update(
             verdict=j.verdict.value,

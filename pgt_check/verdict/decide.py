@@ -72,6 +72,14 @@ def decide(m: FrameMeasurement, config: VerdictConfig) -> tuple[Verdict, str]:
     return path_outcome(m, m.chosen, config)
 
 
+def _reference_off(m: FrameMeasurement, own: Mapping[str, Verdict] | None) -> str:
+    """The id of the enhanced path's reference when its own render FAILs (else "")."""
+    p = m.enhanced
+    if own is None or p is None or p.evidence is not Evidence.RELATIVE or not p.reference_id:
+        return ""
+    return p.reference_id if own.get(p.reference_id) is Verdict.FAIL else ""
+
+
 @dataclass(frozen=True)
 class Judgement:
     """The verdict of one frame with what it rests on.
@@ -109,7 +117,65 @@ def _calibrated(m: FrameMeasurement, path: PathMeasurement | None, shared: Any) 
     return np.linalg.solve(h_cal, np.asarray(path.photo_from_render, np.float64))
 
 
-def judge(m: FrameMeasurement, config: VerdictConfig, shared: Any = None) -> Judgement:
+#: an absolute PASS that overrules a relative FAIL whose reference is off: corner error within
+#: this fraction of the threshold (the band where ``enhance.auto_margin`` calls a raw result
+#: decisive, default 0.5)
+CLEAR_PASS = 0.5
+
+
+def path_outcomes(
+    m: FrameMeasurement, config: VerdictConfig, shared: Any = None
+) -> dict[str, tuple[Verdict, str] | None]:
+    """What each path (raw, enhanced, edges) alone says, after removing the camera's estimated
+    calibration error from absolute paths when the config asks for it."""
+    removing = config.remove_calibration or config.calibration_from
+    out = {}
+    for name in ("raw", "enhanced", "edges"):
+        p = getattr(m, name)
+        h = _calibrated(m, p, shared) if removing else None
+        out[name] = None if p is None else path_outcome(m, p, config, h)
+    return out
+
+
+def own_outcome(outcomes: Mapping[str, tuple[Verdict, str] | None]) -> tuple[Verdict, str, str]:
+    """What the frame's own render says (absolute evidence only): the raw path when it is
+    verifiable, else the geometric-edge path; UNVERIFIABLE when neither is. Returns (verdict,
+    reason, path name)."""
+    for name in ("raw", "edges"):
+        o = outcomes.get(name)
+        if o is not None and o[0] is not Verdict.UNVERIFIABLE:
+            return o[0], o[1], name
+    return Verdict.UNVERIFIABLE, "no_absolute_path", ""
+
+
+def _clear_pass(m: FrameMeasurement, name: str, config: VerdictConfig, shared: Any) -> bool:
+    """The named absolute path passes with its corner error (calibration removed where asked)
+    within ``CLEAR_PASS`` x the threshold."""
+    p = getattr(m, name, None) if name else None
+    if p is None or p.corner_error_px is None:
+        return False
+    err = p.corner_error_px
+    h = _calibrated(m, p, shared) if config.remove_calibration or config.calibration_from else None
+    if h is not None:
+        from pgt_check.geometry.homography import corner_error
+
+        err = corner_error(h, m.width, m.height)
+    return bool(err <= CLEAR_PASS * config.threshold_for(m.width, m.height))
+
+
+def own_outcomes(
+    measurements: Iterable[FrameMeasurement], config: VerdictConfig, shared: Any = None
+) -> dict[str, Verdict]:
+    """frame id -> what its own render says (``own_outcome``), for the reference check."""
+    return {m.frame_id: own_outcome(path_outcomes(m, config, shared))[0] for m in measurements}
+
+
+def judge(
+    m: FrameMeasurement,
+    config: VerdictConfig,
+    shared: Any = None,
+    own: Mapping[str, Verdict] | None = None,
+) -> Judgement:
     """The frame's verdict from its paths and the run-level checks (``verdict.shared``).
 
     Rules: a confident FAIL of a feature path (>= ``confident_inliers`` inliers) is a FAIL.
@@ -119,16 +185,16 @@ def judge(m: FrameMeasurement, config: VerdictConfig, shared: Any = None) -> Jud
     registration check whose drift score at this frame stays within the shared threshold; a
     relative-only PASS is UNVERIFIABLE (``relative_evidence_only``). A failed registration check
     or a flagged drift segment turns the frames' PASS into FAIL.
+
+    ``own`` (frame id -> what its own render says, ``own_outcomes``): when the reprojected
+    reference that decided FAILs on its own render, the reprojection carries the reference's
+    error, so neither its PASS nor its FAIL counts: this frame's own render decides, or the
+    frame is UNVERIFIABLE (``reference_off``).
     """
     base, why = decide(m, config)
     if m.error is not MeasureReason.NONE or why == MeasureReason.LOW_COVERAGE.value:
         return Judgement(base, why, "none", "", "")
-    out = {}
-    for name in ("raw", "enhanced", "edges"):
-        p = getattr(m, name)
-        removing = config.remove_calibration or config.calibration_from
-        h = _calibrated(m, p, shared) if removing else None
-        out[name] = None if p is None else path_outcome(m, p, config, h)
+    out = path_outcomes(m, config, shared)
     raw_v = "" if out["raw"] is None else out["raw"][0].value
     enh_v = "" if out["enhanced"] is None else out["enhanced"][0].value
     edge_v = None if out["edges"] is None else out["edges"][0]
@@ -136,13 +202,31 @@ def judge(m: FrameMeasurement, config: VerdictConfig, shared: Any = None) -> Jud
     def j(verdict: Verdict, reason: str, evidence: str) -> Judgement:
         return Judgement(verdict, reason, evidence, raw_v, enh_v)
 
+    ref_off = _reference_off(m, own)
     for name in ("raw", "enhanced"):
         p = getattr(m, name)
         if out[name] and out[name][0] is Verdict.FAIL and p.n_inliers >= config.confident_inliers:
+            if ref_off and p.evidence is Evidence.RELATIVE:
+                continue  # the reference's own error explains it
             return j(Verdict.FAIL, out[name][1], p.evidence.value)
     chosen = m.chosen
     evidence = "none" if chosen is None else chosen.evidence.value
     base, why = out.get(m.verdict_path) or (base, why)
+    if ref_off and evidence == Evidence.RELATIVE.value:
+        # a reference that its own render shows off cannot vouch for or against this frame:
+        # what this frame's own render says decides; a PASS of it only when clear (a large
+        # relative error may still be this frame's own)
+        base, why, own_path = own_outcome(out)
+        off = f"reference {ref_off} fails on its own render"
+        if base is Verdict.UNVERIFIABLE:
+            return j(base, f"reference_off ({off})", evidence)
+        if base is Verdict.PASS and not _clear_pass(m, own_path, config, shared):
+            return j(
+                Verdict.UNVERIFIABLE,
+                f"paths_disagree ({off}; the {own_path} path passes, not clearly)",
+                evidence,
+            )
+        evidence = Evidence.ABSOLUTE.value
     if base is Verdict.UNVERIFIABLE and edge_v in (Verdict.PASS, Verdict.FAIL):
         base, why = out["edges"]
         evidence = Evidence.ABSOLUTE.value

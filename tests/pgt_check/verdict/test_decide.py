@@ -110,3 +110,55 @@ def test_systematic_offset_uses_the_raw_path_when_measured():
     s = run_statistics(recs, 20.0)["systematic_offset"]
     assert s["path"] == "raw" and s["systematic"]
     assert s["median_dx_px"] == pytest.approx(-9.0)
+
+
+def _path(kind, err, inliers=120, reference_id=None, evidence=Evidence.ABSOLUTE):
+    ok = err is not None
+    return PathMeasurement(
+        kind=kind, method="render" if kind != "enhanced" else "reproject", evidence=evidence,
+        n_kpts_render=500, n_kpts_photo=500, n_matches=200, n_inliers=inliers if ok else 5,
+        inlier_ratio=0.5 if ok else 0.02, reason="" if ok else "too_few_inliers",
+        photo_from_render=tuple(map(tuple, np.eye(3))) if ok else None,
+        corner_error_px=err, reference_id=reference_id,
+    )
+
+
+def _frame(fid, raw_err, enh_err=None, ref=None):
+    """Raw path with ``raw_err`` (None: too few inliers); an enhanced relative path through
+    reference ``ref`` with ``enh_err`` (None: not run); the enhanced path decides if it ran."""
+    enh = None if enh_err is None else _path("enhanced", enh_err, 150, ref, Evidence.RELATIVE)
+    return FrameMeasurement(
+        frame_id=fid, timestamp=0, image_path=f"{fid}.png", width=640, height=480,
+        center=(0.0, 0.0, 0.0), coverage=0.8, raw=_path("raw", raw_err, 60), enhanced=enh,
+        verdict_path="enhanced" if enh is not None else "raw",
+    )
+
+
+@pytest.mark.parametrize(
+    ("raw_err", "verdict", "reason"),
+    [
+        (3.0, "PASS", ""),  # this frame's own render passes clearly
+        (None, "UNVERIFIABLE", "reference_off"),  # nothing absolute to judge it by
+        (12.0, "UNVERIFIABLE", "paths_disagree"),  # passes, but not clearly
+        (40.0, "FAIL", "corner_error"),  # its own render fails too
+    ],
+)
+def test_a_reference_that_fails_on_its_own_render_does_not_decide(raw_err, verdict, reason):
+    """Frame g reprojects reference b; b's own render is 50 px off, so the reprojection
+    paints b's error into g's view: a confident relative FAIL of g is not g's own."""
+    from pgt_check.config import VerdictConfig
+    from pgt_check.verdict.decide import judge, own_outcomes
+
+    cfg = VerdictConfig()
+    bad_ref = _frame("b", 50.0)
+    g = _frame("g", raw_err, enh_err=45.0, ref="b")
+    own = own_outcomes([bad_ref, g], cfg)
+    assert own["b"] is Verdict.FAIL
+    j = judge(g, cfg, None, own)
+    assert j.verdict.value == verdict
+    assert j.reason.startswith(reason)
+    # without knowing the reference's own result the confident relative FAIL stands
+    assert judge(g, cfg, None, None).verdict is Verdict.FAIL
+    # a good reference: the relative FAIL is this frame's
+    good_ref = _frame("b", 2.0)
+    assert judge(g, cfg, None, own_outcomes([good_ref, g], cfg)).verdict is Verdict.FAIL
