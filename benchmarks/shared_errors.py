@@ -162,9 +162,18 @@ def evaluate(name: str, truth: dict, ms, cfg: RunConfig) -> dict:
             [np.inf if r["corner_error_px"] is None else r["corner_error_px"] for r in rows]
         )
         out["frame_auc"] = roc_auc(err, labels)
+        # the error of the path the verdict rests on (``decided_by``: the frame's own render
+        # where a reference was off)
+        judged = np.array([_decided_error(r) for r in rows])
+        out["verdict_auc"] = roc_auc(judged, labels)
         out["flagged_bad"] = f"{int((flagged & labels).sum())}/{int(labels.sum())}"
         out["flagged_good"] = f"{int((flagged & ~labels).sum())}/{int((~labels).sum())}"
     return out
+
+
+def _decided_error(row: dict) -> float:
+    e = row.get(f"corner_error_px_{row.get('decided_by')}") if row.get("decided_by") else None
+    return np.inf if e is None else float(e)
 
 
 def run_dataset(name: str, traj: Trajectory, mesh: Path, cfgd: dict, edges_off: bool) -> dict:
@@ -235,6 +244,7 @@ def write_reports(results: list[dict], args: argparse.Namespace) -> None:
             [
                 r["case"],
                 r["flagged"],
+                f"{r['verdicts'].get('FAIL', 0)} / {r['verdicts'].get('UNVERIFIABLE', 0)}",
                 r.get("flagged_bad", ""),
                 r.get("flagged_good", ""),
                 r.get("registration", ""),
@@ -245,6 +255,7 @@ def write_reports(results: list[dict], args: argparse.Namespace) -> None:
                 r.get("drift", ""),
                 _f(r.get("drift_auc")),
                 _f(r.get("frame_auc")),
+                _f(r.get("verdict_auc")),
                 r.get("calibration", ""),
                 ", ".join(f"{k} {v}" for k, v in r["evidence"].items()),
                 _f(r.get("s_per_frame")),
@@ -257,6 +268,7 @@ def write_reports(results: list[dict], args: argparse.Namespace) -> None:
                 [
                     "case",
                     "flagged",
+                    "FAIL / UNV.",
                     "bad flagged",
                     "good flagged",
                     "registration",
@@ -267,6 +279,7 @@ def write_reports(results: list[dict], args: argparse.Namespace) -> None:
                     "drift",
                     "drift AUC",
                     "frame AUC",
+                    "verdict AUC",
                     "calibration",
                     "evidence",
                     "s/frame",

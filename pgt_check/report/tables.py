@@ -35,11 +35,12 @@ BASE_COLUMNS: tuple[Col, ...] = (
 OPTIONAL_COLUMNS: tuple[Col, ...] = (
     ("evidence", "evidence", "str", None, False),
     ("drift_px", "drift [px]", "num", 2, False),
+    ("decided_by", "decided by", "str", None, False),
 )
 #: shown only when the enhanced path ran on some frame; ``disagree`` is computed when absent
 ENHANCED_COLUMNS: tuple[Col, ...] = (
     ("disagree", "raw\u2260enh.", "flag", None, False),
-    ("verdict_path", "decided by", "str", None, False),
+    ("verdict_path", "most inliers", "str", None, True),
     ("corner_error_px_raw", "err raw [px]", "num", 2, False),
     ("corner_error_px_enhanced", "err enh. [px]", "num", 2, False),
     ("raw_verdict", "verdict raw", "verdict", None, True),

@@ -21,6 +21,7 @@ VERDICT_COLUMNS: dict[str, str] = {
     "enhanced_verdict": "what the enhanced render alone says ('' if it did not run)",
     "disagree": "raw and enhanced paths give PASS and FAIL",
     "drift_px": "run-level drift score of this frame, px (see summary shared_errors.drift)",
+    "decided_by": "the path the verdict rests on: raw, enhanced, edges ('' when none)",
 }
 
 
@@ -55,6 +56,7 @@ def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> Ru
             enhanced_verdict=j.enhanced_verdict,
             disagree=j.disagree,
             drift_px=None if shared is None else shared.drift_px.get(m.frame_id),
+            decided_by=j.decided_by,
         )
         rows.append(row)
     return RunJudgement(rows, shared)

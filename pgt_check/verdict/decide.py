@@ -72,12 +72,12 @@ def decide(m: FrameMeasurement, config: VerdictConfig) -> tuple[Verdict, str]:
     return path_outcome(m, m.chosen, config)
 
 
-def _reference_off(m: FrameMeasurement, own: Mapping[str, Verdict] | None) -> str:
-    """The id of the enhanced path's reference when its own render FAILs (else "")."""
+def _reference_off(m: FrameMeasurement, own: Mapping[str, bool] | None) -> str:
+    """The id of the enhanced path's reference when its own render is clearly off (else "")."""
     p = m.enhanced
     if own is None or p is None or p.evidence is not Evidence.RELATIVE or not p.reference_id:
         return ""
-    return p.reference_id if own.get(p.reference_id) is Verdict.FAIL else ""
+    return p.reference_id if own.get(p.reference_id) else ""
 
 
 @dataclass(frozen=True)
@@ -95,6 +95,8 @@ class Judgement:
     evidence: str
     raw_verdict: str
     enhanced_verdict: str
+    #: the path the verdict rests on (raw, enhanced, edges; "" when none ran)
+    decided_by: str = ""
 
     @property
     def disagree(self) -> bool | None:
@@ -117,10 +119,11 @@ def _calibrated(m: FrameMeasurement, path: PathMeasurement | None, shared: Any) 
     return np.linalg.solve(h_cal, np.asarray(path.photo_from_render, np.float64))
 
 
-#: an absolute PASS that overrules a relative FAIL whose reference is off: corner error within
-#: this fraction of the threshold (the band where ``enhance.auto_margin`` calls a raw result
-#: decisive, default 0.5)
-CLEAR_PASS = 0.5
+#: the band around the threshold (fraction of it) where an absolute result is not clear, as
+#: ``enhance.auto_margin`` (default 0.5): a reference is off when its own render's error is
+#: beyond 1.5 x the threshold; a PASS of the frame's own render overrules a relative FAIL
+#: through such a reference only within 0.5 x the threshold
+CLEAR_MARGIN = 0.5
 
 
 def path_outcomes(
@@ -137,44 +140,59 @@ def path_outcomes(
     return out
 
 
-def own_outcome(outcomes: Mapping[str, tuple[Verdict, str] | None]) -> tuple[Verdict, str, str]:
+def own_outcome(
+    m: FrameMeasurement, outcomes: Mapping[str, tuple[Verdict, str] | None], config: VerdictConfig
+) -> tuple[Verdict, str, str]:
     """What the frame's own render says (absolute evidence only): the raw path when it is
-    verifiable, else the geometric-edge path; UNVERIFIABLE when neither is. Returns (verdict,
-    reason, path name)."""
-    for name in ("raw", "edges"):
-        o = outcomes.get(name)
-        if o is not None and o[0] is not Verdict.UNVERIFIABLE:
+    verifiable with ``confident_inliers``, else the geometric-edge path when verifiable, else a
+    raw path with fewer inliers; UNVERIFIABLE when none is. Returns (verdict, reason, path)."""
+    raw, edges = outcomes.get("raw"), outcomes.get("edges")
+
+    def ok(o: tuple[Verdict, str] | None) -> bool:
+        return o is not None and o[0] is not Verdict.UNVERIFIABLE
+
+    if ok(raw) and m.raw is not None and m.raw.n_inliers >= config.confident_inliers:
+        return raw[0], raw[1], "raw"
+    for name, o in (("edges", edges), ("raw", raw)):
+        if ok(o):
             return o[0], o[1], name
     return Verdict.UNVERIFIABLE, "no_absolute_path", ""
 
 
-def _clear_pass(m: FrameMeasurement, name: str, config: VerdictConfig, shared: Any) -> bool:
-    """The named absolute path passes with its corner error (calibration removed where asked)
-    within ``CLEAR_PASS`` x the threshold."""
+def _error_ratio(m: FrameMeasurement, name: str, config: VerdictConfig, shared: Any) -> float:
+    """The named path's corner error (calibration removed where asked) over the threshold;
+    NaN when the path has none."""
     p = getattr(m, name, None) if name else None
     if p is None or p.corner_error_px is None:
-        return False
+        return float("nan")
     err = p.corner_error_px
     h = _calibrated(m, p, shared) if config.remove_calibration or config.calibration_from else None
     if h is not None:
         from pgt_check.geometry.homography import corner_error
 
         err = corner_error(h, m.width, m.height)
-    return bool(err <= CLEAR_PASS * config.threshold_for(m.width, m.height))
+    return float(err) / config.threshold_for(m.width, m.height)
 
 
 def own_outcomes(
     measurements: Iterable[FrameMeasurement], config: VerdictConfig, shared: Any = None
-) -> dict[str, Verdict]:
-    """frame id -> what its own render says (``own_outcome``), for the reference check."""
-    return {m.frame_id: own_outcome(path_outcomes(m, config, shared))[0] for m in measurements}
+) -> dict[str, bool]:
+    """frame id -> whether its own render is clearly off (``own_outcome`` FAILs with the
+    corner error beyond ``1 + CLEAR_MARGIN`` x the threshold), for the reference check: a
+    reference that is only near the threshold still serves."""
+    out = {}
+    for m in measurements:
+        verdict, _, name = own_outcome(m, path_outcomes(m, config, shared), config)
+        ratio = _error_ratio(m, name, config, shared)
+        out[m.frame_id] = verdict is Verdict.FAIL and ratio > 1.0 + CLEAR_MARGIN
+    return out
 
 
 def judge(
     m: FrameMeasurement,
     config: VerdictConfig,
     shared: Any = None,
-    own: Mapping[str, Verdict] | None = None,
+    own: Mapping[str, bool] | None = None,
 ) -> Judgement:
     """The frame's verdict from its paths and the run-level checks (``verdict.shared``).
 
@@ -186,8 +204,8 @@ def judge(
     relative-only PASS is UNVERIFIABLE (``relative_evidence_only``). A failed registration check
     or a flagged drift segment turns the frames' PASS into FAIL.
 
-    ``own`` (frame id -> what its own render says, ``own_outcomes``): when the reprojected
-    reference that decided FAILs on its own render, the reprojection carries the reference's
+    ``own`` (frame id -> its own render is clearly off, ``own_outcomes``): when the
+    reprojected reference that decided is clearly off on its own render, the reprojection carries the reference's
     error, so neither its PASS nor its FAIL counts: this frame's own render decides, or the
     frame is UNVERIFIABLE (``reference_off``).
     """
@@ -198,9 +216,10 @@ def judge(
     raw_v = "" if out["raw"] is None else out["raw"][0].value
     enh_v = "" if out["enhanced"] is None else out["enhanced"][0].value
     edge_v = None if out["edges"] is None else out["edges"][0]
+    path = m.verdict_path or ""
 
     def j(verdict: Verdict, reason: str, evidence: str) -> Judgement:
-        return Judgement(verdict, reason, evidence, raw_v, enh_v)
+        return Judgement(verdict, reason, evidence, raw_v, enh_v, path)
 
     ref_off = _reference_off(m, own)
     for name in ("raw", "enhanced"):
@@ -208,6 +227,7 @@ def judge(
         if out[name] and out[name][0] is Verdict.FAIL and p.n_inliers >= config.confident_inliers:
             if ref_off and p.evidence is Evidence.RELATIVE:
                 continue  # the reference's own error explains it
+            path = name
             return j(Verdict.FAIL, out[name][1], p.evidence.value)
     chosen = m.chosen
     evidence = "none" if chosen is None else chosen.evidence.value
@@ -216,11 +236,13 @@ def judge(
         # a reference that its own render shows off cannot vouch for or against this frame:
         # what this frame's own render says decides; a PASS of it only when clear (a large
         # relative error may still be this frame's own)
-        base, why, own_path = own_outcome(out)
+        base, why, own_path = own_outcome(m, out, config)
         off = f"reference {ref_off} fails on its own render"
         if base is Verdict.UNVERIFIABLE:
             return j(base, f"reference_off ({off})", evidence)
-        if base is Verdict.PASS and not _clear_pass(m, own_path, config, shared):
+        path = own_path
+        clear = _error_ratio(m, own_path, config, shared) <= 1.0 - CLEAR_MARGIN
+        if base is Verdict.PASS and not clear:
             return j(
                 Verdict.UNVERIFIABLE,
                 f"paths_disagree ({off}; the {own_path} path passes, not clearly)",
@@ -229,44 +251,57 @@ def judge(
         evidence = Evidence.ABSOLUTE.value
     if base is Verdict.UNVERIFIABLE and edge_v in (Verdict.PASS, Verdict.FAIL):
         base, why = out["edges"]
-        evidence = Evidence.ABSOLUTE.value
+        evidence, path = Evidence.ABSOLUTE.value, "edges"
     absolute_pass = Verdict.PASS.value in (raw_v, edge_v and edge_v.value)
-    if base is Verdict.FAIL and evidence != Evidence.ABSOLUTE.value and absolute_pass:
-        # a FAIL of reprojected references (not confident) against a PASS of this frame's own
-        # render: the references' poses may be the wrong ones
+    other_pass = any(
+        out[n] is not None and out[n][0] is Verdict.PASS for n in ("raw", "edges") if n != path
+    )
+    if base is Verdict.FAIL and other_pass:
+        # a FAIL that is not confident (reprojected references, whose poses may be the wrong
+        # ones, or a render with few inliers) against a PASS of another absolute path
         return j(
             Verdict.UNVERIFIABLE,
-            f"paths_disagree ({why} on the {m.verdict_path} path; an absolute path passes)",
+            f"paths_disagree ({why} on the {path} path; an absolute path passes)",
             evidence,
         )
     if base is not Verdict.PASS:
         return j(base, why, evidence)
-    if shared is not None and m.frame_id in shared.drift_flagged:
-        px = shared.drift_px.get(m.frame_id, float("nan"))
-        return j(Verdict.FAIL, f"drift: this segment moves {px:.1f} px off the mesh", evidence)
+    return j(*_run_level(m.frame_id, shared, evidence, absolute_pass))
+
+
+def _run_level(
+    frame_id: str, shared: Any, evidence: str, absolute_pass: bool
+) -> tuple[Verdict, str, str]:
+    """(verdict, reason, evidence) of a frame whose paths PASS, after the run-level checks:
+    a flagged drift segment or a failed registration makes it FAIL; relative evidence needs a
+    passed registration check, the frame's own evidence consistent with it and the drift here
+    within the threshold."""
+    if shared is not None and frame_id in shared.drift_flagged:
+        px = shared.drift_px.get(frame_id, float("nan"))
+        return Verdict.FAIL, f"drift: this segment moves {px:.1f} px off the mesh", evidence
     reg = NOT_CHECKED if shared is None else shared.registration_status
     if reg == FAILED:
         e = shared.registration if shared.registration["status"] == FAILED else shared.similarity
-        return j(
+        return (
             Verdict.FAIL,
             f"registration: trajectory off the mesh by {e['effect_px']:.1f} "
             f"px ({e['angle_deg']:.2f} deg)",
             evidence,
         )
     if evidence == Evidence.ABSOLUTE.value:
-        return j(Verdict.PASS, "", evidence)
+        return Verdict.PASS, "", evidence
     if absolute_pass:  # an absolute path confirms the relative PASS
-        return j(Verdict.PASS, "", Evidence.ABSOLUTE.value)
-    drift = np.nan if shared is None else shared.drift_px.get(m.frame_id, np.nan)
-    if reg == PASSED and m.frame_id not in shared.left_out and not drift > shared.threshold_px:
-        return j(Verdict.PASS, "", "relative+registration")
+        return Verdict.PASS, "", Evidence.ABSOLUTE.value
+    drift = np.nan if shared is None else shared.drift_px.get(frame_id, np.nan)
+    if reg == PASSED and frame_id not in shared.left_out and not drift > shared.threshold_px:
+        return Verdict.PASS, "", "relative+registration"
     if reg == PASSED and drift > shared.threshold_px:
         # the run-level checks do not vouch for this part of the trajectory: its drift score
         # is above the threshold, only not significantly
         reg = f"passed, but the trajectory here drifts by {drift:.1f} px, not confirmed"
     elif reg == PASSED:  # its own absolute evidence disagrees with the registered trajectory
         reg = "passed, but this frame's absolute evidence disagrees with it"
-    return j(Verdict.UNVERIFIABLE, f"relative_evidence_only (registration {reg})", evidence)
+    return Verdict.UNVERIFIABLE, f"relative_evidence_only (registration {reg})", evidence
 
 
 #: UNVERIFIABLE reasons that mean the tool itself failed on a frame (they count against the gate)

@@ -153,12 +153,17 @@ def test_a_reference_that_fails_on_its_own_render_does_not_decide(raw_err, verdi
     bad_ref = _frame("b", 50.0)
     g = _frame("g", raw_err, enh_err=45.0, ref="b")
     own = own_outcomes([bad_ref, g], cfg)
-    assert own["b"] is Verdict.FAIL
+    assert own["b"] is True
     j = judge(g, cfg, None, own)
     assert j.verdict.value == verdict
     assert j.reason.startswith(reason)
+    assert j.decided_by == ("enhanced" if reason == "reference_off" else "raw")
     # without knowing the reference's own result the confident relative FAIL stands
     assert judge(g, cfg, None, None).verdict is Verdict.FAIL
     # a good reference: the relative FAIL is this frame's
     good_ref = _frame("b", 2.0)
     assert judge(g, cfg, None, own_outcomes([good_ref, g], cfg)).verdict is Verdict.FAIL
+    # a reference just above the threshold (16 px here) is not clearly off: it still serves
+    near_ref = _frame("b", 20.0)
+    assert own_outcomes([near_ref], cfg)["b"] is False
+    assert judge(g, cfg, None, own_outcomes([near_ref, g], cfg)).verdict is Verdict.FAIL
