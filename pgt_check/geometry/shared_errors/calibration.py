@@ -26,7 +26,6 @@ from pgt_check.geometry.shared_errors.solver import (
     _bootstrap_deltas,
     _ci,
     _Fit,
-    _weighted_median,
 )
 
 
@@ -42,7 +41,7 @@ def _calibration_effect(p: _Problem, sel_g: np.ndarray, rc: np.ndarray, lz: np.n
     return _per_frame_mean(p, sel_g, np.linalg.norm(u1 - u0[None], axis=2))
 
 
-def _camera_estimate(p, fit, g, cid, deltas, counts, off, sel, base) -> CalibrationEstimate:
+def _camera_estimate(p, fit, g, cid, deltas, off, sel, base) -> CalibrationEstimate:
     """The estimate of camera group ``g`` from a successful fit (bootstrap steps optional)."""
     st = fit.state
     frames = np.flatnonzero(p.cam == g)
@@ -65,7 +64,9 @@ def _camera_estimate(p, fit, g, cid, deltas, counts, off, sel, base) -> Calibrat
     def ci(x: np.ndarray):
         return tuple(_ci(x).tolist()) if boot else _NAN_CI
 
-    eff_b = _weighted_median(eff_f[1:], counts[:, frames]) if boot else None
+    # the median over this camera's frames; the interval from the bootstrap states only (see
+    # registration: re-drawing the frames of the median measures their spread, not precision)
+    eff_b = np.nanmedian(eff_f[1:], axis=1) if boot else None
     return CalibrationEstimate(
         True,
         "",
@@ -136,9 +137,9 @@ def estimate_calibration(
     )  # fmt: skip
     fit, world = _choose_calibration_fit(p, registration, loss_scale_px, model_penalty, sel)
     inl = np.linalg.norm(fit.residuals, axis=1) < max_error_px
-    counts, deltas = None, None
+    deltas = None
     if n_bootstrap > 0 and fit.ok:
-        counts, deltas = _bootstrap_deltas(p, fit, n_bootstrap, seed)
+        deltas = _bootstrap_deltas(p, fit, n_bootstrap, seed)[1]
     _, off, _ = _layout(p, world, False, True)
     sel_pts = _effect_points(p, inl)
     out: dict[str, CalibrationEstimate] = {}
@@ -156,5 +157,5 @@ def estimate_calibration(
         elif (inl & pts).sum() < min_inliers or len(frames) < min_frames:
             out[cid] = CalibrationEstimate(False, "too_few_inliers", cid, **base)
         else:
-            out[cid] = _camera_estimate(p, fit, g, cid, deltas, counts, off, sel_pts, base)
+            out[cid] = _camera_estimate(p, fit, g, cid, deltas, off, sel_pts, base)
     return out

@@ -23,7 +23,6 @@ from pgt_check.geometry.shared_errors.solver import (
     _ci,
     _Fit,
     _solve,
-    _weighted_median,
 )
 
 logger = logging.getLogger(__name__)
@@ -114,9 +113,11 @@ def _registration_from_fit(
         p, fit, ref, sel, n_bootstrap, seed, similarity, ref_deltas
     )
     has_boot = counts is not None
-    eff = np.concatenate(
-        [[np.median(eff_f[0])], _weighted_median(eff_f[1:], counts) if has_boot else []]
-    )
+    # the effect is the median over THIS trajectory's frames; its interval comes from the
+    # uncertainty of the correction (bootstrap states), not from re-drawing the frames for
+    # the median: a similarity moves far frames more than near ones, and resampling which
+    # frames enter the median measured that spread instead of the correction's precision
+    eff = np.nanmedian(eff_f, axis=1) if has_boot else np.array([np.nanmedian(eff_f[0])])
 
     def ci(x: np.ndarray) -> _CI:
         return tuple(_ci(x[1:]).tolist()) if has_boot else _NAN_CI

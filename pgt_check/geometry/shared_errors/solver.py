@@ -130,15 +130,6 @@ def _ci(x: np.ndarray, axis: int = 0) -> np.ndarray:
     return np.percentile(x, [2.5, 97.5], axis=axis)
 
 
-def _weighted_median(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """Row-wise weighted median of (B, F) values with (B, F) non-negative weights."""
-    order = np.argsort(values, axis=1)
-    v = np.take_along_axis(values, order, axis=1)
-    cw = np.cumsum(np.take_along_axis(weights, order, axis=1), axis=1)
-    idx = np.argmax(cw >= 0.5 * cw[:, -1:], axis=1)
-    return v[np.arange(len(v)), idx]
-
-
 def _cost(r: np.ndarray, scale: float) -> float:
     """Sum over points of log(1 + |r|^2 / scale^2): the Cauchy cost of residuals (N, 2)."""
     return float(np.sum(np.log1p(np.sum(r * r, axis=1) / scale**2)))
