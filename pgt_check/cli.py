@@ -145,6 +145,10 @@ def _add_verdict_args(p: argparse.ArgumentParser) -> None:
                    help="judge frames after removing the estimated per-camera calibration "
                    "error (a shared principal-point / camera-to-rig / focal error; see the "
                    "summary's shared_errors.calibration)")
+    g.add_argument("--calibration-translation", action="store_true",
+                   help="the calibration error may include a camera-to-rig translation (photos "
+                   "from a camera beside the posed sensor, e.g. RGB beside depth); estimated "
+                   "where depths differ enough, reported and removed with --remove-calibration")
     g.add_argument("--calibration-from", default=None, metavar="SUMMARY_JSON",
                    help="remove the calibration estimated by a trusted run (its summary.json) "
                    "instead of one estimated on this run")
@@ -205,6 +209,7 @@ def _cli_overrides(args: argparse.Namespace) -> dict[str, Any]:
         ("verdict", "shared_threshold_px"): args.shared_threshold_px,
         ("verdict", "shared_checks"): False if args.no_shared_checks else None,
         ("verdict", "remove_calibration"): True if args.remove_calibration else None,
+        ("verdict", "calibration_translation"): True if args.calibration_translation else None,
         ("verdict", "calibration_from"): args.calibration_from,
         ("correct", "frames"): args.correct,
         ("correct", "rounds"): args.correct_rounds,

@@ -230,6 +230,11 @@ class VerdictConfig:
     shared_threshold_rel: float = 0.15
     #: judge frames after removing the estimated per-camera calibration error (absolute paths)
     remove_calibration: bool = False
+    #: the calibration error also has a camera-frame translation (the photos come from a
+    #: camera beside the sensor whose poses are given, e.g. RGB beside depth); fitted where the
+    #: points' depths differ enough. Off by default: for cameras circling the scene it can
+    #: mimic a world rotation, which would then be taken for calibration
+    calibration_translation: bool = False
     #: a trusted run's summary.json: its per-camera calibration estimate is removed instead of
     #: one estimated on this run (which views that cannot separate calibration from
     #: registration would let absorb a misregistration)

@@ -113,7 +113,7 @@ def _calibrated(m: FrameMeasurement, path: PathMeasurement | None, shared: Any) 
     """The path's homography with the camera's estimated calibration error removed."""
     if path is None or path.photo_from_render is None or shared is None:
         return None
-    h_cal = shared.calibration_homographies.get(m.camera_id)
+    h_cal = shared.calibration_homography(m.frame_id, m.camera_id)
     if h_cal is None or path.evidence is not Evidence.ABSOLUTE:
         return None
     return np.linalg.solve(h_cal, np.asarray(path.photo_from_render, np.float64))
@@ -178,13 +178,15 @@ def own_outcomes(
     measurements: Iterable[FrameMeasurement], config: VerdictConfig, shared: Any = None
 ) -> dict[str, bool]:
     """frame id -> whether its own render is clearly off (``own_outcome`` FAILs with the
-    corner error beyond ``1 + CLEAR_MARGIN`` x the threshold), for the reference check: a
-    reference that is only near the threshold still serves."""
+    corner error beyond ``1 + CLEAR_MARGIN`` x the threshold, on a raw path with
+    ``confident_inliers`` or the edge path), for the reference check: a reference that is only
+    near the threshold, or judged by a few raw inliers, still serves."""
     out = {}
     for m in measurements:
         verdict, _, name = own_outcome(m, path_outcomes(m, config, shared), config)
+        weak = name == "raw" and m.raw is not None and m.raw.n_inliers < config.confident_inliers
         ratio = _error_ratio(m, name, config, shared)
-        out[m.frame_id] = verdict is Verdict.FAIL and ratio > 1.0 + CLEAR_MARGIN
+        out[m.frame_id] = verdict is Verdict.FAIL and not weak and ratio > 1.0 + CLEAR_MARGIN
     return out
 
 
@@ -253,17 +255,22 @@ def judge(
         base, why = out["edges"]
         evidence, path = Evidence.ABSOLUTE.value, "edges"
     absolute_pass = Verdict.PASS.value in (raw_v, edge_v and edge_v.value)
-    other_pass = any(
-        out[n] is not None and out[n][0] is Verdict.PASS for n in ("raw", "edges") if n != path
-    )
-    if base is Verdict.FAIL and other_pass:
+    passing = [
+        n for n in ("raw", "edges") if n != path and out[n] is not None and out[n][0] is Verdict.PASS
+    ]
+    if base is Verdict.FAIL and passing:
         # a FAIL that is not confident (reprojected references, whose poses may be the wrong
-        # ones, or a render with few inliers) against a PASS of another absolute path
-        return j(
-            Verdict.UNVERIFIABLE,
-            f"paths_disagree ({why} on the {path} path; an absolute path passes)",
-            evidence,
-        )
+        # ones, or a render with few inliers) against a PASS of another absolute path: a
+        # clear PASS (within half the threshold) decides, otherwise the paths disagree
+        clear = [n for n in passing if _error_ratio(m, n, config, shared) <= 1.0 - CLEAR_MARGIN]
+        if not clear:
+            return j(
+                Verdict.UNVERIFIABLE,
+                f"paths_disagree ({why} on the {path} path; an absolute path passes)",
+                evidence,
+            )
+        base, why = out[clear[0]]
+        evidence, path = Evidence.ABSOLUTE.value, clear[0]
     if base is not Verdict.PASS:
         return j(base, why, evidence)
     return j(*_run_level(m.frame_id, shared, evidence, absolute_pass))

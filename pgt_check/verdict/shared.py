@@ -31,6 +31,11 @@ import numpy as np
 
 from pgt_check.config import RunConfig
 from pgt_check.measure.record import FrameMeasurement
+from pgt_check.verdict.calibration import (
+    CameraCalibration,
+    frame_homographies,
+    trusted_calibration,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -63,6 +68,14 @@ class SharedChecks:
     #: frames whose absolute evidence disagrees with the shared correction (an error of their
     #: own): left out of the pooled fits, and not covered by a passed registration check
     left_out: frozenset[str] = frozenset()
+    #: frame id -> photo_from_render of the calibration error at that frame's depth (only
+    #: where a camera-frame translation was estimated; else the camera's homography holds)
+    frame_homographies: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def calibration_homography(self, frame_id: str, camera_id: str) -> np.ndarray | None:
+        """The calibration error's photo_from_render for this frame (None if not estimated)."""
+        h = self.frame_homographies.get(frame_id)
+        return self.calibration_homographies.get(camera_id) if h is None else h
 
     @property
     def registration_status(self) -> str:
@@ -224,6 +237,8 @@ def _calibration_entry(est: Any, shared_thr: float, frame_thr: float) -> dict[st
         "separable_from_registration": bool(est.separable),
         # true_cam_from_checked_cam: what --calibration-from applies to another run
         "rotation": None if est.rotation is None else np.asarray(est.rotation).tolist(),
+        "translation": _ci(est.translation) if est.translation_fitted else None,
+        "translation_ci": _ci(est.translation_ci) if est.translation_fitted else None,
     }
     if status == NOT_CHECKED:
         entry["message"] = f"calibration not checked: no absolute evidence ({est.reason})"
@@ -234,29 +249,16 @@ def _calibration_entry(est: Any, shared_thr: float, frame_thr: float) -> dict[st
         f"{est.effect_px:.1f} px: principal point off by ({pp[0]:+.1f}, {pp[1]:+.1f}) px or a "
         f"camera-to-rig rotation of {est.equivalent_rotation_deg:.2f} deg "
         f"(roll {est.roll_deg:+.2f} deg), focal length x{est.focal_scale:.4f}"
+        + (
+            ", camera-to-rig translation ({:+.4f}, {:+.4f}, {:+.4f}) scene units".format(
+                *est.translation
+            )
+            if est.translation_fitted
+            else ""
+        )
         + ("" if est.separable else "; not separable from registration with these views")
     )
     return entry
-
-
-def _calibration_homography(est: Any, intrinsics: tuple[float, ...]) -> np.ndarray | None:
-    """photo_from_render of a calibration error: K_zoom @ R @ K^-1 (see shared_errors)."""
-    if not est.success or est.rotation is None or not math.isfinite(est.focal_scale):
-        return None
-    return calibration_homography(np.asarray(est.rotation), est.focal_scale, intrinsics)
-
-
-def calibration_homography(
-    rotation: np.ndarray, focal_scale: float, intrinsics: tuple[float, ...]
-) -> np.ndarray:
-    """(3, 3) photo_from_render of a camera-frame rotation ``rotation`` (true_cam_from_checked)
-    and a focal scale, for a pinhole camera with ``intrinsics`` (fx, fy, cx, cy)."""
-    fx, fy, cx, cy = intrinsics
-    k = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]], np.float64)
-    kz = k.copy()
-    kz[0, 0] *= focal_scale
-    kz[1, 1] *= focal_scale
-    return kz @ np.asarray(rotation, np.float64) @ np.linalg.inv(k)
 
 
 def _drift_coverage(
@@ -341,16 +343,6 @@ def _drift_entry(est: Any, ids: list[str], threshold: float) -> tuple[dict, dict
     return entry, score, flagged
 
 
-def _without_calibration(e: Any, h_cal: np.ndarray | None) -> Any:
-    """The frame's evidence with the camera's calibration error taken out of its photo points."""
-    if h_cal is None:
-        return e
-    from dataclasses import replace
-
-    p = np.c_[e.pts2d, np.ones(len(e.pts2d))] @ np.linalg.inv(h_cal).T
-    return replace(e, pts2d=p[:, :2] / p[:, 2:3])
-
-
 def frame_residuals(ev: Sequence[Any], est: Any) -> np.ndarray:
     """Median reprojection residual (px) of each frame's evidence after the world correction
     ``est`` (a ``RegistrationEstimate``; identity when it failed)."""
@@ -394,47 +386,6 @@ def consistent_frames(
     return kept, [e.frame_id for e in ev if e.frame_id not in ids]
 
 
-def trusted_calibration(
-    path: str, intrinsics: dict[str, tuple[float, ...]]
-) -> dict[str, np.ndarray]:
-    """Calibration homographies per camera from a trusted run's summary.json
-    (``shared_errors.calibration``), for this run's cameras (``--calibration-from``)."""
-    import json
-    from pathlib import Path
-
-    from pgt_check.errors import InputError
-
-    try:
-        se = json.loads(Path(path).read_text(encoding="utf-8"))["shared_errors"]["calibration"]
-    except (OSError, ValueError, KeyError, TypeError) as err:
-        raise InputError(
-            f"{path}: no shared_errors.calibration of a pgt-check run ({err})"
-        ) from err
-    out = {}
-    usable = {
-        c: e
-        for c, e in se.items()
-        if isinstance(e, dict)
-        and e.get("rotation") is not None
-        and e.get("focal_scale") is not None
-    }
-    for cam_id, k in intrinsics.items():
-        e = usable.get(cam_id)
-        if e is None and len(usable) == 1 and len(intrinsics) == 1:
-            # one camera on both sides whose parameters changed (e.g. re-calibrated intrinsics)
-            ((other, e),) = usable.items()
-            logger.warning(
-                "--calibration-from: camera %r not in %s; using its only camera %r",
-                cam_id,
-                path,
-                other,
-            )
-        if e is None:
-            raise InputError(f"{path}: no calibration estimate for camera {cam_id!r}")
-        out[cam_id] = calibration_homography(np.asarray(e["rotation"]), e["focal_scale"], k)
-    return out
-
-
 def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfig) -> SharedChecks:
     """All run-level checks on the measurements (in trajectory order)."""
     from pgt_check.geometry.shared_errors import (
@@ -461,13 +412,14 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
             len(left_out),
             ", ".join(left_out[:5]),
         )
-    calib, homs = {}, {}
-    intrinsics = {m.camera_id: m.intrinsics for m in measurements if m.intrinsics}
-    for cam_id, est in estimate_calibration(ev).items():
+    v = config.verdict
+    trans = v.calibration_translation
+    calib, cals = {}, {}
+    for cam_id, est in estimate_calibration(ev, calibration_translation=trans).items():
         calib[cam_id] = _calibration_entry(est, thr, frame_thr)
-        h = _calibration_homography(est, intrinsics[cam_id]) if cam_id in intrinsics else None
-        if h is not None:
-            homs[cam_id] = h
+        cal = CameraCalibration.from_estimate(est)
+        if cal is not None:
+            cals[cam_id] = cal
     for cam_id in sorted({m.camera_id for m in measurements} - set(calib)):
         calib[cam_id] = {
             "status": NOT_CHECKED,
@@ -475,25 +427,30 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
             "message": "calibration not checked: no absolute evidence",
         }
     mode = "auto"
-    if config.verdict.calibration_from:
+    intrinsics = {m.camera_id: m.intrinsics for m in measurements if m.intrinsics}
+    if v.calibration_from:
         # a calibration known from a trusted run (same cameras): removed before judging, so
         # this run's own shared error cannot be taken for calibration
-        homs = trusted_calibration(config.verdict.calibration_from, intrinsics)
-    if (config.verdict.remove_calibration or config.verdict.calibration_from) and homs:
+        cals = trusted_calibration(v.calibration_from, sorted(intrinsics))
+    homs, frame_homs = frame_homographies(
+        cals, all_ev, intrinsics, {m.frame_id: m.camera_id for m in measurements}
+    )
+    if (v.remove_calibration or v.calibration_from) and cals:
         # the user states that the shared camera-frame error is calibration: the evidence is
         # corrected by it, and registration / drift are judged on what remains
-        ev, mode = [_without_calibration(e, homs.get(e.camera_id)) for e in ev], "none"
-        all_ev = [_without_calibration(e, homs.get(e.camera_id)) for e in all_ev]
-    reg = _registration_entry(estimate_registration(ev, calibration=mode), thr, "rigid")
-    sim = _registration_entry(
-        estimate_registration(ev, similarity=True, calibration=mode), thr, "similarity"
-    )
+        def without(e: Any) -> Any:
+            return cals[e.camera_id].remove(e) if e.camera_id in cals else e
+
+        ev, all_ev, mode = [without(e) for e in ev], [without(e) for e in all_ev], "none"
+    kw = {"calibration": mode, "calibration_translation": trans}
+    reg = _registration_entry(estimate_registration(ev, **kw), thr, "rigid")
+    sim = _registration_entry(estimate_registration(ev, similarity=True, **kw), thr, "similarity")
     # drift looks at every frame: a drifting segment is what the consistent frames leave out;
     # frames without evidence of their own are covered by the segment they lie in
     ids = [m.frame_id for m in measurements]
-    drift, drift_px, flagged = _drift_entry(
-        estimate_drift(all_ev, threshold_px=thr, calibration=mode), ids, thr
-    )
+    drift, drift_px, flagged = _drift_entry(estimate_drift(all_ev, threshold_px=thr, **kw), ids, thr)
     for entry in (reg, sim):
         entry["frames_left_out"] = left_out
-    return SharedChecks(thr, reg, sim, drift, calib, drift_px, flagged, homs, frozenset(left_out))
+    return SharedChecks(
+        thr, reg, sim, drift, calib, drift_px, flagged, homs, frozenset(left_out), frame_homs
+    )

@@ -29,13 +29,16 @@ from pgt_check.geometry.shared_errors.solver import (
 )
 
 
-def _calibration_effect(p: _Problem, sel_g: np.ndarray, rc: np.ndarray, lz: np.ndarray):
+def _calibration_effect(
+    p: _Problem, sel_g: np.ndarray, rc: np.ndarray, lz: np.ndarray, tc: np.ndarray
+):
     """(B, F) per-frame mean displacement of the selected points of one camera, checked
-    projection -> projection with camera rotations rc (B, 3, 3) and log zooms lz (B,)."""
+    projection -> projection with camera rotations rc (B, 3, 3), log zooms lz (B,) and
+    camera-frame translations tc (B, 3)."""
     u0 = _project_world(p, np.eye(3)[None], np.ones(1), np.zeros((1, 3)), sel_g)[0]
     fsel = p.fidx[sel_g]
     xc = _bmv(p.rt[fsel], p.y[sel_g] - p.centre[fsel])
-    pix = _bmv(p.K[fsel], xc @ rc.transpose(0, 2, 1))
+    pix = _bmv(p.K[fsel], xc @ rc.transpose(0, 2, 1) + tc[:, None, :])
     cxy = p.K[fsel][:, :2, 2]
     u1 = cxy + np.exp(lz)[:, None, None] * (pix[..., :2] / pix[..., 2:3] - cxy)
     return _per_frame_mean(p, sel_g, np.linalg.norm(u1 - u0[None], axis=2))
@@ -47,17 +50,21 @@ def _camera_estimate(p, fit, g, cid, deltas, off, sel, base) -> CalibrationEstim
     frames = np.flatnonzero(p.cam == g)
     rc = st.rcal[g][None]
     lz = np.array([st.log_zoom[g]])
+    tc = st.tcal[g][None]
     if deltas is not None:
-        dc = deltas[:, off + 4 * g : off + 4 * g + 4]
+        n = p.n_cal
+        dc = deltas[:, off + n * g : off + n * g + n]
         rc = np.concatenate([rc, _rodrigues(dc[:, :3]) @ st.rcal[g]])
         lz = np.concatenate([lz, st.log_zoom[g] + dc[:, 3]])
+        dt = dc[:, 4:7] if n == 7 else np.zeros((len(dc), 3))
+        tc = np.concatenate([tc, st.tcal[g] + dt])
     rv = np.degrees(_rotvec(rc))  # (1+B, 3)
     kf = p.K[frames]
     fx, fy = float(np.median(kf[:, 0, 0])), float(np.median(kf[:, 1, 1]))
     # equivalent principal-point shift: image of the optical axis under the rotation
     ax = rc[:, :, 2]
     pp = np.stack([fx * ax[:, 0] / ax[:, 2], fy * ax[:, 1] / ax[:, 2]], axis=1)
-    eff_f = _calibration_effect(p, sel & (p.cam[p.fidx] == g), rc, lz)[:, frames]
+    eff_f = _calibration_effect(p, sel & (p.cam[p.fidx] == g), rc, lz, tc)[:, frames]
     ang = np.linalg.norm(rv, axis=1)
     boot = deltas is not None
 
@@ -82,6 +89,9 @@ def _camera_estimate(p, fit, g, cid, deltas, off, sel, base) -> CalibrationEstim
         roll_deg_ci=ci(rv[1:, 2]),
         focal_scale=float(np.exp(lz[0])),
         focal_scale_ci=ci(np.exp(lz[1:])),
+        translation=tc[0],
+        translation_ci=_ci(tc[1:]).T if boot else np.full((3, 2), np.nan),
+        translation_fitted=p.n_cal == 7,
         effect_px=float(np.median(eff_f[0])),
         effect_px_ci=ci(eff_b) if boot else _NAN_CI,
         **base,
@@ -114,6 +124,7 @@ def estimate_calibration(
     max_correlation: float = 0.985,
     model_penalty: float = 2.0,
     ambiguity_margin: float = 0.1,
+    calibration_translation: bool = False,
 ) -> dict[str, CalibrationEstimate]:
     """Per camera_id: shared camera-frame rotation (principal-point shift + roll) and zoom.
 
@@ -124,10 +135,13 @@ def estimate_calibration(
     ``estimate_registration``); the estimate is then the calibration-only fit. Returns one
     estimate per camera id present in the evidence (a single "" entry with the reason when
     there is no evidence at all).
+    calibration_translation: also fit a camera-frame translation per camera (a camera mounted
+    beside the sensor whose poses are given, e.g. RGB beside depth), where the points' depths
+    differ enough; off by default: for cameras circling the scene it mimics a world rotation.
     """
     if registration not in ("auto", "joint", "none"):
         raise ValueError(f"registration must be auto, joint or none, not {registration!r}")
-    p = _prepare(evidence, min_points_per_frame, min_frames)
+    p = _prepare(evidence, min_points_per_frame, min_frames, calibration_translation)
     if isinstance(p, str):
         ids = sorted({ev.camera_id for ev in evidence}) or [""]
         return {cid: CalibrationEstimate(False, p, cid) for cid in ids}

@@ -218,6 +218,7 @@ def estimate_drift(
     max_correlation: float = 0.985,
     model_penalty: float = 2.0,
     ambiguity_margin: float = 0.1,
+    calibration_translation: bool = False,
 ) -> DriftEstimate:
     """Windowed world corrections along ``index`` relative to the reference registration.
 
@@ -229,12 +230,15 @@ def estimate_drift(
     exceeds threshold_px; a frame when it lies in a flagged window, its interpolated lower bound
     exceeds threshold_px, and its run of such frames spans ``min_segment_windows`` flagged
     windows or ``min_segment_frames`` frames (shorter runs: ``rejected_segments``).
+    calibration_translation: also fit a camera-frame translation per camera (a camera mounted
+    beside the sensor whose poses are given, e.g. RGB beside depth), where the points' depths
+    differ enough; off by default: for cameras circling the scene it mimics a world rotation.
     """
     opt = _DriftOptions(
         threshold_px, similarity, n_bootstrap, seed, loss_scale_px, max_error_px, min_frames,
         min_window_inliers, min_segment_windows, min_segment_frames,
     )  # fmt: skip
-    p = _prepare(evidence, min_points_per_frame, 2 * min_frames)
+    p = _prepare(evidence, min_points_per_frame, 2 * min_frames, calibration_translation)
     if isinstance(p, str):
         return DriftEstimate(False, p, threshold_px=threshold_px)
     fit, calib, sel = _choose_world_fit(

@@ -25,6 +25,9 @@ class _Problem:
     obs: np.ndarray  # (N, 2) photo pixels
     fidx: np.ndarray  # (N,) frame of each point (contiguous, non-decreasing)
     starts: np.ndarray  # (F,) first point of each frame
+    #: calibration parameters per camera group: 4 (rotation, log zoom) or 7 (+ camera-frame
+    #: translation, fitted where the points' depths differ enough to tell it from a rotation)
+    n_cal: int = 4
 
     @property
     def n_frames(self) -> int:
@@ -40,14 +43,24 @@ class _State:
     q: np.ndarray  # (3, 3) rotation of D
     tau: np.ndarray  # (3,)
     log_sigma: float
-    rcal: np.ndarray  # (G, 3, 3) true_cam_from_checked_cam
+    rcal: np.ndarray  # (G, 3, 3) true_cam_from_checked_cam rotation
     log_zoom: np.ndarray  # (G,)
+    tcal: np.ndarray  # (G, 3) true_cam_from_checked_cam translation (checked-camera units)
 
     @staticmethod
     def identity(n_cams: int) -> _State:
         return _State(
-            np.eye(3), np.zeros(3), 0.0, np.tile(np.eye(3), (n_cams, 1, 1)), np.zeros(n_cams)
+            np.eye(3),
+            np.zeros(3),
+            0.0,
+            np.tile(np.eye(3), (n_cams, 1, 1)),
+            np.zeros(n_cams),
+            np.zeros((n_cams, 3)),
         )
+
+    def with_world(self, other: _State) -> _State:
+        """This state's calibration with ``other``'s world map."""
+        return _State(other.q, other.tau, other.log_sigma, self.rcal, self.log_zoom, self.tcal)
 
 
 def _rodrigues(v: np.ndarray) -> np.ndarray:
@@ -88,9 +101,14 @@ def _angle_deg(r: np.ndarray) -> np.ndarray:
 
 
 def _prepare(
-    evidence: Sequence[FrameEvidence], min_points_per_frame: int, min_frames: int
+    evidence: Sequence[FrameEvidence],
+    min_points_per_frame: int,
+    min_frames: int,
+    translation: bool = False,
 ) -> _Problem | str:
-    """Concatenate usable points; a reason string when there is too little to fit."""
+    """Concatenate usable points; a reason string when there is too little to fit.
+    ``translation``: the calibration block gets a camera-frame translation where the points'
+    inverse depths spread enough (``RIG_TRANSLATION_MIN_SPREAD``) to tell it from a rotation."""
     usable = []
     for ev in evidence:
         if not (np.all(np.isfinite(ev.world_from_cam)) and np.all(np.isfinite(ev.K))):
@@ -106,6 +124,10 @@ def _prepare(
         return "too_few_frames" if len(evidence) < min_frames else "too_few_points"
     usable.sort(key=lambda e: e[0].index)
     origin = np.mean([ev.world_from_cam[:3, 3] for ev, _ in usable], axis=0)
+    inv_depth = np.concatenate(
+        [1.0 / ((ev.pts3d[k] - ev.world_from_cam[:3, 3]) @ ev.world_from_cam[:3, 2])
+         for ev, k in usable]
+    )  # fmt: skip
     camera_ids = tuple(sorted({ev.camera_id for ev, _ in usable}))
     counts = np.array([len(k) for _, k in usable])
     return _Problem(
@@ -121,7 +143,23 @@ def _prepare(
         obs=np.concatenate([ev.pts2d[k] for ev, k in usable]),
         fidx=np.repeat(np.arange(len(usable)), counts),
         starts=np.concatenate([[0], np.cumsum(counts)[:-1]]),
+        n_cal=7 if translation and depth_spread(inv_depth) >= RIG_TRANSLATION_MIN_SPREAD else 4,
     )
+
+
+#: a camera-frame translation is fitted when the inverse depths of the points spread by this
+#: much (``depth_spread``): its image effect (f t / z) is then told from a rotation's (f theta)
+RIG_TRANSLATION_MIN_SPREAD = 0.5
+
+
+def depth_spread(inv_depth: np.ndarray) -> float:
+    """(p90 - p10) / median of the points' inverse depths (0 for a fronto-parallel scene)."""
+    v = np.asarray(inv_depth, np.float64)
+    v = v[np.isfinite(v) & (v > 0)]
+    if len(v) < 10:
+        return 0.0
+    lo, med, hi = np.percentile(v, [10, 50, 90])
+    return float((hi - lo) / med)
 
 
 def _subset(p: _Problem, frames: np.ndarray) -> _Problem:
@@ -144,13 +182,14 @@ def _subset(p: _Problem, frames: np.ndarray) -> _Problem:
         obs=p.obs[pts],
         fidx=remap[p.fidx[pts]],
         starts=np.concatenate([[0], np.cumsum(counts)[:-1]]),
+        n_cal=p.n_cal,
     )
 
 
 def _layout(p: _Problem, world: bool, similarity: bool, calib: bool) -> tuple[int, int, int]:
     """(number of world columns, offset of the calibration columns, total columns)."""
     nw = (7 if similarity else 6) if world else 0
-    return nw, nw, nw + (4 * p.n_cams if calib else 0)
+    return nw, nw, nw + (p.n_cal * p.n_cams if calib else 0)
 
 
 def _residuals(
@@ -165,7 +204,7 @@ def _residuals(
     """Residuals (N, 2) = predicted - observed, and the Jacobian (N, 2, P) of the active blocks.
 
     Column order: world [rotation (3), translation (3), log scale (1, similarity)], then per
-    camera [rotation (3), log zoom (1)].
+    camera [rotation (3), log zoom (1), translation (3) when ``p.n_cal`` is 7].
     """
     sig = np.exp(st.log_sigma)
     w = sig * (p.y @ st.q.T)  # (N, 3): sigma Q Y
@@ -173,7 +212,7 @@ def _residuals(
     g = p.cam[f]
     xw = w + st.tau - p.centre[f]
     m_f = st.rcal[p.cam] @ p.rt  # (F, 3, 3) true_cam_from_world rotation
-    xp = _bmv(m_f[f], xw)
+    xp = _bmv(m_f[f], xw) + st.tcal[g]
     k = p.K[f]
     fx, sk, fy = k[:, 0, 0], k[:, 0, 1], k[:, 1, 1]
     z = xp[:, 2]
@@ -204,9 +243,11 @@ def _residuals(
         jz = np.stack([e * m0, e * m1], axis=1)
         for gi in range(p.n_cams):
             sel = g == gi
-            c0 = off + 4 * gi
+            c0 = off + p.n_cal * gi
             jm[sel, :, c0 : c0 + 3] = jr[sel]
             jm[sel, :, c0 + 3] = jz[sel]
+            if p.n_cal == 7:
+                jm[sel, :, c0 + 4 : c0 + 7] = d[sel]
     return r, jm
 
 
@@ -214,14 +255,16 @@ def _update(
     p: _Problem, st: _State, delta: np.ndarray, world: bool, similarity: bool, calib: bool
 ) -> _State:
     nw, off, _ = _layout(p, world, similarity, calib)
-    q, tau, ls, rcal, lz = st.q, st.tau, st.log_sigma, st.rcal, st.log_zoom
+    q, tau, ls, rcal, lz, tc = st.q, st.tau, st.log_sigma, st.rcal, st.log_zoom, st.tcal
     if world:
         q = _rodrigues(delta[0:3]) @ q
         tau = tau + delta[3:6]
         if similarity:
             ls = ls + float(delta[6])
     if calib:
-        dc = delta[off:].reshape(-1, 4)
+        dc = delta[off:].reshape(-1, p.n_cal)
         rcal = _rodrigues(dc[:, :3]) @ rcal
         lz = lz + dc[:, 3]
-    return _State(q, tau, ls, rcal, lz)
+        if p.n_cal == 7:
+            tc = tc + dc[:, 4:7]
+    return _State(q, tau, ls, rcal, lz, tc)

@@ -107,7 +107,7 @@ def _registration_from_fit(
         return RegistrationEstimate(False, "too_few_inliers", **base)
     ref = reference if reference is not None else _State.identity(p.n_cams)
     # before: the reference world map, fitted calibration kept (the world part alone is judged)
-    r_before, _ = _residuals(p, _State(ref.q, ref.tau, ref.log_sigma, st.rcal, st.log_zoom))
+    r_before, _ = _residuals(p, st.with_world(ref))
     sel = _effect_points(p, inl)
     # depth of the selected points in the checked cameras
     zc = np.einsum("nj,nj->n", p.y[sel] - p.centre[p.fidx[sel]], p.rt[p.fidx[sel]][:, 2, :])
@@ -195,7 +195,7 @@ def _choose_world_fit(
     )  # fmt: skip
     if calibration == "joint":
         return sel.joint, True, sel
-    if _use_joint(sel, sel.world, 4 * p.n_cams, loss_scale_px, model_penalty):
+    if _use_joint(sel, sel.world, p.n_cal * p.n_cams, loss_scale_px, model_penalty):
         return sel.joint, True, sel
     return sel.world, False, sel
 
@@ -216,6 +216,7 @@ def estimate_registration(
     max_correlation: float = 0.985,
     model_penalty: float = 2.0,
     ambiguity_margin: float = 0.1,
+    calibration_translation: bool = False,
 ) -> RegistrationEstimate:
     """One world correction (rigid, or similarity) for the whole trajectory.
 
@@ -230,8 +231,11 @@ def estimate_registration(
     fit, so a misregistered trajectory is still caught. loss_scale_px: Cauchy scale;
     max_error_px: inlier threshold; scene_depth: the depth used for ``translation_frac``
     (default: median depth of the inliers).
+    calibration_translation: also fit a camera-frame translation per camera (a camera mounted
+    beside the sensor whose poses are given, e.g. RGB beside depth), where the points' depths
+    differ enough; off by default: for cameras circling the scene it mimics a world rotation.
     """
-    p = _prepare(evidence, min_points_per_frame, min_frames)
+    p = _prepare(evidence, min_points_per_frame, min_frames, calibration_translation)
     if isinstance(p, str):
         return RegistrationEstimate(False, p, n_frames=len(evidence), similarity=similarity)
     fit, calib, sel = _choose_world_fit(

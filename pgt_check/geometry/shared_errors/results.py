@@ -76,8 +76,8 @@ class RegistrationEstimate:
 class CalibrationEstimate:
     """Shared camera-frame error of one camera (all its frames).
 
-    rotation: (3, 3) ``true_cam_from_checked_cam`` (x_true = rotation @ x_checked): the
-    camera-to-rig rotation error; ``rotvec_deg`` its rotation vector (x, y, z = roll) in degrees.
+    rotation: (3, 3) ``true_cam_from_checked_cam`` (x_true = rotation @ x_checked +
+    translation): the camera-to-rig rotation error; ``rotvec_deg`` its rotation vector (x, y, z = roll) in degrees.
     ``principal_point_shift_px``: the equivalent principal-point shift at the image centre.
     ``focal_scale``: observed focal / given focal. ``effect_px``: median over frames of the mean
     image displacement of the frame's points. ``separable``: False when the error cannot be told
@@ -100,6 +100,12 @@ class CalibrationEstimate:
     roll_deg_ci: _CI = _NAN_CI
     focal_scale: float = float("nan")
     focal_scale_ci: _CI = _NAN_CI
+    #: (3,) camera-frame translation of ``true_cam_from_checked_cam`` (x_true = rotation @
+    #: x_checked + translation), scene units; fitted only where the points' depths differ
+    #: enough (``translation_fitted``), else zero
+    translation: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    translation_ci: np.ndarray = field(default_factory=lambda: np.full((3, 2), np.nan))
+    translation_fitted: bool = False
     effect_px: float = float("nan")
     effect_px_ci: _CI = _NAN_CI
     n_frames: int = 0

@@ -101,7 +101,9 @@ def _select(
     corr = float("nan")
     if j.ok:
         corr = max(
-            _max_canonical_corr(j.hessian, np.arange(nw), off + 4 * g + np.arange(4))
+            _max_canonical_corr(
+                j.hessian, np.arange(nw), off + p.n_cal * g + np.arange(p.n_cal)
+            )
             for g in range(p.n_cams)
         )
     c0 = _cost(_residuals(p, st0)[0], loss_scale_px)
@@ -110,7 +112,7 @@ def _select(
     best = j if j.ok else (w if gain_w >= gain_c else c)
     unit = _penalty_unit(best.residuals, loss_scale_px)
     reason = _ambiguity(
-        gain_w, gain_c, nw, 4 * p.n_cams, unit, corr,
+        gain_w, gain_c, nw, p.n_cal * p.n_cams, unit, corr,
         max_correlation=max_correlation, model_penalty=model_penalty,
         ambiguity_margin=ambiguity_margin,
     )  # fmt: skip

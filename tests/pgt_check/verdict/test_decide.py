@@ -169,17 +169,22 @@ def test_a_reference_that_fails_on_its_own_render_does_not_decide(raw_err, verdi
     assert judge(g, cfg, None, own_outcomes([near_ref, g], cfg)).verdict is Verdict.FAIL
 
 
-def test_a_weak_raw_fail_against_an_edge_pass_is_not_a_fail():
-    """Raw render with 18 inliers just over the threshold, the geometric-edge path clearly
-    passes: two absolute paths disagree and neither is confident."""
+@pytest.mark.parametrize(
+    ("edge_err", "verdict", "reason", "decided_by"),
+    [(4.8, "PASS", "", "edges"), (12.0, "UNVERIFIABLE", "paths_disagree", "raw")],
+)
+def test_a_weak_raw_fail_against_an_edge_pass(edge_err, verdict, reason, decided_by):
+    """Raw render with 18 inliers just over the threshold (16 px): a clear PASS of the
+    geometric-edge path (within half the threshold) decides; a PASS near the threshold leaves
+    the two absolute paths disagreeing. A confident raw FAIL stands either way."""
     from pgt_check.verdict.decide import judge
 
     cfg = VerdictConfig()
     m = _frame("w", 17.0)
     m = FrameMeasurement(**{**m.__dict__, "raw": _path("raw", 17.0, 18),
-                            "edges": _path("edges", 4.8, 2000)})
+                            "edges": _path("edges", edge_err, 2000)})
     j = judge(m, cfg)
-    assert j.verdict is Verdict.UNVERIFIABLE and j.reason.startswith("paths_disagree"), j
-    # with 40 inliers the raw FAIL is confident and stands
+    assert (j.verdict.value, j.decided_by) == (verdict, decided_by), j
+    assert j.reason.startswith(reason)
     m40 = FrameMeasurement(**{**m.__dict__, "raw": _path("raw", 17.0, 40)})
     assert judge(m40, cfg).verdict is Verdict.FAIL

@@ -225,6 +225,29 @@ def test_calibration_is_a_finding_and_can_be_removed(truth):
     assert j2.shared.summary()["registration"]["status"] == "passed"
 
 
+def test_calibration_translation_is_reported_and_removed(truth):
+    """Photos from a camera 4 cm beside the posed sensor: with ``calibration_translation`` the
+    summary states the camera-to-rig translation, and --remove-calibration removes it."""
+    t = np.array([0.04, 0.0, 0.0])
+    ms = []
+    for m in measurements(truth, truth):
+        xc = np.asarray(m.evidence.pts_cam) + t
+        uv = xc[:, :2] / xc[:, 2:3] * 500.0 + [319.5, 239.5]
+        ms.append(m.__class__(**{**m.__dict__, "evidence": AbsoluteEvidence(
+            ("raw",), tuple(map(tuple, uv)), m.evidence.pts_cam)}))
+    cfg = {"verdict": {"calibration_translation": True, "remove_calibration": True}}
+    j = judge_run(ms, RunConfig.from_dict(cfg))
+    cal = next(iter(j.shared.summary()["calibration"].values()))
+    assert cal["translation"] is not None
+    np.testing.assert_allclose(cal["translation"], t, atol=0.3 * 0.04)
+    assert "camera-to-rig translation" in cal["message"]
+    assert j.shared.summary()["registration"]["status"] == "passed"
+    assert j.shared.summary()["drift"]["status"] == "passed"
+    # without the option no translation is estimated
+    plain = judge_run(ms, RunConfig())
+    assert next(iter(plain.shared.summary()["calibration"].values()))["translation"] is None
+
+
 def test_calibration_from_a_trusted_run_keeps_misregistration_visible(truth, tmp_path):
     """A calibration estimated on the same run may absorb a misregistration where views
     cannot separate them; one from a trusted run (same camera) cannot."""

@@ -1,0 +1,155 @@
+"""A camera's estimated calibration error, and removing it (``--remove-calibration``,
+``--calibration-from``).
+
+The error is ``true_cam_from_checked_cam``: a rotation (principal-point shift + roll), a focal
+scale and, where it was fitted, a camera-frame translation (a camera beside the sensor whose
+poses are given). A rotation and a zoom move every pixel the same way whatever the depth (a
+homography); a translation moves near points more than far ones, so removing it needs the
+depth: exactly per evidence point (its 3D point is known), and per frame as the homography
+induced at the frame's median depth.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+
+from pgt_check.errors import InputError
+
+logger = logging.getLogger(__name__)
+
+
+def _k(intrinsics: Sequence[float], focal_scale: float = 1.0) -> np.ndarray:
+    fx, fy, cx, cy = intrinsics
+    return np.array([[fx * focal_scale, 0, cx], [0, fy * focal_scale, cy], [0, 0, 1]], float)
+
+
+@dataclass(frozen=True, eq=False)
+class CameraCalibration:
+    """rotation (3, 3), focal_scale, translation (3,) of ``true_cam_from_checked_cam``."""
+
+    rotation: np.ndarray
+    focal_scale: float
+    translation: np.ndarray
+
+    @classmethod
+    def from_estimate(cls, est: Any) -> CameraCalibration | None:
+        """From a ``CalibrationEstimate`` (None when it failed)."""
+        if not est.success or est.rotation is None or not math.isfinite(est.focal_scale):
+            return None
+        t = getattr(est, "translation", None)
+        return cls(np.asarray(est.rotation, float), float(est.focal_scale), _vec3(t))
+
+    @classmethod
+    def from_summary(cls, entry: Mapping[str, Any]) -> CameraCalibration | None:
+        """From a summary.json calibration entry (None without rotation or focal scale)."""
+        if entry.get("rotation") is None or entry.get("focal_scale") is None:
+            return None
+        return cls(
+            np.asarray(entry["rotation"], float),
+            float(entry["focal_scale"]),
+            _vec3(entry.get("translation")),
+        )
+
+    def homography(self, intrinsics: Sequence[float], depth: float | None = None) -> np.ndarray:
+        """(3, 3) photo_from_render: K_zoom (R + t n^T / depth) K^-1, the map this error
+        induces for a fronto-parallel plane at ``depth`` (exact for R and zoom; the
+        translation's part needs a depth and is left out without one)."""
+        m = self.rotation.copy()
+        if depth is not None and math.isfinite(depth) and depth > 0:
+            m[:, 2] += self.translation / depth
+        h = _k(intrinsics, self.focal_scale) @ m @ np.linalg.inv(_k(intrinsics))
+        return h / h[2, 2]
+
+    def remove(self, e: Any) -> Any:
+        """The frame's evidence (``FrameEvidence``) with this error taken out of its photo
+        points, point by point (each point's depth is known)."""
+        r, c = e.world_from_cam[:3, :3], e.world_from_cam[:3, 3]
+        xc = (e.pts3d - c) @ r
+        xt = xc @ self.rotation.T + self.translation
+        k0 = e.K
+        kz = k0.copy()
+        kz[0, 0] *= self.focal_scale
+        kz[1, 1] *= self.focal_scale
+        kz[0, 1] *= self.focal_scale
+        with np.errstate(divide="ignore", invalid="ignore"):
+            u0 = (xc @ k0.T)[:, :2] / xc[:, 2:3]
+            u1 = (xt @ kz.T)[:, :2] / xt[:, 2:3]
+        delta = np.where(np.isfinite(u1 - u0), u1 - u0, 0.0)
+        return replace(e, pts2d=e.pts2d - delta)
+
+
+def _vec3(t: Any) -> np.ndarray:
+    v = np.zeros(3) if t is None else np.asarray(t, float).reshape(-1)
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        return np.zeros(3)
+    return v
+
+
+def frame_homographies(
+    cals: Mapping[str, CameraCalibration],
+    evidence: Sequence[Any],
+    intrinsics: Mapping[str, Sequence[float]],
+    cameras: Mapping[str, str],
+) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """(per camera, per frame) photo_from_render of the calibration error: per frame at the
+    median depth of its evidence, per camera at the median over its frames (for frames
+    without evidence). ``cameras``: frame id -> camera id of every frame."""
+    depth = {}
+    for e in evidence:
+        z = (e.pts3d - e.world_from_cam[:3, 3]) @ e.world_from_cam[:3, 2]
+        z = z[np.isfinite(z) & (z > 0)]
+        if len(z):
+            depth[e.frame_id] = float(np.median(z))
+    per_cam, per_frame = {}, {}
+    for cam_id, cal in cals.items():
+        if cam_id not in intrinsics:
+            continue
+        frames = [f for f, c in cameras.items() if c == cam_id]
+        zs = [depth[f] for f in frames if f in depth]
+        per_cam[cam_id] = cal.homography(intrinsics[cam_id], np.median(zs) if zs else None)
+        if np.any(cal.translation):
+            for f in frames:
+                if f in depth:
+                    per_frame[f] = cal.homography(intrinsics[cam_id], depth[f])
+    return per_cam, per_frame
+
+
+def trusted_calibration(path: str, camera_ids: Sequence[str]) -> dict[str, CameraCalibration]:
+    """Calibration errors per camera from a trusted run's summary.json
+    (``shared_errors.calibration``), for this run's cameras (``--calibration-from``)."""
+    import json
+    from pathlib import Path
+
+    try:
+        se = json.loads(Path(path).read_text(encoding="utf-8"))["shared_errors"]["calibration"]
+    except (OSError, ValueError, KeyError, TypeError) as err:
+        raise InputError(
+            f"{path}: no shared_errors.calibration of a pgt-check run ({err})"
+        ) from err
+    usable = {}
+    for c, e in se.items():
+        cal = CameraCalibration.from_summary(e) if isinstance(e, dict) else None
+        if cal is not None:
+            usable[c] = cal
+    out = {}
+    for cam_id in camera_ids:
+        cal = usable.get(cam_id)
+        if cal is None and len(usable) == 1 and len(camera_ids) == 1:
+            # one camera on both sides whose parameters changed (e.g. re-calibrated intrinsics)
+            ((other, cal),) = usable.items()
+            logger.warning(
+                "--calibration-from: camera %r not in %s; using its only camera %r",
+                cam_id,
+                path,
+                other,
+            )
+        if cal is None:
+            raise InputError(f"{path}: no calibration estimate for camera {cam_id!r}")
+        out[cam_id] = cal
+    return out
