@@ -94,6 +94,9 @@ def summarise(ms, cfg: RunConfig, path: str, labels: set[str] | None) -> dict:
         "pass": float(np.mean([v is Verdict.PASS for v in verdicts])),
         "fail": float(np.mean([v is Verdict.FAIL for v in verdicts])),
         "median_inliers": float(np.median(inl)),
+        #: over the verifiable frames: on the given poses, how precisely the path aligns
+        "median_corner_err": float(np.median(err[ok])) if ok.any() else None,
+        "threshold_px": cfg.verdict.threshold_for(ms[0].width, ms[0].height) if ms else None,
         "median_evidence": float(np.median([len(m.evidence or ()) for m in ms])),
         "median_s_frame": float(np.median(totals)) if totals else None,
         "errors": sorted({m.error_detail.splitlines()[-1] for m in ms if m.error_detail})[:3],
@@ -101,7 +104,10 @@ def summarise(ms, cfg: RunConfig, path: str, labels: set[str] | None) -> dict:
     }
     if labels is not None:
         lab = np.array([m.frame_id in labels for m in ms])
-        out["auc"] = roc_auc(err, lab)
+        try:
+            out["auc"] = roc_auc(err, lab)
+        except ValueError:  # a subsample (--stride) with only good or only bad frames
+            out["auc"] = None
         flagged = np.array([v is not Verdict.PASS for v in verdicts])
         out["flagged_bad"] = f"{int((flagged & lab).sum())}/{int(lab.sum())}"
         out["flagged_good"] = f"{int((flagged & ~lab).sum())}/{int((~lab).sum())}"
@@ -202,7 +208,10 @@ def write_reports(results: dict) -> None:
         "median of `FrameChecker.measure` per frame (render, match, homography, PnP, edges).\n",
     ]
     for name, ds in results["datasets"].items():
+        thr = next((r["given"].get("threshold_px") for r in ds["rows"].values()
+                    if r.get("given", {}).get("threshold_px")), None)
         lines.append(f"\n## {name} ({ds['frames']} frames, median depth {ds['depth']:.3g}, "
+                     f"per-frame threshold {_f(thr, '.1f')} px, "
                      f"config `{json.dumps(ds['config'])}`)\n")
         rows = []
         for method, row in ds["rows"].items():
@@ -213,6 +222,7 @@ def write_reports(results: dict) -> None:
                 _pct(g.get("verifiable")),
                 _pct(p.get("verifiable")),
                 _f(g.get("median_inliers"), ".0f"),
+                _f(g.get("median_corner_err"), ".1f"),
                 _pct(g.get("pass")),
                 _f(p.get("auc")),
                 p.get("flagged_bad", ""),
@@ -223,7 +233,7 @@ def write_reports(results: dict) -> None:
             ])
         lines.append(md_table(
             ["method", "frames (given+perturbed)", "verifiable (given)", "verifiable (perturbed)", "median inliers (given)",
-             "PASS (given)", "per-frame AUC", "perturbed: bad flagged", "good flagged",
+             "median corner error px (given)", "PASS (given)", "per-frame AUC", "perturbed: bad flagged", "good flagged",
              "evidence pts/frame", "s/frame", "errors"],
             rows,
         ))
