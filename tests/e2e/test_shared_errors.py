@@ -100,3 +100,33 @@ def test_real_moved_trajectory_fails_the_gate(shared_data, dataset, tmp_path, ca
         assert reg["effect_px"] > 4 * summary["shared_errors"]["threshold_px"]
     assert reg["corrected_world_from_world"] is not None
     assert _flagged(rows) >= 0.9
+
+
+@pytest.mark.shared_data
+@pytest.mark.slow
+@pytest.mark.parametrize("dataset", ["castle", "7scenes"])
+def test_real_drifting_segment_is_separated(shared_data, dataset, tmp_path, capsys):
+    """The last 40 % of the frames drift to 2 deg + 4 % of the depth (neighbours share the
+    error, so the reprojected references cannot see it): the drift check separates the
+    drifting frames by their drift score, covers the ones without evidence of their own, and
+    none of them PASSes."""
+    from pgt_check.evaluation import drift_trajectory, roc_auc
+
+    if dataset == "castle":
+        root, depth, extra = shared_data / "sceaux_castle", 9.0, ()
+        traj = read_trajectory(root / "trajectories.txt")
+    else:
+        root, depth, extra = shared_data / "7scenes_redkitchen", 2.3, ("--remove-calibration",)
+        full = read_trajectory(root / "trajectories.txt")
+        traj = Trajectory(tuple(full.frames[::5]), full.source, full.format)
+    drifted, ids = drift_trajectory(traj, 0.6, 2.0, 0.04 * depth, seed=2)
+    rc, summary, rows = _run(drifted, root / "mesh.ply", tmp_path, *extra)
+    drift = summary["shared_errors"]["drift"]
+    assert rc == 1 and drift["status"] == "failed", drift["message"]
+    labels = np.array([r["frame_id"] in set(ids) for r in rows])
+    score = np.array([float(r["drift_px"]) if r["drift_px"] else 0.0 for r in rows])
+    assert roc_auc(score, labels) >= 0.95  # measured 1.00 on both
+    drifting = [r for r, lab in zip(rows, labels, strict=True) if lab]
+    # the frames where the drift has grown past half its final size are never PASS
+    assert all(r["verdict"] != "PASS" for r in drifting[len(drifting) // 2 :])
+    assert all(r["drift_px"] for r in drifting)  # every drifting frame is scored
