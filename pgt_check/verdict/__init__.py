@@ -1,15 +1,8 @@
 """Verdicts: per-frame PASS / FAIL / UNVERIFIABLE from measurements, and run-level statistics."""
 
 from pgt_check.verdict.apply import VERDICT_COLUMNS, RunJudgement, apply_verdicts, judge_run
-from pgt_check.verdict.decide import (
-    Verdict,
-    decide,
-    gate,
-    judge,
-    resolve_threshold_px,
-    run_statistics,
-    systematic_offset,
-)
+from pgt_check.verdict.decide import Verdict, decide, judge, resolve_threshold_px
+from pgt_check.verdict.run_stats import gate, run_statistics, systematic_offset
 
 __all__ = [
     "VERDICT_COLUMNS",

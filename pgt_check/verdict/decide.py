@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-from collections import Counter
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from enum import Enum
@@ -13,7 +12,6 @@ import numpy as np
 
 from pgt_check.config import VerdictConfig
 from pgt_check.enhance.base import Evidence
-from pgt_check.geometry.homography import auc_at_thresholds
 from pgt_check.measure.record import FrameMeasurement, MeasureReason, PathMeasurement
 from pgt_check.verdict.shared import FAILED, NOT_CHECKED, PASSED
 
@@ -309,154 +307,3 @@ def _run_level(
     elif reg == PASSED:  # its own absolute evidence disagrees with the registered trajectory
         reg = "passed, but this frame's absolute evidence disagrees with it"
     return Verdict.UNVERIFIABLE, f"relative_evidence_only (registration {reg})", evidence
-
-
-#: UNVERIFIABLE reasons that mean the tool itself failed on a frame (they count against the gate)
-INTERNAL_REASONS = (MeasureReason.INTERNAL_ERROR.value, MeasureReason.WORKER_CRASHED.value)
-
-
-def gate(
-    counts: Mapping[str, int],
-    config: VerdictConfig,
-    reasons: Mapping[str, int] | None = None,
-) -> tuple[bool, str]:
-    """Run-level gate over verdict counts; returns (passed, explanation). Fails closed.
-
-    Fails when no frame was checked or none was verified (PASS + FAIL = 0), when frames with an
-    internal error or a crashed worker (``reasons``: UNVERIFIABLE reason counts) exceed
-    ``max_internal_errors``, or when the FAIL or UNVERIFIABLE share exceeds its limit. The
-    comparisons are written so that a non-finite limit (rejected by the config anyway) fails.
-    """
-    total = sum(counts.values())
-    if total == 0:
-        return False, "no frames were checked"
-    n_fail = counts.get(Verdict.FAIL.value, 0)
-    n_pass = counts.get(Verdict.PASS.value, 0)
-    if n_pass + n_fail == 0:
-        return False, f"no frame was verified (all {total} frames UNVERIFIABLE)"
-    n_internal = sum(int((reasons or {}).get(r, 0)) for r in INTERNAL_REASONS)
-    if not n_internal <= config.max_internal_errors:
-        return False, (
-            f"{n_internal} frames with internal errors or crashed workers > max "
-            f"{config.max_internal_errors}"
-        )
-    fail = n_fail / total
-    unv = counts.get(Verdict.UNVERIFIABLE.value, 0) / total
-    if not fail <= config.max_fail_fraction:
-        return False, f"FAIL fraction {fail:.3f} > max {config.max_fail_fraction:.3f}"
-    if not unv <= config.max_unverifiable_fraction:
-        return (
-            False,
-            f"UNVERIFIABLE fraction {unv:.3f} > max {config.max_unverifiable_fraction:.3f}",
-        )
-    return True, (
-        f"FAIL fraction {fail:.3f} <= max {config.max_fail_fraction:.3f}, UNVERIFIABLE fraction "
-        f"{unv:.3f} <= max {config.max_unverifiable_fraction:.3f}"
-    )
-
-
-def systematic_offset(
-    shifts: Iterable[tuple[float, float]], zooms: Iterable[float], threshold_px: float
-) -> dict[str, Any]:
-    """Detect a consistent image-space offset across frames (a calibration hint).
-
-    shifts: per-frame mean corner displacement (dx, dy) in px of successfully measured frames;
-    zooms: per-frame warped/original diagonal ratio. A pose error moves frames in varying
-    directions; a calibration error (intrinsics, camera-to-rig, RGB vs depth camera) moves
-    every frame the same way. We report the median shift and zoom, and ``consistency``: the
-    fraction of frames whose shift lies within 45 degrees of the median direction. The offset is
-    flagged systematic when its magnitude >= 25 % of the threshold (or the zoom differs from 1
-    by >= 1 %) and consistency >= 0.7 over at least 5 frames.
-    """
-    s = np.asarray(list(shifts), dtype=np.float64).reshape(-1, 2)
-    z = np.asarray(list(zooms), dtype=np.float64).reshape(-1)
-    s = s[np.all(np.isfinite(s), axis=1)]
-    z = z[np.isfinite(z)]
-    out: dict[str, Any] = {"n_frames": int(len(s)), "systematic": False}
-    if len(s) == 0:
-        out["message"] = "no frame was measured"
-        return out
-    med = np.median(s, axis=0)
-    mag = float(np.hypot(*med))
-    zoom = float(np.median(z)) if len(z) else 1.0
-    if mag > 1e-9:
-        u = med / mag
-        n = np.linalg.norm(s, axis=1)
-        cosang = (s @ u) / np.maximum(n, 1e-12)
-        consistency = float(np.mean(cosang >= math.cos(math.radians(45))))
-    else:
-        consistency = 0.0
-    direction = float(math.degrees(math.atan2(med[1], med[0])))
-    systematic = len(s) >= 5 and (
-        (mag >= 0.25 * threshold_px and consistency >= 0.7) or abs(zoom - 1.0) >= 0.01
-    )
-    out.update(
-        median_dx_px=float(med[0]),
-        median_dy_px=float(med[1]),
-        median_shift_px=mag,
-        direction_deg=direction,
-        consistency=consistency,
-        median_zoom=zoom,
-        systematic=bool(systematic),
-    )
-    if systematic:
-        parts = []
-        if mag >= 0.25 * threshold_px and consistency >= 0.7:
-            parts.append(
-                f"every frame's render is shifted by about ({med[0]:+.1f}, {med[1]:+.1f}) px "
-                f"({consistency:.0%} of frames in the same direction)"
-            )
-        if abs(zoom - 1.0) >= 0.01:
-            parts.append(f"the render is scaled by {zoom:.3f} relative to the photos")
-        out["message"] = (
-            "systematic offset: "
-            + " and ".join(parts)
-            + ". A constant offset points at calibration (intrinsics, camera-to-rig or "
-            "RGB-vs-depth camera extrinsics), not at individual bad poses."
-        )
-    else:
-        out["message"] = (
-            f"no systematic offset (median shift {mag:.1f} px, consistency {consistency:.0%}, "
-            f"zoom {zoom:.3f})"
-        )
-    return out
-
-
-def run_statistics(records: list[Mapping[str, Any]], threshold_px: float) -> dict[str, Any]:
-    """Run-level statistics: verdict and reason counts, error percentiles, AUC, systematic offset."""
-    counts = Counter(str(r["verdict"]) for r in records)
-    reasons = Counter(
-        str(r["reason"]) for r in records if r["verdict"] == Verdict.UNVERIFIABLE.value
-    )
-    errs = np.array(
-        [r["corner_error_px"] if r.get("corner_error_px") is not None else np.inf for r in records],
-        dtype=np.float64,
-    )
-    finite = errs[np.isfinite(errs)]
-    # Systematic offset from the raw path where it was measured: an enhanced render borrows
-    # its appearance from a neighbouring photo with the same calibration, which hides a shared
-    # offset. Records without raw shifts (older runs) fall back to the verdict path.
-    raw = [r for r in records if r.get("shift_dx_px_raw") is not None]
-    if raw:
-        shifts = [(r["shift_dx_px_raw"], r["shift_dy_px_raw"]) for r in raw]
-        zooms = [r.get("zoom_raw", 1.0) for r in raw]
-        source = "raw"
-    else:
-        ok = [r for r in records if r.get("shift_dx_px") is not None]
-        shifts = [(r["shift_dx_px"], r["shift_dy_px"]) for r in ok]
-        zooms = [r.get("zoom", 1.0) for r in ok]
-        source = "verdict_path"
-    stats: dict[str, Any] = {
-        "n_frames": len(records),
-        "counts": {v.value: counts.get(v.value, 0) for v in Verdict},
-        "unverifiable_reasons": dict(reasons),
-        "corner_error_px": {
-            "median": float(np.median(finite)) if len(finite) else None,
-            "p90": float(np.percentile(finite, 90)) if len(finite) else None,
-            "max": float(np.max(finite)) if len(finite) else None,
-            "n_measured": int(len(finite)),
-        },
-        "auc": auc_at_thresholds(errs, (1.0, 3.0, 5.0, 10.0)),
-        "systematic_offset": {**systematic_offset(shifts, zooms, threshold_px), "path": source},
-    }
-    return stats

@@ -10,7 +10,7 @@ import pytest
 
 from pgt_check.config import RunConfig
 from pgt_check.errors import ConfigError
-from pgt_check.verdict.decide import gate
+from pgt_check.verdict.run_stats import gate
 
 
 @pytest.mark.parametrize(

@@ -7,7 +7,7 @@ from pgt_check.config import VerdictConfig
 from pgt_check.enhance.base import Evidence
 from pgt_check.measure import FrameMeasurement, MeasureReason, PathMeasurement
 from pgt_check.verdict import Verdict, decide, gate, resolve_threshold_px, systematic_offset
-from pgt_check.verdict.decide import run_statistics
+from pgt_check.verdict.run_stats import run_statistics
 
 
 def _m(error="", coverage=0.8, homography_reason="", n_inliers=100, inlier_ratio=0.5,
