@@ -15,6 +15,7 @@ inf), the evidence kinds, and seconds per frame (measurement) and per run (run-l
 Writes reports/shared_errors.md and reports/edge_evidence.md (+ .json).
 
     python benchmarks/shared_errors.py [--frames 20] [--datasets 7s,7s-colourless,castle,boxes]
+        [--edges-off] [--presets fast,balanced,accurate]
 """
 
 from __future__ import annotations
@@ -176,7 +177,40 @@ def _decided_error(row: dict) -> float:
     return np.inf if e is None else float(e)
 
 
-def run_dataset(name: str, traj: Trajectory, mesh: Path, cfgd: dict, edges_off: bool) -> dict:
+#: cases also measured under each preset (``--presets``)
+PRESET_CASES = ("given", "per-frame", "moved 2deg+4%", "moved 1deg", "drift (last 40 %)")
+
+
+def _merged(base: dict, extra: dict) -> dict:
+    """``base`` with ``extra``'s sections merged in (one level deep, ``extra`` wins)."""
+    out = {k: dict(v) if isinstance(v, dict) else v for k, v in base.items()}
+    for k, v in extra.items():
+        out[k] = {**out.get(k, {}), **v} if isinstance(v, dict) else v
+    return out
+
+
+def run_presets(name: str, traj: Trajectory, mesh: Path, cfgd: dict, depth: float,
+                presets: list[str]) -> list[dict]:
+    """The ``PRESET_CASES`` under each named preset (``pgt_check.config.PRESETS``)."""
+    from pgt_check.config import PRESETS
+
+    out = []
+    all_cases = cases(traj, depth)
+    for preset in presets:
+        pcfg = _merged(cfgd, PRESETS[preset])
+        for case in PRESET_CASES:
+            t, truth = all_cases[case]
+            c_cfg, c_ms, c_tpf = measure(t, mesh, pcfg, f"{name}-{case}-{preset}")
+            row = evaluate(case, truth, c_ms, c_cfg)
+            row.update(preset=preset, s_per_frame=c_tpf)
+            out.append(row)
+            print(name, preset, json.dumps(row), flush=True)
+    return out
+
+
+def run_dataset(
+    name: str, traj: Trajectory, mesh: Path, cfgd: dict, edges_off: bool, presets: list[str]
+) -> dict:
     cfg, ms, tpf = measure(traj, mesh, cfgd, f"{name}-given")
     depth = scene_depth(ms)
     res = {"dataset": name, "frames": len(ms), "depth": depth, "s_per_frame": tpf, "rows": []}
@@ -207,6 +241,7 @@ def run_dataset(name: str, traj: Trajectory, mesh: Path, cfgd: dict, edges_off: 
             row_off["s_per_frame"] = o_tpf
             res["rows"].append(row_off)
             print(name, json.dumps(row_off), flush=True)
+    res["presets"] = run_presets(name, traj, mesh, cfgd, depth, presets) if presets else []
     return res
 
 
@@ -288,9 +323,41 @@ def write_reports(results: list[dict], args: argparse.Namespace) -> None:
                 rows,
             )
         )
+    lines += _preset_section(results)
     (REPORTS / "shared_errors.md").write_text("\n".join(lines) + "\n")
     (REPORTS / "shared_errors.json").write_text(json.dumps(results, indent=1, default=str))
     write_edge_report(results, head)
+
+
+def _preset_section(results: list[dict]) -> list[str]:
+    """The presets table (``--presets``): detection and cost of each preset on the key cases."""
+    rows = [
+        [
+            res["dataset"], r["preset"], r["case"], r["flagged"],
+            f"{r['verdicts'].get('FAIL', 0)} / {r['verdicts'].get('UNVERIFIABLE', 0)}",
+            r.get("flagged_bad", ""), r.get("flagged_good", ""), r.get("registration", ""),
+            _f(r.get("reg_deg")), _f(r.get("reg_px")), r.get("drift", ""),
+            _f(r.get("drift_auc")), _f(r.get("verdict_auc")),
+            ", ".join(f"{k} {v}" for k, v in r["evidence"].items()),
+            _f(r.get("s_per_frame")), _f(r.get("t_run_checks_s")),
+        ]  # fmt: skip
+        for res in results
+        for r in res.get("presets", [])
+    ]
+    if not rows:
+        return []
+    head = [
+        "dataset", "preset", "case", "flagged", "FAIL / UNV.", "bad flagged", "good flagged",
+        "registration", "deg", "px", "drift", "drift AUC", "verdict AUC", "evidence",
+        "s/frame", "run checks s",
+    ]  # fmt: skip
+    return [
+        "\n## Presets\n",
+        "The key cases under each `--preset` (`fast`: SIFT 320 px, raw only, no PnP; "
+        "`balanced`: SIFT 320 px + auto reprojection; `accurate`: XFeat 640 px + auto "
+        "reprojection), with the same run-level checks and the edge path on auto.\n",
+        md_table(head, rows),
+    ]
 
 
 def _verifiable(r: dict) -> str:
@@ -358,6 +425,7 @@ def main() -> None:
     p.add_argument("--frames", type=int, default=20)
     p.add_argument("--datasets", default="castle,7s,7s-colourless")
     p.add_argument("--edges-off", action="store_true", help="also run without the edge path")
+    p.add_argument("--presets", default="", help="comma-separated presets to run the key cases with")
     p.add_argument(
         "--from-json",
         action="store_true",
@@ -369,7 +437,8 @@ def main() -> None:
         return
     results = []
     for name, (traj, mesh, cfgd) in datasets(args.datasets.split(","), args.frames).items():
-        results.append(run_dataset(name, traj, mesh, cfgd, args.edges_off))
+        presets = [x for x in args.presets.split(",") if x]
+        results.append(run_dataset(name, traj, mesh, cfgd, args.edges_off, presets))
         write_reports(results, args)
 
 
