@@ -35,6 +35,19 @@ def _flagged(rows) -> float:
     return float(np.mean([r["verdict"] != "PASS" for r in rows]))
 
 
+def _real(shared_data: Path, dataset: str) -> tuple[Path, float, tuple[str, ...], Trajectory]:
+    """(root, median scene depth, extra CLI options, trajectory) of a shared dataset: the
+    castle's 10 photos, or 20 7-Scenes frames (every 5th), judged after removing their real
+    RGB-vs-depth calibration offset as the README documents for that data."""
+    if dataset == "castle":
+        root = shared_data / "sceaux_castle"
+        return root, 9.0, (), read_trajectory(root / "trajectories.txt")
+    root = shared_data / "7scenes_redkitchen"
+    full = read_trajectory(root / "trajectories.txt")
+    traj = Trajectory(tuple(full.frames[::5]), full.source, full.format)
+    return root, 2.3, ("--remove-calibration",), traj
+
+
 @pytest.fixture(scope="module")
 def boxes(tmp_path_factory):
     return textureless_scene(tmp_path_factory.mktemp("boxes"), 16)
@@ -79,13 +92,7 @@ def test_real_moved_trajectory_fails_the_gate(shared_data, dataset, tmp_path, ca
     """2 deg + 4 % of the depth on the real data: the gate fails, the summary states the
     correction. (The 7-Scenes poses also carry their real RGB-vs-depth offset, so the check is
     run after removing the estimated calibration, as the README documents for that data.)"""
-    if dataset == "castle":
-        root, depth, extra = shared_data / "sceaux_castle", 9.0, ()
-        traj = read_trajectory(root / "trajectories.txt")
-    else:
-        root, depth, extra = shared_data / "7scenes_redkitchen", 2.4, ("--remove-calibration",)
-        full = read_trajectory(root / "trajectories.txt")
-        traj = Trajectory(tuple(full.frames[::5]), full.source, full.format)
+    root, depth, extra, traj = _real(shared_data, dataset)
     moved = move_trajectory(traj, shared_transform(traj, 2.0, 0.04 * depth, seed=1))
     rc, summary, rows = _run(moved, root / "mesh.ply", tmp_path, *extra)
     reg = summary["shared_errors"]["registration"]
@@ -112,13 +119,7 @@ def test_real_drifting_segment_is_separated(shared_data, dataset, tmp_path, caps
     none of them PASSes."""
     from pgt_check.evaluation import drift_trajectory, roc_auc
 
-    if dataset == "castle":
-        root, depth, extra = shared_data / "sceaux_castle", 9.0, ()
-        traj = read_trajectory(root / "trajectories.txt")
-    else:
-        root, depth, extra = shared_data / "7scenes_redkitchen", 2.3, ("--remove-calibration",)
-        full = read_trajectory(root / "trajectories.txt")
-        traj = Trajectory(tuple(full.frames[::5]), full.source, full.format)
+    root, depth, extra, traj = _real(shared_data, dataset)
     drifted, ids = drift_trajectory(traj, 0.6, 2.0, 0.04 * depth, seed=2)
     rc, summary, rows = _run(drifted, root / "mesh.ply", tmp_path, *extra)
     drift = summary["shared_errors"]["drift"]
