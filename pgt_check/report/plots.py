@@ -214,7 +214,8 @@ def plot_drift(records, summary, out_dir: Path) -> str | None:
     if not per:
         return None
     plt = _pyplot()
-    thr = _threshold(records, summary)
+    drift = summary.get("shared_errors", {}).get("drift", {})
+    thr = _num(drift, "threshold_px") if isinstance(drift, Mapping) else math.nan
     x = np.array([_num(e, "index") for e in per])
     eff = np.array([_num(e, "effect_px") for e in per])
     lo = np.array([_num(e, "lo_px") for e in per])

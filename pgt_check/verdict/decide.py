@@ -298,9 +298,9 @@ def _run_level(
     if absolute_pass:  # an absolute path confirms the relative PASS
         return Verdict.PASS, "", Evidence.ABSOLUTE.value
     drift = np.nan if shared is None else shared.drift_px.get(frame_id, np.nan)
-    if reg == PASSED and frame_id not in shared.left_out and not drift > shared.threshold_px:
+    if reg == PASSED and frame_id not in shared.left_out and not drift > shared.drift_threshold_px:
         return Verdict.PASS, "", "relative+registration"
-    if reg == PASSED and drift > shared.threshold_px:
+    if reg == PASSED and drift > shared.drift_threshold_px:
         # the run-level checks do not vouch for this part of the trajectory: its drift score
         # is above the threshold, only not significantly
         reg = f"passed, but the trajectory here drifts by {drift:.1f} px, not confirmed"
