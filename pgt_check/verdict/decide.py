@@ -200,14 +200,15 @@ def judge(
     Otherwise the deciding feature path (more inliers) gives the verdict; where no feature path
     is verifiable, the geometric-edge path does. A PASS needs absolute evidence (an absolute
     path decided, or the raw or edge path also passes), or relative evidence plus a passed
-    registration check whose drift score at this frame stays within the shared threshold; a
-    relative-only PASS is UNVERIFIABLE (``relative_evidence_only``). A failed registration check
-    or a flagged drift segment turns the frames' PASS into FAIL.
+    registration check whose drift score at this frame stays within the drift threshold; a
+    relative-only PASS is UNVERIFIABLE (``relative_evidence_only``). A non-confident FAIL
+    against another absolute path's PASS: a clear PASS decides, else ``paths_disagree``. A
+    failed registration check or a flagged drift segment turns the frames' PASS into FAIL.
 
     ``own`` (frame id -> its own render is clearly off, ``own_outcomes``): when the
-    reprojected reference that decided is clearly off on its own render, the reprojection carries the reference's
-    error, so neither its PASS nor its FAIL counts: this frame's own render decides, or the
-    frame is UNVERIFIABLE (``reference_off``).
+    reprojected reference that decided is clearly off on its own render, the reprojection
+    carries the reference's error, so neither its PASS nor its FAIL counts: this frame's own
+    render decides, or the frame is UNVERIFIABLE (``reference_off``).
     """
     base, why = decide(m, config)
     if m.error is not MeasureReason.NONE or why == MeasureReason.LOW_COVERAGE.value:
