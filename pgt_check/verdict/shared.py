@@ -353,6 +353,25 @@ def _drift_entry(est: Any, ids: list[str], threshold: float) -> tuple[dict, dict
     return entry, score, flagged
 
 
+def _shared_or_not(entry: dict[str, Any], residuals: np.ndarray, tol_px: float) -> dict:
+    """A FAILED registration entry becomes INCONCLUSIVE when fewer than half of the frames
+    agree with the correction (residual within ``tol_px`` after it): the frames then carry
+    errors of their own, and one shared correction does not describe them (e.g. 3 frames, 2
+    with large pose errors, which leaving frames out cannot separate)."""
+    finite = residuals[np.isfinite(residuals)]
+    agree = float(np.mean(finite <= tol_px)) if len(finite) else 0.0
+    entry["frames_agreeing"] = agree
+    if entry.get("status") == FAILED and agree < 0.5:
+        entry["status"] = INCONCLUSIVE
+        what = entry["message"].split(" FAILED", 1)[0]
+        entry["message"] = (
+            f"{what} inconclusive: only {agree:.0%} of the frames agree with one shared "
+            f"correction (the others have errors of their own); the fitted one moves the "
+            f"images by {entry.get('effect_px') or float('nan'):.1f} px"
+        )
+    return entry
+
+
 def frame_residuals(ev: Sequence[Any], est: Any) -> np.ndarray:
     """Median reprojection residual (px) of each frame's evidence after the world correction
     ``est`` (a ``RegistrationEstimate``; identity when it failed)."""
@@ -453,8 +472,14 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
 
         ev, all_ev, mode = [without(e) for e in ev], [without(e) for e in all_ev], "none"
     kw = {"calibration": mode, "calibration_translation": trans}
-    reg = _registration_entry(estimate_registration(ev, **kw), thr, "rigid")
-    sim = _registration_entry(estimate_registration(ev, similarity=True, **kw), thr, "similarity")
+    reg, sim = (
+        _shared_or_not(
+            _registration_entry(est := estimate_registration(ev, similarity=s, **kw), thr, kind),
+            frame_residuals(ev, est),
+            0.5 * frame_thr,
+        )
+        for s, kind in ((False, "rigid"), (True, "similarity"))
+    )
     # drift looks at every frame: a drifting segment is what the consistent frames leave out;
     # frames without evidence of their own are covered by the segment they lie in
     ids = [m.frame_id for m in measurements]

@@ -110,7 +110,7 @@ def test_3d_scene_translation_is_not_a_silent_pass(scene_factory):
         s.frame(CAM, pose, pose @ make_rigid(np.eye(3), [0.0, 0.0, 0.5])),
     ]
     recs = s.check(frames)
-    assert recs[0]["verdict"] == "PASS" and recs[0]["corner_error_px"] < 1.0
+    assert recs[0]["verdict"] == "PASS" and recs[0]["corner_error_px"] < 1.0, recs[0]["reason"]
     for r in recs[1:]:
         assert r["verdict"] in ("FAIL", "UNVERIFIABLE"), r
         if r["corner_error_px"] is not None:

@@ -210,7 +210,7 @@ def estimate_registration(
     loss_scale_px: float = 2.0,
     max_error_px: float = 6.0,
     scene_depth: float | None = None,
-    min_frames: int = 3,
+    min_frames: int = 5,
     min_points_per_frame: int = 6,
     min_inliers: int = 30,
     max_correlation: float = 0.985,
@@ -234,6 +234,9 @@ def estimate_registration(
     calibration_translation: also fit a camera-frame translation per camera (a camera mounted
     beside the sensor whose poses are given, e.g. RGB beside depth), where the points' depths
     differ enough; off by default: for cameras circling the scene it mimics a world rotation.
+    min_frames: frames with evidence needed (default 5): the interval resamples frames, and
+    fewer give too few distinct resamples (3 frames with errors of their own fit a shared
+    similarity closely).
     """
     p = _prepare(evidence, min_points_per_frame, min_frames, calibration_translation)
     if isinstance(p, str):

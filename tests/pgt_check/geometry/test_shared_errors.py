@@ -247,7 +247,7 @@ def test_same_viewing_direction_is_reported_as_ambiguous():
 
 
 def test_degenerate_input_fails_with_a_reason():
-    ev = make_evidence(0, n_frames=4)
+    ev = make_evidence(0, n_frames=6)
     assert estimate_registration([]).reason == "too_few_frames"
     assert estimate_registration(ev[:1]).reason == "too_few_frames"
     empty = [
