@@ -122,7 +122,6 @@ def _evaluate(p: _Problem, bounds, ref: _State, ref_deltas, opt: _DriftOptions, 
             sub, wf, similarity=opt.similarity, calib=calib, n_bootstrap=opt.n_bootstrap,
             seed=opt.seed + 1 + k, max_error_px=opt.max_error_px, scene_depth=None,
             reference=ref, ref_deltas=ref_deltas, min_inliers=opt.min_window_inliers // 2,
-            resample_frames=False,
         )  # fmt: skip
         flagged = bool(est.success and est.exceeds(opt.threshold_px))
         member[a:b] += flagged

@@ -23,7 +23,6 @@ from pgt_check.geometry.shared_errors.solver import (
     _ci,
     _Fit,
     _solve,
-    _weighted_median,
 )
 
 logger = logging.getLogger(__name__)
@@ -90,10 +89,8 @@ def _registration_from_fit(
     ref_deltas: np.ndarray | None = None,
     selection: _Selection | None = None,
     min_inliers: int = 12,
-    resample_frames: bool = False,
 ) -> RegistrationEstimate:
-    """Summaries and bootstrap CIs of a world fit (relative to ``reference`` if given);
-    ``resample_frames``: the effect's interval also re-draws the frames of its median."""
+    """Summaries and bootstrap CIs of a world fit (relative to ``reference`` if given)."""
     st = fit.state
     rn = np.linalg.norm(fit.residuals, axis=1)
     inl = rn < max_error_px
@@ -119,15 +116,8 @@ def _registration_from_fit(
     # the effect is the median over THIS trajectory's frames; its interval comes from the
     # uncertainty of the correction (bootstrap states), not from re-drawing the frames for
     # the median: a similarity moves far frames more than near ones, and resampling which
-    # frames enter the median measured that spread instead of the correction's precision.
-    # Drift windows keep the re-drawn median (``resample_frames``): over a short stretch a
-    # view-dependent error the model lacks (e.g. a camera-to-rig translation, whose image
-    # effect depends on the depth) looks like a local world correction, and the wider
-    # interval keeps it from being flagged as drift (7-Scenes, 100 given frames)
-    if has_boot and resample_frames:
-        eff = np.concatenate([[np.median(eff_f[0])], _weighted_median(eff_f[1:], counts)])
-    else:
-        eff = np.nanmedian(eff_f, axis=1) if has_boot else np.array([np.nanmedian(eff_f[0])])
+    # frames enter the median measured that spread instead of the correction's precision
+    eff = np.nanmedian(eff_f, axis=1) if has_boot else np.array([np.nanmedian(eff_f[0])])
 
     def ci(x: np.ndarray) -> _CI:
         return tuple(_ci(x[1:]).tolist()) if has_boot else _NAN_CI

@@ -165,12 +165,3 @@ def _fit_at(
     r, jm = _residuals(p, st, jac=True, world=world, similarity=similarity, calib=calib)
     wgt = _cauchy_weights(r, scale)
     return _Fit(st, wgt, r, jm, _normal_equations(jm, wgt, r)[0], True)
-
-
-def _weighted_median(values: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """Row-wise weighted median of (B, F) values with (B, F) non-negative weights."""
-    order = np.argsort(values, axis=1)
-    v = np.take_along_axis(values, order, axis=1)
-    cw = np.cumsum(np.take_along_axis(weights, order, axis=1), axis=1)
-    idx = np.argmax(cw >= 0.5 * cw[:, -1:], axis=1)
-    return v[np.arange(len(v)), idx]
