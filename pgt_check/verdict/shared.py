@@ -247,7 +247,10 @@ def _calibration_entry(est: Any, shared_thr: float, frame_thr: float) -> dict[st
         # true_cam_from_checked_cam: what --calibration-from applies to another run
         "rotation": None if est.rotation is None else np.asarray(est.rotation).tolist(),
         "translation": _ci(est.translation) if est.translation_fitted else None,
-        "translation_ci": _ci(est.translation_ci) if est.translation_fitted else None,
+        # (3, 2): the 95 % interval of each component
+        "translation_ci": (
+            [_ci(row) for row in np.asarray(est.translation_ci)] if est.translation_fitted else None
+        ),
     }
     if status == NOT_CHECKED:
         entry["message"] = f"calibration not checked: no absolute evidence ({est.reason})"

@@ -240,6 +240,8 @@ def test_calibration_translation_is_reported_and_removed(truth):
     cal = next(iter(j.shared.summary()["calibration"].values()))
     assert cal["translation"] is not None
     np.testing.assert_allclose(cal["translation"], t, atol=0.3 * 0.04)
+    lo, hi = np.asarray(cal["translation_ci"]).T  # (3, 2) per-component intervals
+    assert np.all(lo <= hi) and lo[0] < 0.04 * 1.3 and hi[0] > 0.04 * 0.7
     assert "camera-to-rig translation" in cal["message"]
     assert j.shared.summary()["registration"]["status"] == "passed"
     assert j.shared.summary()["drift"]["status"] == "passed"
