@@ -227,7 +227,7 @@ def run_calibration_from(name: str, traj: Trajectory, mesh: Path, cfgd: dict,
     out = []
     for case in CALIBRATION_FROM_CASES:
         t, truth = all_cases[case]
-        c_cfg, c_ms, c_tpf = measure(t, mesh, cfgd, f"{name}-{case}")
+        _, c_ms, c_tpf = measure(t, mesh, cfgd, f"{name}-{case}")
         vcfg = RunConfig.from_dict(
             {"input": {"mesh": str(mesh)}, **base, "verdict": {"calibration_from": str(trusted)}}
         )
