@@ -10,6 +10,15 @@ _CI = tuple[float, float]
 _NAN_CI: _CI = (float("nan"), float("nan"))
 
 
+def _exceeds(est: RegistrationEstimate | CalibrationEstimate, threshold_px: float) -> bool:
+    """The estimate succeeded and the lower bound of its pixel effect (the effect itself when
+    there is no interval) exceeds ``threshold_px``."""
+    if not est.success:
+        return False
+    low = est.effect_px_ci[0]
+    return bool((low if np.isfinite(low) else est.effect_px) > threshold_px)
+
+
 @dataclass(frozen=True, eq=False)
 class RegistrationEstimate:
     """One world correction for the whole trajectory (or one drift window).
@@ -52,10 +61,7 @@ class RegistrationEstimate:
 
     def exceeds(self, threshold_px: float) -> bool:
         """True when the lower 95 % bound of the pixel effect exceeds ``threshold_px``."""
-        if not self.success:
-            return False
-        low = self.effect_px_ci[0]
-        return bool((low if np.isfinite(low) else self.effect_px) > threshold_px)
+        return _exceeds(self, threshold_px)
 
     def correct(self, world_from_cam: np.ndarray) -> np.ndarray:
         """Apply the correction to one (4, 4) pose; returns a rigid (4, 4) pose."""
@@ -120,10 +126,7 @@ class CalibrationEstimate:
 
     def exceeds(self, threshold_px: float) -> bool:
         """True when the lower 95 % bound of the pixel effect exceeds ``threshold_px``."""
-        if not self.success:
-            return False
-        low = self.effect_px_ci[0]
-        return bool((low if np.isfinite(low) else self.effect_px) > threshold_px)
+        return _exceeds(self, threshold_px)
 
     def to_json(self) -> dict:
         return _to_json(self)
