@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -250,35 +251,9 @@ def test_degenerate_input_fails_with_a_reason():
     ev = make_evidence(0, n_frames=6)
     assert estimate_registration([]).reason == "too_few_frames"
     assert estimate_registration(ev[:1]).reason == "too_few_frames"
-    empty = [
-        FrameEvidence(
-            e.frame_id,
-            e.index,
-            e.camera_id,
-            e.world_from_cam,
-            e.K,
-            640,
-            480,
-            np.zeros((0, 2)),
-            np.zeros((0, 3)),
-        )
-        for e in ev
-    ]
+    empty = [replace(e, pts2d=np.zeros((0, 2)), pts3d=np.zeros((0, 3))) for e in ev]
     assert estimate_registration(empty).reason == "too_few_points"
-    nan = [
-        FrameEvidence(
-            e.frame_id,
-            e.index,
-            e.camera_id,
-            e.world_from_cam,
-            e.K,
-            640,
-            480,
-            np.full_like(e.pts2d, np.nan),
-            e.pts3d,
-        )
-        for e in ev
-    ]
+    nan = [replace(e, pts2d=np.full_like(e.pts2d, np.nan)) for e in ev]
     assert estimate_registration(nan).reason == "too_few_points"
     junk = make_evidence(0, n_frames=10, outliers=1.0)
     reg = estimate_registration(junk)
