@@ -8,7 +8,7 @@ from typing import Any
 
 from pgt_check.config import RunConfig
 from pgt_check.measure.record import FrameMeasurement
-from pgt_check.verdict.decide import judge, own_outcomes
+from pgt_check.verdict.decide import judge, own_outcomes, path_outcomes
 from pgt_check.verdict.shared import SharedChecks, run_shared_checks
 
 #: the verdict columns every row gets beside the measurement columns, with their meaning
@@ -42,10 +42,11 @@ def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> Ru
     Measurements are not changed (records.jsonl stays as measured)."""
     ms = list(measurements)
     shared = run_shared_checks(ms, config) if config.verdict.shared_checks and ms else None
-    own = own_outcomes(ms, config.verdict, shared)
+    outs = [path_outcomes(m, config.verdict, shared) for m in ms]
+    own = own_outcomes(ms, config.verdict, shared, outs)
     rows = []
-    for m in ms:
-        j = judge(m, config.verdict, shared, own)
+    for m, out in zip(ms, outs, strict=True):
+        j = judge(m, config.verdict, shared, own, out)
         row = m.row()
         row.update(
             verdict=j.verdict.value,

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from enum import Enum
 from typing import Any
@@ -173,15 +173,21 @@ def _error_ratio(m: FrameMeasurement, name: str, config: VerdictConfig, shared: 
 
 
 def own_outcomes(
-    measurements: Iterable[FrameMeasurement], config: VerdictConfig, shared: Any = None
+    measurements: Iterable[FrameMeasurement],
+    config: VerdictConfig,
+    shared: Any = None,
+    outcomes: Sequence[Mapping[str, tuple[Verdict, str] | None]] | None = None,
 ) -> dict[str, bool]:
     """frame id -> whether its own render is clearly off (``own_outcome`` FAILs with the
     corner error beyond ``1 + CLEAR_MARGIN`` x the threshold, on a raw path with
     ``confident_inliers`` or the edge path), for the reference check: a reference that is only
-    near the threshold, or judged by a few raw inliers, still serves."""
+    near the threshold, or judged by a few raw inliers, still serves. ``outcomes``: the
+    frames' ``path_outcomes`` when already computed (same order)."""
+    ms = list(measurements)
+    outs = outcomes if outcomes is not None else [path_outcomes(m, config, shared) for m in ms]
     out = {}
-    for m in measurements:
-        verdict, _, name = own_outcome(m, path_outcomes(m, config, shared), config)
+    for m, o in zip(ms, outs, strict=True):
+        verdict, _, name = own_outcome(m, o, config)
         weak = name == "raw" and m.raw is not None and m.raw.n_inliers < config.confident_inliers
         ratio = _error_ratio(m, name, config, shared)
         out[m.frame_id] = verdict is Verdict.FAIL and not weak and ratio > 1.0 + CLEAR_MARGIN
@@ -193,6 +199,7 @@ def judge(
     config: VerdictConfig,
     shared: Any = None,
     own: Mapping[str, bool] | None = None,
+    outcomes: Mapping[str, tuple[Verdict, str] | None] | None = None,
 ) -> Judgement:
     """The frame's verdict from its paths and the run-level checks (``verdict.shared``).
 
@@ -208,12 +215,13 @@ def judge(
     ``own`` (frame id -> its own render is clearly off, ``own_outcomes``): when the
     reprojected reference that decided is clearly off on its own render, the reprojection
     carries the reference's error, so neither its PASS nor its FAIL counts: this frame's own
-    render decides, or the frame is UNVERIFIABLE (``reference_off``).
+    render decides, or the frame is UNVERIFIABLE (``reference_off``). ``outcomes``: this
+    frame's ``path_outcomes`` when already computed.
     """
     base, why = decide(m, config)
     if m.error is not MeasureReason.NONE or why == MeasureReason.LOW_COVERAGE.value:
         return Judgement(base, why, "none", "", "")
-    out = path_outcomes(m, config, shared)
+    out = outcomes if outcomes is not None else path_outcomes(m, config, shared)
     raw_v = "" if out["raw"] is None else out["raw"][0].value
     enh_v = "" if out["enhanced"] is None else out["enhanced"][0].value
     edge_v = None if out["edges"] is None else out["edges"][0]
