@@ -21,25 +21,22 @@ class Column:
     csv: bool = True
 
 
-def _path_attr(path: str, attr: str) -> Callable[[FrameMeasurement], Any]:
+def _path_attr(path: str, attr: str, default: Any = None) -> Callable[[FrameMeasurement], Any]:
+    """``attr`` of the record's part ``path`` (raw, enhanced, edges, pose, or ``chosen``: the
+    deciding path), ``default`` when it is absent."""
+
     def get(m: FrameMeasurement) -> Any:
         p = getattr(m, path)
-        return None if p is None else getattr(p, attr)
-
-    return get
-
-
-def _chosen_attr(attr: str, default: Any = None) -> Callable[[FrameMeasurement], Any]:
-    def get(m: FrameMeasurement) -> Any:
-        p = m.chosen
         return default if p is None else getattr(p, attr)
 
     return get
 
 
-def _chosen_success_attr(attr: str) -> Callable[[FrameMeasurement], Any]:
+def _path_success_attr(path: str, attr: str) -> Callable[[FrameMeasurement], Any]:
+    """``attr`` of path ``path`` where it found a homography (None otherwise)."""
+
     def get(m: FrameMeasurement) -> Any:
-        p = m.chosen
+        p = getattr(m, path)
         return None if p is None or not p.success else getattr(p, attr)
 
     return get
@@ -49,12 +46,21 @@ def _timing(attr: str) -> Callable[[FrameMeasurement], Any]:
     return lambda m: getattr(m.timings, attr)
 
 
-def _pose_attr(attr: str) -> Callable[[FrameMeasurement], Any]:
-    return lambda m: None if m.pose is None else getattr(m.pose, attr)
-
-
-def _raw_shift(attr: str) -> Callable[[FrameMeasurement], Any]:
-    return lambda m: None if m.raw is None or not m.raw.success else getattr(m.raw, attr)
+def _path_stats(path: str, what: str) -> tuple[Column, ...]:
+    """Matches, inliers, inlier ratio and no-homography reason of one feature path."""
+    return (
+        Column(f"n_matches_{path}", f"matches of the {what}", _path_attr(path, "n_matches")),
+        Column(f"n_inliers_{path}", f"inliers of the {what}", _path_attr(path, "n_inliers")),
+        Column(
+            f"inlier_ratio_{path}", f"inlier ratio of the {what}", _path_attr(path, "inlier_ratio")
+        ),
+        Column(
+            f"homography_reason_{path}",
+            f"why the {what} has no homography",
+            _path_attr(path, "reason", ""),
+            csv=False,
+        ),
+    )
 
 
 #: the measurement's flat columns, in frames.csv order (the verdict columns come from
@@ -68,35 +74,35 @@ MEASUREMENT_COLUMNS: tuple[Column, ...] = (
     Column(
         "corner_error_px",
         "corner error of the deciding path, photo px",
-        _chosen_attr("corner_error_px"),
+        _path_attr("chosen", "corner_error_px"),
     ),
-    Column("n_matches", "matches of the deciding path", _chosen_attr("n_matches", 0)),
-    Column("n_inliers", "homography inliers of the deciding path", _chosen_attr("n_inliers", 0)),
+    Column("n_matches", "matches of the deciding path", _path_attr("chosen", "n_matches", 0)),
+    Column("n_inliers", "homography inliers of the deciding path", _path_attr("chosen", "n_inliers", 0)),
     Column(
-        "inlier_ratio", "inliers / matches of the deciding path", _chosen_attr("inlier_ratio", 0.0)
+        "inlier_ratio", "inliers / matches of the deciding path", _path_attr("chosen", "inlier_ratio", 0.0)
     ),
     Column(
         "homography_reason",
         "why the deciding path has no homography",
-        _chosen_attr("reason", ""),
+        _path_attr("chosen", "reason", ""),
         csv=False,
     ),
     Column("coverage", "share of the render covered by the mesh", lambda m: m.coverage),
     Column(
         "shift_dx_px",
         "mean corner shift x of the deciding path, px",
-        _chosen_success_attr("shift_dx_px"),
+        _path_success_attr("chosen", "shift_dx_px"),
     ),
     Column(
         "shift_dy_px",
         "mean corner shift y of the deciding path, px",
-        _chosen_success_attr("shift_dy_px"),
+        _path_success_attr("chosen", "shift_dy_px"),
     ),
-    Column("zoom", "warped / original diagonal of the deciding path", _chosen_success_attr("zoom")),
+    Column("zoom", "warped / original diagonal of the deciding path", _path_success_attr("chosen", "zoom")),
     Column(
-        "n_kpts_render", "keypoints in the render (deciding path)", _chosen_attr("n_kpts_render")
+        "n_kpts_render", "keypoints in the render (deciding path)", _path_attr("chosen", "n_kpts_render")
     ),
-    Column("n_kpts_photo", "keypoints in the photo (deciding path)", _chosen_attr("n_kpts_photo")),
+    Column("n_kpts_photo", "keypoints in the photo (deciding path)", _path_attr("chosen", "n_kpts_photo")),
     Column("width", "photo width, px", lambda m: m.width),
     Column("height", "photo height, px", lambda m: m.height),
     Column("match_width", "width matched at, px", lambda m: m.match_width),
@@ -108,43 +114,19 @@ MEASUREMENT_COLUMNS: tuple[Column, ...] = (
         _path_attr("raw", "corner_error_px"),
     ),
     Column(
-        "shift_dx_px_raw", "mean corner shift x of the raw render, px", _raw_shift("shift_dx_px")
+        "shift_dx_px_raw", "mean corner shift x of the raw render, px", _path_success_attr("raw", "shift_dx_px")
     ),
     Column(
-        "shift_dy_px_raw", "mean corner shift y of the raw render, px", _raw_shift("shift_dy_px")
+        "shift_dy_px_raw", "mean corner shift y of the raw render, px", _path_success_attr("raw", "shift_dy_px")
     ),
-    Column("zoom_raw", "zoom of the raw render", _raw_shift("zoom")),
-    Column("n_matches_raw", "matches of the raw render", _path_attr("raw", "n_matches")),
-    Column("n_inliers_raw", "inliers of the raw render", _path_attr("raw", "n_inliers")),
-    Column("inlier_ratio_raw", "inlier ratio of the raw render", _path_attr("raw", "inlier_ratio")),
-    Column(
-        "homography_reason_raw",
-        "why the raw render has no homography",
-        lambda m: "" if m.raw is None else m.raw.reason,
-        csv=False,
-    ),
+    Column("zoom_raw", "zoom of the raw render", _path_success_attr("raw", "zoom")),
+    *_path_stats("raw", "raw render"),
     Column(
         "corner_error_px_enhanced",
         "corner error of the enhanced render, px",
         _path_attr("enhanced", "corner_error_px"),
     ),
-    Column(
-        "n_matches_enhanced", "matches of the enhanced render", _path_attr("enhanced", "n_matches")
-    ),
-    Column(
-        "n_inliers_enhanced", "inliers of the enhanced render", _path_attr("enhanced", "n_inliers")
-    ),
-    Column(
-        "inlier_ratio_enhanced",
-        "inlier ratio of the enhanced render",
-        _path_attr("enhanced", "inlier_ratio"),
-    ),
-    Column(
-        "homography_reason_enhanced",
-        "why the enhanced render has no homography",
-        lambda m: "" if m.enhanced is None else m.enhanced.reason,
-        csv=False,
-    ),
+    *_path_stats("enhanced", "enhanced render"),
     Column(
         "corner_error_px_edges",
         "corner error of the geometric-edge alignment, px",
@@ -158,7 +140,7 @@ MEASUREMENT_COLUMNS: tuple[Column, ...] = (
     Column(
         "edge_reason",
         "why the edge path is not verifiable (ambiguous, low_support, ...)",
-        lambda m: "" if m.edges is None else m.edges.reason,
+        _path_attr("edges", "reason", ""),
     ),
     Column("enhanced", "whether the enhanced path ran", lambda m: m.enhance_ran),
     Column("enhanced_why", "why it ran or not", lambda m: m.enhanced_why),
@@ -172,13 +154,13 @@ MEASUREMENT_COLUMNS: tuple[Column, ...] = (
         "reference frame of the enhanced path",
         _path_attr("enhanced", "reference_id"),
     ),
-    Column("pose_dt", "PnP camera-centre correction, scene units", _pose_attr("dt")),
-    Column("pose_drot_deg", "PnP rotation correction, deg", _pose_attr("drot_deg")),
-    Column("pose_inliers", "PnP inliers", _pose_attr("n_inliers")),
+    Column("pose_dt", "PnP camera-centre correction, scene units", _path_attr("pose", "dt")),
+    Column("pose_drot_deg", "PnP rotation correction, deg", _path_attr("pose", "drot_deg")),
+    Column("pose_inliers", "PnP inliers", _path_attr("pose", "n_inliers")),
     Column(
         "pose_reason",
         "why the PnP estimate failed",
-        lambda m: "" if m.pose is None else m.pose.reason,
+        _path_attr("pose", "reason", ""),
         csv=False,
     ),
     Column("t_load_s", "time: photo loading, s", _timing("load")),
