@@ -31,7 +31,8 @@ def test_log_progress_every_interval_and_at_the_end(caplog):
     assert list(runner.log_progress([], 0, "x", clock=lambda: 0.0)) == []
 
 
-def test_sample_run_keeps_panels_from_the_main_pass(tmp_path, capsys, sample_scene, monkeypatch):
+def _count_measures(monkeypatch) -> list[str]:
+    """The frame ids ``FrameChecker.measure`` is called with, in order (filled as it runs)."""
     calls: list[str] = []
     measure = FrameChecker.measure
 
@@ -40,6 +41,11 @@ def test_sample_run_keeps_panels_from_the_main_pass(tmp_path, capsys, sample_sce
         return measure(self, frame, keep)
 
     monkeypatch.setattr(FrameChecker, "measure", counting)
+    return calls
+
+
+def test_sample_run_keeps_panels_from_the_main_pass(tmp_path, capsys, sample_scene, monkeypatch):
+    calls = _count_measures(monkeypatch)
     out = tmp_path / "out"
     rc = main([str(sample_scene / "trajectories.txt"), "--mesh", str(sample_scene / "mesh.glb"),
                "--out", str(out), "-q", "--enhance", "never"])
@@ -62,14 +68,7 @@ def test_sample_run_keeps_panels_from_the_main_pass(tmp_path, capsys, sample_sce
 def test_missing_panels_are_measured_again(tmp_path, sample_scene, monkeypatch):
     """Frames without main-pass panels (here: a sink that writes none) are measured again."""
     monkeypatch.setattr(runner, "panel_writer", lambda config, fingerprint: None)
-    calls: list[str] = []
-    measure = FrameChecker.measure
-
-    def counting(self, frame, keep=None):
-        calls.append(frame.frame_id)
-        return measure(self, frame, keep)
-
-    monkeypatch.setattr(FrameChecker, "measure", counting)
+    calls = _count_measures(monkeypatch)
     out = tmp_path / "out"
     main([str(sample_scene / "trajectories.txt"), "--mesh", str(sample_scene / "mesh.glb"),
           "--out", str(out), "-q", "--enhance", "never", "--report-details", "3"])
