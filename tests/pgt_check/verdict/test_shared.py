@@ -275,3 +275,24 @@ def test_calibration_from_a_trusted_run_keeps_misregistration_visible(truth, tmp
     ok = judge_run(with_pp_shift(measurements(truth, truth)), cfg)
     assert ok.shared.summary()["registration"]["status"] == "passed"
     assert all(r["verdict"] == "PASS" for r in ok.rows)
+
+
+def test_a_failed_registration_most_frames_disagree_with_is_inconclusive():
+    """When the frames' own errors dominate the pooled fit (leaving frames out could not
+    separate them; measured: castle, 4 of 10 frames perturbed, the 320 px presets), fewer
+    than half of the frames agree with the fitted correction: one shared correction does not
+    describe them, and the check says so instead of failing every frame."""
+    from pgt_check.verdict.shared import _shared_or_not
+
+    def entry():
+        return {"status": "failed", "effect_px": 48.0,
+                "message": "rigid registration FAILED: the trajectory is misregistered"}
+
+    disagree = _shared_or_not(entry(), np.array([1.0, 2.0, 30.0, 40.0, 50.0, np.inf]), 8.0)
+    assert disagree["status"] == "inconclusive"
+    assert disagree["frames_agreeing"] == pytest.approx(2 / 5)
+    assert disagree["message"].startswith("rigid registration inconclusive: only 40%")
+    agree = _shared_or_not(entry(), np.array([1.0, 2.0, 3.0, 40.0]), 8.0)
+    assert agree["status"] == "failed" and agree["frames_agreeing"] == pytest.approx(0.75)
+    passed = _shared_or_not({**entry(), "status": "passed"}, np.array([30.0, 40.0]), 8.0)
+    assert passed["status"] == "passed"
