@@ -180,6 +180,18 @@ class EdgeConfig:
     model: Literal["homography", "similarity"] = "homography"
     #: mesh borders (holes, scan limits) count as edges
     include_borders: bool = True
+    #: longest image side of the edge path (render and photo edges); where it is larger than
+    #: ``match.resize_max`` the frame is rendered again at this size for the edges. Edges
+    #: localise to about a working pixel, so on large photos the finer size is what resolves
+    #: a shared error of a few pixels (castle, 1416 px photos, 1 deg misregistration: the
+    #: evidence carried 38-97 % of the true displacement at 640 px, 77-90 % at 1024 px;
+    #: reports/shared_errors.md). None / 0 = the original size
+    resize_max: int | None = 1024
+
+    def __post_init__(self) -> None:
+        if self.resize_max == 0:
+            object.__setattr__(self, "resize_max", None)
+        _check_range("edges.resize_max", self.resize_max, 16)
 
 
 @dataclass(frozen=True)

@@ -185,7 +185,7 @@ class FrameChecker:
         if m.coverage < self.config.verdict.min_coverage:
             return replace_measurement(m, error=MeasureReason.LOW_COVERAGE)
 
-        ctx = Working(photo_w, camera, cam_w, size, scale, render)
+        ctx = Working(photo_w, camera, cam_w, size, scale, render, photo, frame.world_from_cam)
         return self._compare(frame, ctx, m, keep, clock)
 
     def _compare(
@@ -242,7 +242,7 @@ class FrameChecker:
             absolute.append((enh, method))
         extra = []
         if edges is not None:
-            extra.append((*edge_evidence(edges, w.cam_w, w.scale, MAX_EVIDENCE_POINTS), "edges"))
+            extra.append((*edge_evidence(edges, MAX_EVIDENCE_POINTS), "edges"))
         return replace_measurement(
             m,
             evidence=absolute_evidence(absolute, w.render.depth, w.cam_w, w.scale, extra=extra),
@@ -275,10 +275,28 @@ class FrameChecker:
             )
             if decisive:
                 return None
+        render, photo, cam, scale = self._edge_images(w, clock)
         t = time.perf_counter()
-        out = measure_edges(w.render, w.photo, w.cam_w, w.scale, w.camera, e)
+        out = measure_edges(render, photo, cam, scale, w.camera, e)
         clock.add("edges", time.perf_counter() - t)
         return out
+
+    def _edge_images(self, w: Working, clock: Clock) -> tuple[Any, np.ndarray, Camera, tuple]:
+        """(render, photo, working camera, scale) of the edge path: the matching ones, or a
+        finer render and photo where ``edges.resize_max`` is larger than the matching size."""
+        from pgt_check.io.images import resize_image
+        from pgt_check.io.photo import working_scale
+
+        size = working_scale(w.camera.width, w.camera.height, self.config.edges.resize_max)
+        if size[0] <= w.size[0]:
+            return w.render, w.photo, w.cam_w, w.scale
+        t = time.perf_counter()
+        scale = (size[0] / w.camera.width, size[1] / w.camera.height)
+        cam = w.camera.scaled(*scale)
+        photo = resize_image(w.original, size)
+        render = self.renderer.render(cam, w.world_from_cam)
+        clock.add("render", time.perf_counter() - t)
+        return render, photo, cam, scale
 
     def _load_photo(self, frame: Frame) -> tuple[np.ndarray, Camera]:
         from pgt_check.io import load_image

@@ -21,12 +21,15 @@ from pgt_check.types import Camera
 
 @dataclass(frozen=True, eq=False)
 class EdgePath:
-    """The stored result and the matched edge points (working pixels) for evidence."""
+    """The stored result and the matched edge points (pixels of the edge path's working size,
+    whose camera and scale (working / original) it keeps) for evidence."""
 
     measurement: PathMeasurement
     render_points: np.ndarray  # (M, 2)
     photo_points: np.ndarray  # (M, 2)
     depth: np.ndarray  # (M,)
+    cam_w: Camera
+    scale: tuple[float, float]
 
 
 def measure_edges(
@@ -79,14 +82,13 @@ def measure_edges(
     mt = al.matches
     if not al.success:
         empty = np.zeros((0, 2))
-        return EdgePath(m, empty, empty, np.zeros(0))
-    return EdgePath(m, mt.render_points, mt.photo_points, mt.depth)
+        return EdgePath(m, empty, empty, np.zeros(0), cam_w, scale)
+    return EdgePath(m, mt.render_points, mt.photo_points, mt.depth, cam_w, scale)
 
 
-def edge_evidence(
-    path: EdgePath, cam_w: Camera, scale: tuple[float, float], max_points: int
-) -> tuple[np.ndarray, np.ndarray]:
+def edge_evidence(path: EdgePath, max_points: int) -> tuple[np.ndarray, np.ndarray]:
     """(pts2d (N, 2) original photo px, pts_cam (N, 3)) from the matched edge points."""
+    cam_w, scale = path.cam_w, path.scale
     ok = np.isfinite(path.depth) & (path.depth > 0)
     rp, pp, z = path.render_points[ok], path.photo_points[ok], path.depth[ok]
     if len(rp) > max_points:

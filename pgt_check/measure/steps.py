@@ -56,7 +56,8 @@ def edges_decisive(path: Any, threshold: float, enhance_cfg: Any) -> bool:
 @dataclass(frozen=True, eq=False)
 class Working:
     """One frame at working resolution: photo, cameras (original and working), the size and
-    scale (working / original), and the render."""
+    scale (working / original), the render, and (for paths that work at another size) the
+    photo at its original size and the checked pose."""
 
     photo: np.ndarray
     camera: Camera
@@ -64,6 +65,8 @@ class Working:
     size: tuple[int, int]
     scale: tuple[float, float]
     render: Any
+    original: np.ndarray
+    world_from_cam: np.ndarray
 
 
 @dataclass

@@ -87,10 +87,12 @@ def test_sample_scene_moved_trajectory(sample_scene, tmp_path, capsys):
 
 @pytest.mark.shared_data
 @pytest.mark.slow
-@pytest.mark.parametrize("dataset", ["castle", "7scenes"])
-def test_real_moved_trajectory_fails_the_gate(shared_data, dataset, tmp_path, capsys):
-    """2 deg + 4 % of the depth on the real data: the gate fails, the summary states the
-    correction. The 7-Scenes poses also carry their real RGB-vs-depth offset, which these
+@pytest.mark.parametrize(
+    ("dataset", "deg", "frac"), [("castle", 2.0, 0.04), ("castle", 1.0, 0.0), ("7scenes", 2.0, 0.04)]
+)
+def test_real_moved_trajectory_fails_the_gate(shared_data, dataset, deg, frac, tmp_path, capsys):
+    """2 deg + 4 % of the depth (and 1 deg on the castle) on the real data: the gate fails,
+    the summary states the correction. The 7-Scenes poses also carry their real RGB-vs-depth offset, which these
     sweep views cannot tell from a world rotation; as the README documents for that data, the
     calibration is estimated once on a trusted run (the given poses) and removed from the
     moved one (``--calibration-from``)."""
@@ -99,12 +101,14 @@ def test_real_moved_trajectory_fails_the_gate(shared_data, dataset, tmp_path, ca
         _, trusted, _ = _run(traj, root / "mesh.ply", tmp_path / "trusted", *extra)
         assert trusted["shared_errors"]["registration"]["status"] == "passed"
         extra = ("--calibration-from", str(tmp_path / "trusted" / "out" / "summary.json"))
-    moved = move_trajectory(traj, shared_transform(traj, 2.0, 0.04 * depth, seed=1))
+    moved = move_trajectory(traj, shared_transform(traj, deg, frac * depth, seed=1))
     rc, summary, rows = _run(moved, root / "mesh.ply", tmp_path / "moved", *extra)
     reg = summary["shared_errors"]["registration"]
     assert rc == 1 and reg["status"] == "failed", reg["message"]
     if dataset == "castle":
-        assert reg["angle_deg"] == pytest.approx(2.0, rel=0.3)  # measured 1.91
+        # measured 2.47 and 0.73 deg (0.53 for 1 deg when the edges ran at the 640 px
+        # matching size: ~8 px on these 1416 px photos is 3.6 px there)
+        assert reg["angle_deg"] == pytest.approx(deg, rel=0.3)
     else:
         # 20 frames of one kitchen sweep: rotation about the camera centroid and translation
         # move these views alike, so the split between them is loose (measured 0.97 deg +
