@@ -321,6 +321,9 @@ def shared_error_lines(shared: dict[str, Any]) -> list[str]:
     """One line per run-level check worth reading: failed, inconclusive or a finding."""
     entries = [shared.get(k) for k in ("registration", "similarity", "drift")]
     entries += list((shared.get("calibration") or {}).values())
+    texture = shared.get("texture") or {}
+    if texture.get("status") == "finding":  # informational: printed only as a finding
+        entries.append(texture)
     return [
         str(e["message"]) for e in entries
         if isinstance(e, dict) and e.get("status") in ("failed", "inconclusive", "finding")

@@ -154,6 +154,7 @@ def absolute_evidence(
             pts2d.append(p2d)
             pts_cam.append(p3d)
             sources.append(source)
+    counts = tuple(len(p) for p in pts2d)
     if not pts2d:
         return None
     p2, p3 = np.concatenate(pts2d), np.concatenate(pts_cam)
@@ -161,4 +162,5 @@ def absolute_evidence(
         tuple(sources),
         tuple((float(u), float(v)) for u, v in p2),
         tuple((float(x), float(y), float(z)) for x, y, z in p3),
+        counts,
     )

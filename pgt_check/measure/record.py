@@ -183,12 +183,38 @@ class AbsoluteEvidence:
 
     pts2d: (N, 2) photo pixels (original resolution, OpenCV convention); pts_cam: (N, 3) the
     matched render points lifted with the render depth, in the checked camera's frame (world
-    point = world_from_cam @ pts_cam). ``sources``: which paths contributed.
+    point = world_from_cam @ pts_cam). ``sources``: which paths contributed; ``counts``: how
+    many of the points each source gave, in order (empty in records written before it was
+    stored: the split of the points is then unknown).
     """
 
     sources: tuple[str, ...]
     pts2d: tuple[tuple[float, float], ...]
     pts_cam: tuple[tuple[float, float, float], ...]
+    counts: tuple[int, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.counts and (
+            len(self.counts) != len(self.sources) or sum(self.counts) != len(self.pts2d)
+        ):
+            raise ValueError(
+                f"evidence counts {self.counts} do not split {len(self.pts2d)} points "
+                f"among sources {self.sources}"
+            )
+
+    def by_source(self) -> dict[str, tuple[Any, Any]]:
+        """source -> (pts2d (n, 2), pts_cam (n, 3)); {} when the split is unknown."""
+        import numpy as np
+
+        if not self.counts:
+            return {}
+        p2 = np.asarray(self.pts2d, np.float64).reshape(-1, 2)
+        p3 = np.asarray(self.pts_cam, np.float64).reshape(-1, 3)
+        out, start = {}, 0
+        for src, n in zip(self.sources, self.counts, strict=True):
+            out[src] = (p2[start : start + n], p3[start : start + n])
+            start += n
+        return out
 
     def __len__(self) -> int:
         return len(self.pts2d)
@@ -203,6 +229,7 @@ class AbsoluteEvidence:
             "sources": list(self.sources),
             "pts2d": [[round(u, 3), round(v, 3)] for u, v in self.pts2d],
             "pts_cam": [[_g6(c) for c in p] for p in self.pts_cam],
+            "counts": list(self.counts),
         }
 
     @classmethod
@@ -211,6 +238,7 @@ class AbsoluteEvidence:
             tuple(d.get("sources") or ()),
             tuple((float(u), float(v)) for u, v in d.get("pts2d") or ()),
             tuple(tuple(float(c) for c in p) for p in d.get("pts_cam") or ()),
+            tuple(int(n) for n in d.get("counts") or ()),
         )
 
 

@@ -70,6 +70,7 @@ SHARED_ERROR_TITLES = {
     "similarity": "similarity (scale)",
     "drift": "drift",
     "calibration": "calibration",
+    "texture": "mesh colours vs geometry",
 }
 SHARED_ERROR_NUMBERS = (
     ("angle_deg", "angle [deg]", ".3f"),
