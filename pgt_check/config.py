@@ -365,6 +365,10 @@ PRESETS: dict[str, dict[str, Any]] = {
         "match": {"method": "sift", "resize_max": 320},
         "enhance": {"mode": "never"},
         "pose": {"enabled": False},
+        # the edge path (where the raw one is not decisive) at 640 px: about half the cost of
+        # the default 1024 on large photos; shared errors of a few px are still flagged,
+        # their size underestimated (reports/shared_errors.md, Presets)
+        "edges": {"resize_max": 640},
     },
     "balanced": {
         "match": {"method": "sift", "resize_max": 320},
