@@ -213,9 +213,10 @@ class FrameChecker:
             # enhancement (colourless meshes where the edges line up clearly)
             why, detail = EnhanceWhy.EDGES_DECISIVE, ""
         enh = ref_id = None
+        others: list[tuple[str, PathResult]] = []
         if why in ENHANCE:
             view = View(w.render, w.cam_w, frame.world_from_cam)
-            enh, ref_id, enh_img, n_tried = self._enhanced_path(
+            enh, ref_id, enh_img, n_tried, others = self._enhanced_path(
                 frame, view, w.photo, w.size, w.scale, w.camera, clock
             )
             if n_tried == 0:
@@ -250,6 +251,10 @@ class FrameChecker:
             enhanced=None
             if enh is None
             else enh.measurement("enhanced", method, self.enhancer.evidence, w.camera, ref_id),
+            enhanced_alternatives=tuple(
+                r.measurement("enhanced", method, self.enhancer.evidence, w.camera, rid)
+                for rid, r in others
+            ),
             edges=None if edges is None else edges.measurement,
             enhance_ran=why not in NO_ENHANCE,
             enhance_why=why,
@@ -381,10 +386,12 @@ class FrameChecker:
         scale: tuple[float, float],
         camera: Camera,
         clock: Clock,
-    ) -> tuple[PathResult | None, str | None, np.ndarray | None, int]:
+    ) -> tuple[PathResult | None, str | None, np.ndarray | None, int, list[tuple[str, PathResult]]]:
         """Enhance with each reference, match again; keep the result with the most inliers.
 
-        Returns (result, reference id, enhanced image, number of references tried).
+        Returns (result, reference id, enhanced image, number of references tried, the other
+        references' aligned results as (reference id, result): the verdict may prefer one
+        whose reference the run vouches for).
         """
         refs = [
             r
@@ -393,6 +400,7 @@ class FrameChecker:
         ]
         best: PathResult | None = None
         best_id = best_img = None
+        tried: list[tuple[str, PathResult]] = []
         for ref in refs:
             t = time.perf_counter()
             out = self.enhancer.enhance(
@@ -404,9 +412,11 @@ class FrameChecker:
             res = self._match_path(
                 out.image, photo_w, view.render.coverage, size, scale, camera, clock
             )
+            tried.append((ref.frame_id, res))
             if best is None or res.n_inliers > best.n_inliers:
                 best, best_id, best_img = res, ref.frame_id, out.image
-        return best, best_id, best_img, len(refs)
+        others = [(rid, r) for rid, r in tried if rid != best_id and r.success]
+        return best, best_id, best_img, len(refs), others
 
     def _pose_estimate(
         self, path: PathResult, depth: np.ndarray, cam_w: Camera, frame: Frame, clock: Clock

@@ -267,6 +267,9 @@ class FrameMeasurement:
     match_height: int | None = None
     raw: PathMeasurement | None = None
     enhanced: PathMeasurement | None = None
+    #: the enhanced path through the other references tried (aligned ones only; the one with
+    #: the most inliers is ``enhanced``)
+    enhanced_alternatives: tuple[PathMeasurement, ...] = ()
     #: the geometric-edge path (absolute; runs where the raw path is not decisive)
     edges: PathMeasurement | None = None
     enhance_ran: bool = False
@@ -317,6 +320,8 @@ class FrameMeasurement:
             v = getattr(self, f.name)
             if isinstance(v, (PathMeasurement, PoseEstimate, Timings, AbsoluteEvidence)):
                 v = v.to_json()
+            elif f.name == "enhanced_alternatives":
+                v = [p.to_json() for p in v]
             elif isinstance(v, Enum):
                 v = v.value
             elif isinstance(v, float) and not math.isfinite(v):
@@ -351,6 +356,9 @@ class FrameMeasurement:
             raw=None if d.get("raw") is None else PathMeasurement.from_json(d["raw"]),
             enhanced=(
                 None if d.get("enhanced") is None else PathMeasurement.from_json(d["enhanced"])
+            ),
+            enhanced_alternatives=tuple(
+                PathMeasurement.from_json(p) for p in d.get("enhanced_alternatives") or ()
             ),
             edges=None if d.get("edges") is None else PathMeasurement.from_json(d["edges"]),
             enhance_ran=bool(d.get("enhance_ran")),

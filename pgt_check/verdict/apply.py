@@ -8,7 +8,7 @@ from typing import Any
 
 from pgt_check.config import RunConfig
 from pgt_check.measure.record import FrameMeasurement
-from pgt_check.verdict.decide import judge, own_outcomes, path_outcomes
+from pgt_check.verdict.decide import judge, own_outcomes, path_outcomes, vouched_reference
 from pgt_check.verdict.shared import SharedChecks, run_shared_checks
 
 #: the verdict columns every row gets beside the measurement columns, with their meaning
@@ -42,16 +42,23 @@ def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> Ru
     Measurements are not changed (records.jsonl stays as measured)."""
     ms = list(measurements)
     shared = run_shared_checks(ms, config) if config.verdict.shared_checks and ms else None
-    outs = [path_outcomes(m, config.verdict, shared) for m in ms]
-    own = own_outcomes(ms, config.verdict, shared, outs)
+    v = config.verdict
+    outs = [path_outcomes(m, v, shared) for m in ms]
+    own = own_outcomes(ms, v, shared, outs)
+    judged = [judge(m, v, shared, own, out) for m, out in zip(ms, outs, strict=True)]
+    # second pass: a frame judged through a reference the run does not pass is judged
+    # through another tried reference that it passes, where one aligned (``vouched_reference``)
+    first = {m.frame_id: j.verdict for m, j in zip(ms, judged, strict=True)}
     rows = []
-    for m, out in zip(ms, outs, strict=True):
-        j = judge(m, config.verdict, shared, own, out)
+    for m, j in zip(ms, judged, strict=True):
+        m2 = vouched_reference(m, j, first, v)
+        if m2 is not None:
+            m, j = m2, judge(m2, v, shared, own, path_outcomes(m2, v, shared))
         row = m.row()
         row.update(
             verdict=j.verdict.value,
             reason=j.reason,
-            threshold_px=config.verdict.threshold_for(m.width, m.height),
+            threshold_px=v.threshold_for(m.width, m.height),
             evidence=j.evidence,
             raw_verdict=j.raw_verdict,
             enhanced_verdict=j.enhanced_verdict,

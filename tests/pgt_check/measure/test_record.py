@@ -43,6 +43,7 @@ def _full() -> FrameMeasurement:
         frame_id="f1", timestamp=12.5, image_path="img/f1.jpg", width=640, height=480,
         center=(1.0, 2.0, 3.0), coverage=0.8, shading="vertex", match_width=640,
         match_height=480, raw=_path("raw", 12.0, 30), enhanced=_path("enhanced", 3.0, 150),
+        enhanced_alternatives=(_path("enhanced", 20.0, 90),),
         enhance_ran=True, enhance_why=EnhanceWhy.RAW_FEW_INLIERS, verdict_path="enhanced",
         pose=PoseEstimate(80, "", 0.01, 0.5, tuple(map(tuple, np.eye(4)))),
         auto_threshold_px=16.0, timings=Timings(load=0.1, render=0.2, total=1.0),

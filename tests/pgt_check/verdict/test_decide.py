@@ -188,3 +188,36 @@ def test_a_weak_raw_fail_against_an_edge_pass(edge_err, verdict, reason, decided
     assert j.reason.startswith(reason)
     m40 = FrameMeasurement(**{**m.__dict__, "raw": _path("raw", 17.0, 40)})
     assert judge(m40, cfg).verdict is Verdict.FAIL
+
+
+def _with(m, **kw):
+    return FrameMeasurement(**{**m.__dict__, **kw})
+
+
+@pytest.mark.parametrize(("alt_inliers", "verdict", "reference"), [(60, "PASS", "p"), (30, "FAIL", "b")])
+def test_a_reference_the_run_does_not_pass_gives_way_to_one_it_does(alt_inliers, verdict, reference):
+    """Neighbours err together: good frame g was reprojected through its bad neighbour b (45 px,
+    the most inliers) and through p, which passes on its own render (3 px). b fails in the
+    first pass, so g is judged through p: its edges confirm, PASS. A weak result through p
+    (fewer than ``confident_inliers``) does not take over: the confident FAIL through b
+    stands. b itself (judged through g, which also failed first) stays FAIL."""
+    from pgt_check.config import RunConfig
+    from pgt_check.verdict import judge_run
+
+    p = _frame("p", 2.0)
+    b = _frame("b", None, enh_err=45.0, ref="g")
+    g = _with(
+        _frame("g", None, enh_err=45.0, ref="b"),
+        edges=_path("edges", 3.0, 2000),
+        enhanced_alternatives=(
+            _path("enhanced", 3.0, alt_inliers, "p", Evidence.RELATIVE),
+        ),
+    )
+    rows = {r["frame_id"]: r for r in judge_run([p, b, g], RunConfig.from_dict(
+        {"verdict": {"shared_checks": False}})).rows}
+    assert rows["p"]["verdict"] == "PASS"
+    assert rows["b"]["verdict"] == "FAIL"
+    assert (rows["g"]["verdict"], rows["g"]["reference_id"]) == (verdict, reference)
+    if verdict == "PASS":
+        assert rows["g"]["corner_error_px_enhanced"] == pytest.approx(3.0)
+        assert rows["g"]["evidence"] == "absolute"  # the edge path confirms the relative PASS
