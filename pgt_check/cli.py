@@ -321,6 +321,7 @@ def shared_error_lines(shared: dict[str, Any]) -> list[str]:
     """One line per run-level check worth reading: failed, inconclusive or a finding."""
     entries = [shared.get(k) for k in ("registration", "similarity", "drift")]
     entries += list((shared.get("calibration") or {}).values())
+    entries += list((shared.get("calibration_change") or {}).values())
     texture = shared.get("texture") or {}
     if texture.get("status") == "finding":  # informational: printed only as a finding
         entries.append(texture)

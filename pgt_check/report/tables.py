@@ -70,6 +70,7 @@ SHARED_ERROR_TITLES = {
     "similarity": "similarity (scale)",
     "drift": "drift",
     "calibration": "calibration",
+    "calibration_change": "calibration change since the trusted run",
     "texture": "mesh colours vs geometry",
 }
 SHARED_ERROR_NUMBERS = (

@@ -280,7 +280,7 @@ def judge(
         evidence, path = Evidence.ABSOLUTE.value, clear[0]
     if base is not Verdict.PASS:
         return j(base, why, evidence)
-    return j(*_run_level(m.frame_id, shared, evidence, absolute_pass))
+    return j(*_run_level(m.frame_id, shared, evidence, absolute_pass, m.camera_id))
 
 
 def vouched_reference(
@@ -327,10 +327,11 @@ def vouched_reference(
 
 
 def _run_level(
-    frame_id: str, shared: Any, evidence: str, absolute_pass: bool
+    frame_id: str, shared: Any, evidence: str, absolute_pass: bool, camera_id: str = ""
 ) -> tuple[Verdict, str, str]:
     """(verdict, reason, evidence) of a frame whose paths PASS, after the run-level checks:
-    a flagged drift segment or a failed registration makes it FAIL; relative evidence needs a
+    a flagged drift segment, a failed registration or (``--calibration-from``) a camera whose
+    calibration changed since the trusted run makes it FAIL; relative evidence needs a
     passed registration check, the frame's own evidence consistent with it and the drift here
     within the threshold."""
     if shared is not None and frame_id in shared.drift_flagged:
@@ -343,6 +344,14 @@ def _run_level(
             Verdict.FAIL,
             f"registration: trajectory off the mesh by {e['effect_px']:.1f} "
             f"px ({e['angle_deg']:.2f} deg)",
+            evidence,
+        )
+    changed = None if shared is None else shared.calibration_changed(camera_id)
+    if changed is not None:
+        return (
+            Verdict.FAIL,
+            f"calibration: this camera changed since the trusted run ({changed['effect_px']:.1f} "
+            "px)",
             evidence,
         )
     if evidence == Evidence.ABSOLUTE.value:

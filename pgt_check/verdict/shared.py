@@ -75,6 +75,9 @@ class SharedChecks:
     drift_threshold_px: float = float("nan")
     #: mesh colours against mesh geometry (``texture_entry``; empty when not run)
     texture: dict[str, Any] = field(default_factory=dict)
+    #: with ``--calibration-from``, per camera id: what is left of the calibration after
+    #: removing the trusted run's (``_calibration_change_entry``); a FAILED camera's frames FAIL
+    calibration_change: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def calibration_homography(self, frame_id: str, camera_id: str) -> np.ndarray | None:
         """The calibration error's photo_from_render for this frame (None if not estimated)."""
@@ -99,7 +102,17 @@ class SharedChecks:
             "drift": self.drift,
             "calibration": self.calibration,
             **({"texture": self.texture} if self.texture else {}),
+            **(
+                {"calibration_change": self.calibration_change}
+                if self.calibration_change
+                else {}
+            ),
         }
+
+    def calibration_changed(self, camera_id: str) -> dict[str, Any] | None:
+        """The calibration-change entry of this camera when it FAILED (else None)."""
+        e = self.calibration_change.get(camera_id)
+        return e if e is not None and e.get("status") == FAILED else None
 
 
 #: the drift check's threshold relative to the shared one. A drift window is fitted on a few
@@ -345,6 +358,31 @@ def _calibration_entry(est: Any, shared_thr: float, frame_thr: float) -> dict[st
     return entry
 
 
+def _calibration_change_entry(est: Any, threshold: float) -> dict[str, Any]:
+    """This run's calibration against a trusted run's (``--calibration-from``): the estimate on
+    the evidence after removing the trusted calibration. FAILED when it moves the images by
+    more than the shared threshold with confidence: the camera changed (focal length,
+    principal point, mounting) since the trusted run, and its frames are not PASS."""
+    entry = _calibration_entry(est, threshold, threshold)
+    if entry["status"] == NOT_CHECKED:
+        entry["message"] = f"calibration change not checked: no absolute evidence ({est.reason})"
+        return entry
+    entry["status"] = _status(est.success, est.effect_px_ci, est.effect_px, threshold)
+    lo, hi = entry["effect_px_ci"] or (est.effect_px, est.effect_px)
+    what = {
+        FAILED: "calibration CHANGED since the trusted run",
+        PASSED: "calibration as in the trusted run",
+        INCONCLUSIVE: "calibration change since the trusted run inconclusive",
+    }[entry["status"]]
+    pp = entry["principal_point_shift_px"] or [float("nan")] * 2
+    entry["message"] = (
+        f"{what}: what is left moves the images by {est.effect_px:.1f} px (95 % {lo:.1f}-"
+        f"{hi:.1f}, threshold {threshold:.1f}): principal point ({pp[0]:+.1f}, {pp[1]:+.1f}) px, "
+        f"roll {est.roll_deg:+.2f} deg, focal length x{est.focal_scale:.4f}"
+    )
+    return entry
+
+
 def _drift_coverage(
     est: Any, ids: list[str], threshold: float
 ) -> tuple[dict, dict, list[tuple[int, int]], set]:
@@ -532,10 +570,21 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
         }
     mode = "auto"
     intrinsics = {m.camera_id: m.intrinsics for m in measurements if m.intrinsics}
+    change: dict[str, dict[str, Any]] = {}
     if v.calibration_from:
         # a calibration known from a trusted run (same cameras): removed before judging, so
-        # this run's own shared error cannot be taken for calibration
+        # this run's own shared error cannot be taken for calibration; what is left of the
+        # calibration is this camera's change since that run
         cals = trusted_calibration(v.calibration_from, sorted(intrinsics))
+        rest = [cals[e.camera_id].remove(e) if e.camera_id in cals else e for e in ev]
+        # calibration only: the change is what the trusted calibration leaves unexplained (a
+        # joint fit would trade part of it against a world correction, and re-split the same
+        # run's calibration differently)
+        for cam_id, est in estimate_calibration(
+            rest, registration="none", calibration_translation=trans
+        ).items():
+            if cam_id:
+                change[cam_id] = _calibration_change_entry(est, thr)
     homs, frame_homs = frame_homographies(
         cals, all_ev, intrinsics, {m.frame_id: m.camera_id for m in measurements}
     )
@@ -566,5 +615,5 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
         entry["frames_left_out"] = left_out
     return SharedChecks(
         thr, reg, sim, drift, calib, drift_px, flagged, homs, frozenset(left_out), frame_homs,
-        drift_thr, texture_entry(measurements, thr),
+        drift_thr, texture_entry(measurements, thr), change,
     )  # fmt: skip

@@ -277,6 +277,53 @@ def test_calibration_from_a_trusted_run_keeps_misregistration_visible(truth, tmp
     assert all(r["verdict"] == "PASS" for r in ok.rows)
 
 
+def test_calibration_from_a_trusted_run_sees_the_camera_change(truth, tmp_path):
+    """Calibrated once on a trusted run (principal point 5 px off); a later run of the same
+    trajectory whose camera moved its principal point by another 6 px: the calibration
+    change FAILs and so do the frames, where the same run with the trusted camera passes."""
+    import json
+
+    def with_pp_shift(ms, dx):
+        return [m.__class__(**{**m.__dict__, "evidence": AbsoluteEvidence(
+            ("raw",), tuple((u + dx, v) for u, v in m.evidence.pts2d), m.evidence.pts_cam)})
+            for m in ms]
+
+    trusted = judge_run(with_pp_shift(measurements(truth, truth), 5.0), RunConfig())
+    path = tmp_path / "summary.json"
+    path.write_text(json.dumps({"shared_errors": trusted.shared.summary()}))
+    cfg = RunConfig.from_dict({"verdict": {"calibration_from": str(path)}})
+    same = judge_run(with_pp_shift(measurements(truth, truth, seed=1), 5.0), cfg)
+    change = next(iter(same.shared.summary()["calibration_change"].values()))
+    assert change["status"] == "passed", change["message"]
+    assert all(r["verdict"] == "PASS" for r in same.rows)
+    changed = judge_run(with_pp_shift(measurements(truth, truth, seed=1), 11.0), cfg)
+    change = next(iter(changed.shared.summary()["calibration_change"].values()))
+    assert change["status"] == "failed", change["message"]
+    assert change["principal_point_shift_px"][0] == pytest.approx(6.0, rel=0.3)
+    assert "CHANGED since the trusted run" in change["message"]
+    assert all(r["verdict"] == "FAIL" for r in changed.rows)
+    # these views also see the shift left as drift or misregistration: those checks come
+    # first; the camera change fails the frames where they pass (below)
+    assert all(r["reason"].startswith(("calibration: this camera changed", "registration:",
+                                       "drift:")) for r in changed.rows)
+
+
+def test_a_changed_camera_fails_frames_the_other_checks_pass():
+    from dataclasses import replace
+
+    from pgt_check.verdict.decide import _run_level
+    from pgt_check.verdict.shared import SharedChecks
+
+    ok = {"status": "passed", "effect_px": 0.5}
+    shared = SharedChecks(2.4, ok, ok, ok, {}, drift_threshold_px=4.8)
+    assert _run_level("f1", shared, "absolute", True, "cam0")[0].value == "PASS"
+    changed = replace(shared, calibration_change={"cam0": {"status": "failed", "effect_px": 6.1}})
+    v, reason, _ = _run_level("f1", changed, "absolute", True, "cam0")
+    assert (v.value, reason) == ("FAIL", "calibration: this camera changed since the trusted "
+                                         "run (6.1 px)")
+    assert _run_level("f1", changed, "absolute", True, "cam1")[0].value == "PASS"  # other camera
+
+
 def test_a_failed_registration_most_frames_disagree_with_is_inconclusive():
     """When the frames' own errors dominate the pooled fit (leaving frames out could not
     separate them; measured: castle, 4 of 10 frames perturbed, the 320 px presets), fewer
