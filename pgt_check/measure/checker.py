@@ -196,13 +196,23 @@ class FrameChecker:
         keep: FrameImages | None,
         clock: Clock,
     ) -> FrameMeasurement:
-        """Raw path, then (where it is not decisive) the enhanced and geometric-edge paths."""
+        """Raw path, then (where it is not decisive) the enhanced and geometric-edge paths. On
+        renders without colours (``edges.lead_on_shaded``) the edge path comes first, and a clear
+        edge PASS leaves out the raw and enhanced paths."""
+        threshold = self.config.verdict.threshold_for(w.camera.width, w.camera.height)
+        edges = None
+        if self._edges_lead(w):
+            edges = self._edge_path(w, None, threshold, clock)
+            if edges is not None and edges_decisive(
+                edges.measurement, threshold, self.config.enhance
+            ):
+                return self._edges_only(m, w, edges, threshold)
         raw = self._match_path(
             w.render.rgb, w.photo, w.render.coverage, w.size, w.scale, w.camera, clock
         )
-        threshold = self.config.verdict.threshold_for(w.camera.width, w.camera.height)
         why, detail = self._enhance_decision(raw, threshold)
-        edges = self._edge_path(w, raw, threshold, clock)
+        if edges is None:
+            edges = self._edge_path(w, raw, threshold, clock)
         if (
             why in ENHANCE
             and why is not EnhanceWhy.MODE_ALWAYS
@@ -264,14 +274,44 @@ class FrameChecker:
             auto_threshold_px=threshold if self.config.enhance.mode == "auto" else None,
         )
 
+    def _edges_lead(self, w: Working) -> bool:
+        """The edge path runs first: a render without colours (the raw path matches shading,
+        which on the shared colourless meshes never aligned: 0 homographies in 300 frames),
+        the edge path on, and the enhancement not forced."""
+        return (
+            w.render.shading == "shaded"
+            and self.config.edges.lead_on_shaded
+            and self.config.edges.mode != "never"
+            and self.config.enhance.mode != "always"
+        )
+
+    def _edges_only(
+        self, m: FrameMeasurement, w: Working, edges: EdgePath, threshold: float
+    ) -> FrameMeasurement:
+        """The measurement of a frame that the leading edge path decides clearly: raw and
+        enhanced paths left out (``enhance_why`` edges_decisive, detail ``raw_left_out``)."""
+        return replace_measurement(
+            m,
+            evidence=absolute_evidence(
+                [], w.render.depth, w.cam_w, w.scale,
+                extra=[(*edge_evidence(edges, MAX_EVIDENCE_POINTS), "edges")],
+            ),  # fmt: skip
+            edges=edges.measurement,
+            enhance_why=EnhanceWhy.EDGES_DECISIVE,
+            enhance_why_detail="raw_left_out",
+            verdict_path="edges",
+            auto_threshold_px=threshold if self.config.enhance.mode == "auto" else None,
+        )
+
     def _edge_path(
-        self, w: Working, raw: PathResult, threshold: float, clock: Clock
+        self, w: Working, raw: PathResult | None, threshold: float, clock: Clock
     ) -> EdgePath | None:
-        """The geometric-edge path, where the config asks for it (auto: raw not decisive)."""
+        """The geometric-edge path, where the config asks for it (auto: raw not decisive; with
+        ``raw`` None it runs before the raw path)."""
         e = self.config.edges
         if e.mode == "never":
             return None
-        if e.mode == "auto":
+        if e.mode == "auto" and raw is not None:
             decisive = (
                 raw.success
                 and raw.n_inliers >= self.config.enhance.auto_min_inliers

@@ -72,3 +72,29 @@ def test_castle_edge_evidence_carries_a_one_degree_misregistration(shared_data):
         # evidence in original photo pixels
         assert np.all((e.pts2d > -1) & (e.pts2d < [1416, 1064])), e.frame_id
         assert _captured_share(e, given[e.frame_id]) > 0.7, e.frame_id
+
+
+@pytest.mark.shared_data
+def test_edges_lead_on_a_colourless_mesh_and_leave_out_the_raw_path(shared_data):
+    """Castle (colourless MVS mesh, shaded render) at its given poses: the edge path runs
+    first and PASSes clearly, so raw matching of the shading is left out; with
+    ``edges.lead_on_shaded`` off the raw path runs (and finds no homography on shading)."""
+    from pgt_check.measure.record import EnhanceWhy
+    from pgt_check.verdict import judge_run
+
+    root = shared_data / "sceaux_castle"
+    full = read_trajectory(root / "trajectories.txt")
+    traj = Trajectory(full.frames[:2], full.source, full.format)
+    led = _measure(traj, root / "mesh.ply", {})
+    for m in led:
+        assert m.shading == "shaded"
+        assert m.raw is None and m.enhanced is None, m.frame_id
+        assert m.enhance_why is EnhanceWhy.EDGES_DECISIVE and m.verdict_path == "edges"
+        assert m.evidence is not None and m.evidence.sources == ("edges",)
+    cfg = RunConfig.from_dict({"input": {"mesh": str(root / "mesh.ply")}})
+    assert [r["verdict"] for r in judge_run(led, cfg).rows] == ["PASS", "PASS"]
+    plain = _measure(traj, root / "mesh.ply", {"lead_on_shaded": False})
+    assert all(m.raw is not None and m.raw.photo_from_render is None for m in plain)
+    assert [m.edges.corner_error_px for m in plain] == pytest.approx(
+        [m.edges.corner_error_px for m in led], abs=1e-6
+    )
