@@ -133,8 +133,17 @@ def shared_threshold(measurements: Sequence[FrameMeasurement], config: RunConfig
     return float(v.shared_threshold_rel * np.median(per_frame))
 
 
+#: points per frame in the pooled run-level fits: one frame, one vote. A frame whose evidence
+#: has several sources (raw matches + edges) would otherwise weigh up to twice as much as one
+#: with edges alone (castle, `accurate` preset, drifting segment: the 4 drifting frames, with
+#: XFeat matches of their shaded renders beside their edges, made the registration fail and
+#: all 10 frames FAIL; capped, it passes and the drift is found, AUC 1.00)
+MAX_FRAME_EVIDENCE_POINTS = 200
+
+
 def frame_evidence(measurements: Sequence[FrameMeasurement]) -> list[Any]:
-    """The frames that carry absolute evidence, as ``FrameEvidence`` (index = trajectory order)."""
+    """The frames that carry absolute evidence, as ``FrameEvidence`` (index = trajectory order),
+    each with at most ``MAX_FRAME_EVIDENCE_POINTS`` points (evenly spaced over its sources)."""
     from pgt_check.geometry.shared_errors import FrameEvidence
 
     out = []
@@ -143,6 +152,10 @@ def frame_evidence(measurements: Sequence[FrameMeasurement]) -> list[Any]:
             continue
         wfc = np.asarray(m.world_from_cam, np.float64)
         pts_cam = np.asarray(m.evidence.pts_cam, np.float64).reshape(-1, 3)
+        pts2d = np.asarray(m.evidence.pts2d, np.float64).reshape(-1, 2)
+        if len(pts2d) > MAX_FRAME_EVIDENCE_POINTS:
+            keep = np.linspace(0, len(pts2d) - 1, MAX_FRAME_EVIDENCE_POINTS).round().astype(int)
+            pts_cam, pts2d = pts_cam[keep], pts2d[keep]
         fx, fy, cx, cy = m.intrinsics
         out.append(
             FrameEvidence(
@@ -153,7 +166,7 @@ def frame_evidence(measurements: Sequence[FrameMeasurement]) -> list[Any]:
                 K=np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]], np.float64),
                 width=m.width,
                 height=m.height,
-                pts2d=np.asarray(m.evidence.pts2d, np.float64).reshape(-1, 2),
+                pts2d=pts2d,
                 pts3d=pts_cam @ wfc[:3, :3].T + wfc[:3, 3],
             )
         )

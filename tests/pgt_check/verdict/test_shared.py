@@ -343,3 +343,27 @@ def test_a_failed_registration_most_frames_disagree_with_is_inconclusive():
     assert agree["status"] == "failed" and agree["frames_agreeing"] == pytest.approx(0.75)
     passed = _shared_or_not({**entry(), "status": "passed"}, np.array([30.0, 40.0]), 8.0)
     assert passed["status"] == "passed"
+
+
+def test_each_frame_weighs_the_same_in_the_pooled_fits(truth):
+    """A drifting segment (the last 12 of 30 frames, 3 deg) whose frames carry about twice
+    the points of the others (several evidence sources): capped per frame, the correct
+    majority keeps the registration and the segment is found as drift."""
+    from pgt_check.verdict.shared import MAX_FRAME_EVIDENCE_POINTS, frame_evidence
+
+    moved = _move(truth, 3.0, 0.0)
+    checked = Trajectory(truth.frames[:18] + moved.frames[18:], "synthetic", "lamar")
+    few = measurements(truth, checked, n_points=MAX_FRAME_EVIDENCE_POINTS)
+    many = measurements(truth, checked, n_points=400)
+    ms = few[:18] + many[18:]
+    ev = frame_evidence(ms)
+    assert max(len(m.evidence) for m in ms) > 1.5 * MAX_FRAME_EVIDENCE_POINTS
+    assert all(len(e.pts2d) == MAX_FRAME_EVIDENCE_POINTS for e in ev)
+    j = judge_run(ms, RunConfig())
+    se = j.shared.summary()
+    assert se["registration"]["status"] == "passed", se["registration"]["message"]
+    assert se["drift"]["status"] == "failed"
+    assert all(r["verdict"] == "PASS" for r in j.rows[:18])
+    # the windows find the segment from its third frame on (3 deg about the trajectory
+    # centroid moves these images by only ~4 px per frame)
+    assert sum(r["verdict"] == "FAIL" for r in j.rows[18:]) >= 9
