@@ -13,7 +13,7 @@ import numpy as np
 from pgt_check.config import VerdictConfig
 from pgt_check.enhance.base import Evidence
 from pgt_check.measure.record import FrameMeasurement, MeasureReason, PathMeasurement
-from pgt_check.verdict.shared import FAILED, NOT_CHECKED, PASSED
+from pgt_check.verdict.status import FAILED, NOT_CHECKED, PASSED
 
 
 class Verdict(str, Enum):

@@ -36,16 +36,11 @@ from pgt_check.verdict.calibration import (
     frame_homographies,
     trusted_calibration,
 )
+from pgt_check.verdict.status import FAILED, FINDING, INCONCLUSIVE, NOT_CHECKED, PASSED
+from pgt_check.verdict.texture import texture_entry
 
 logger = logging.getLogger(__name__)
 
-PASSED, FAILED, INCONCLUSIVE, NOT_CHECKED, FINDING = (
-    "passed",
-    "failed",
-    "inconclusive",
-    "not_checked",
-    "finding",
-)
 
 
 @dataclass(frozen=True)
@@ -171,75 +166,6 @@ def frame_evidence(measurements: Sequence[FrameMeasurement]) -> list[Any]:
             )
         )
     return out
-
-
-#: renders whose colours come from the mesh (their feature matches are texture evidence)
-COLOURED_SHADINGS = ("vertex", "texture")
-#: evidence sources that see the mesh's geometry only
-GEOMETRIC_SOURCES = ("edges",)
-
-
-def texture_entry(measurements: Sequence[FrameMeasurement], threshold: float) -> dict[str, Any]:
-    """Mesh colours against mesh geometry: where the raw matches of a coloured render place the
-    photos against where the geometric edges do, shared by the frames. A ``finding`` (lower
-    bound above ``threshold``) means the colours sit off the geometry in every photo alike:
-    the mesh was likely coloured with these poses (or with a camera offset), so texture
-    matches cannot show a calibration error that the geometry shows. Informational: it does
-    not change verdicts. Empty when no frame has both kinds of evidence."""
-    from pgt_check.geometry.shared_errors.texture import FramePoints, texture_offset
-
-    frames = []
-    for m in measurements:
-        if m.evidence is None or m.shading not in COLOURED_SHADINGS or m.intrinsics is None:
-            continue
-        parts = m.evidence.by_source()
-        geo = [parts[s] for s in GEOMETRIC_SOURCES if s in parts]
-        if "raw" not in parts or not geo:
-            continue
-        fx, fy, cx, cy = m.intrinsics
-        frames.append(
-            FramePoints(
-                np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]], np.float64),
-                *parts["raw"],
-                np.concatenate([g[0] for g in geo]),
-                np.concatenate([g[1] for g in geo]),
-            )
-        )
-    if not frames:
-        return {}
-    est = texture_offset(frames)
-    if not est.success:
-        return {
-            "status": NOT_CHECKED,
-            "reason": est.reason,
-            "n_frames": est.n_frames,
-            "message": "mesh colours vs geometry not checked: too few frames with both "
-            "texture matches and geometric edges",
-        }
-    lo, hi = est.effect_px_ci
-    status = FINDING if lo > threshold else PASSED if hi <= threshold else INCONCLUSIVE
-    dx, dy = est.offset_px
-    what = (
-        "the mesh colours sit off its geometry in every photo alike: the mesh was likely "
-        "coloured with these poses (or with a camera offset), so texture matches cannot show "
-        "a calibration error that the geometry shows (judge calibration on geometry: "
-        "--shading shaded)"
-        if status == FINDING
-        else "mesh colours agree with its geometry"
-        if status == PASSED
-        else "mesh colours vs geometry: not clear"
-    )
-    return {
-        "status": status,
-        "reason": "",
-        "offset_px": [dx, dy],
-        "effect_px": est.effect_px,
-        "effect_px_ci": [lo, hi],
-        "n_frames": est.n_frames,
-        "message": f"{what}: texture matches place the photos ({dx:+.1f}, {dy:+.1f}) px from "
-        f"the geometric edges ({est.effect_px:.1f} px, 95 % {lo:.1f}-{hi:.1f}) over "
-        f"{est.n_frames} frames",
-    }
 
 
 def _ci(x: Any) -> list[float] | None:
