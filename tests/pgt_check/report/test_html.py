@@ -243,3 +243,25 @@ def test_report_modules_import_lazily():
         [sys.executable, "-c", code], capture_output=True, text=True, check=True, env=env
     )
     assert out.stdout.strip() == "[]"
+
+
+def test_shared_error_rows_name_the_new_checks_in_order():
+    """The report's run-level section: known checks first with their titles, per-camera checks
+    one row per camera (calibration change), the informational mesh-colours check last among
+    the known ones; numbers with their intervals."""
+    from pgt_check.report.tables import shared_error_rows
+
+    entry = {"status": "finding", "effect_px": 6.5, "effect_px_ci": [5.9, 7.0], "message": "m"}
+    summary = {"shared_errors": {
+        "texture": entry,
+        "calibration_change": {"cam0": {"status": "failed", "effect_px": 6.4, "message": "c"}},
+        "registration": {"status": "passed", "effect_px": 0.8, "message": "r"},
+    }}  # fmt: skip
+    rows = shared_error_rows(summary)
+    assert [r["name"] for r in rows] == [
+        "registration",
+        "calibration change since the trusted run (camera cam0)",
+        "mesh colours vs geometry",
+    ]
+    assert rows[1]["status_class"] == "failed"
+    assert rows[2]["numbers"] == [("effect [px]", "6.50 [5.90, 7.00]")]
