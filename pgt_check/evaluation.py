@@ -106,7 +106,9 @@ def shared_transform(
     return m
 
 
-def _apply(world_from_cam: np.ndarray, moved_from_world: np.ndarray) -> np.ndarray:
+def move_pose(world_from_cam: np.ndarray, moved_from_world: np.ndarray) -> np.ndarray:
+    """One pose moved by a rigid / similarity world transform: the centre mapped by it, the
+    rotation by its rotation part (the scale leaves the camera's axes alone)."""
     s = float(np.cbrt(np.linalg.det(moved_from_world[:3, :3])))
     out = np.eye(4)
     out[:3, :3] = (moved_from_world[:3, :3] / s) @ world_from_cam[:3, :3]
@@ -116,7 +118,7 @@ def _apply(world_from_cam: np.ndarray, moved_from_world: np.ndarray) -> np.ndarr
 
 def move_trajectory(traj: Trajectory, moved_from_world: np.ndarray) -> Trajectory:
     """Every pose moved by one rigid / similarity transform (a misregistered trajectory)."""
-    frames = [f.with_pose(_apply(f.world_from_cam, moved_from_world)) for f in traj.frames]
+    frames = [f.with_pose(move_pose(f.world_from_cam, moved_from_world)) for f in traj.frames]
     return Trajectory(frames, traj.source, traj.format)
 
 
@@ -140,7 +142,7 @@ def drift_trajectory(
         m[:3, :3] = axis_angle_to_rotmat(axis, rotation_deg * a)
         c = f.center
         m[:3, 3] = c - m[:3, :3] @ c + translation * a * direction
-        frames.append(f.with_pose(_apply(f.world_from_cam, m)))
+        frames.append(f.with_pose(move_pose(f.world_from_cam, m)))
         ids.append(f.frame_id)
     return Trajectory(frames, traj.source, traj.format), ids
 

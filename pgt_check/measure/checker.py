@@ -251,9 +251,7 @@ class FrameChecker:
         absolute = [(raw, "raw")]
         if enh is not None and self.enhancer.evidence is Evidence.ABSOLUTE:
             absolute.append((enh, method))
-        extra = []
-        if edges is not None:
-            extra.append((*edge_evidence(edges, MAX_EVIDENCE_POINTS), "edges"))
+        extra = [] if edges is None else _edge_extra(edges)
         return replace_measurement(
             m,
             evidence=absolute_evidence(absolute, w.render.depth, w.cam_w, w.scale, extra=extra),
@@ -293,9 +291,8 @@ class FrameChecker:
         return replace_measurement(
             m,
             evidence=absolute_evidence(
-                [], w.render.depth, w.cam_w, w.scale,
-                extra=[(*edge_evidence(edges, MAX_EVIDENCE_POINTS), "edges")],
-            ),  # fmt: skip
+                [], w.render.depth, w.cam_w, w.scale, extra=_edge_extra(edges)
+            ),
             edges=edges.measurement,
             enhance_why=EnhanceWhy.EDGES_DECISIVE,
             enhance_why_detail="raw_left_out",
@@ -484,6 +481,11 @@ class FrameChecker:
             corr.drot_deg,
             tuple(tuple(map(float, r)) for r in corr.world_from_cam),
         )
+
+
+def _edge_extra(edges: EdgePath) -> list[tuple[np.ndarray, np.ndarray, str]]:
+    """The edge path's matched points as the ``extra`` evidence source of ``absolute_evidence``."""
+    return [(*edge_evidence(edges, MAX_EVIDENCE_POINTS), "edges")]
 
 
 def build_frame_checker(

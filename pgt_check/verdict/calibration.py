@@ -24,7 +24,8 @@ from pgt_check.errors import InputError
 logger = logging.getLogger(__name__)
 
 
-def _k(intrinsics: Sequence[float], focal_scale: float = 1.0) -> np.ndarray:
+def camera_matrix(intrinsics: Sequence[float], focal_scale: float = 1.0) -> np.ndarray:
+    """(3, 3) K of pinhole ``intrinsics`` (fx, fy, cx, cy), focal lengths scaled."""
     fx, fy, cx, cy = intrinsics
     return np.array([[fx * focal_scale, 0, cx], [0, fy * focal_scale, cy], [0, 0, 1]], float)
 
@@ -63,7 +64,7 @@ class CameraCalibration:
         m = self.rotation.copy()
         if depth is not None and math.isfinite(depth) and depth > 0:
             m[:, 2] += self.translation / depth
-        h = _k(intrinsics, self.focal_scale) @ m @ np.linalg.inv(_k(intrinsics))
+        h = camera_matrix(intrinsics, self.focal_scale) @ m @ np.linalg.inv(camera_matrix(intrinsics))
         return h / h[2, 2]
 
     def remove(self, e: Any) -> Any:

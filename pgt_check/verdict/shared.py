@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import logging
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -33,6 +33,7 @@ from pgt_check.config import RunConfig
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.verdict.calibration import (
     CameraCalibration,
+    camera_matrix,
     frame_homographies,
     trusted_calibration,
 )
@@ -151,14 +152,13 @@ def frame_evidence(measurements: Sequence[FrameMeasurement]) -> list[Any]:
         if len(pts2d) > MAX_FRAME_EVIDENCE_POINTS:
             keep = np.linspace(0, len(pts2d) - 1, MAX_FRAME_EVIDENCE_POINTS).round().astype(int)
             pts_cam, pts2d = pts_cam[keep], pts2d[keep]
-        fx, fy, cx, cy = m.intrinsics
         out.append(
             FrameEvidence(
                 frame_id=m.frame_id,
                 index=i,
                 camera_id=m.camera_id,
                 world_from_cam=wfc,
-                K=np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]], np.float64),
+                K=camera_matrix(m.intrinsics),
                 width=m.width,
                 height=m.height,
                 pts2d=pts2d,
@@ -467,6 +467,11 @@ def consistent_frames(
     return kept, [e.frame_id for e in ev if e.frame_id not in ids]
 
 
+def _without(cals: Mapping[str, CameraCalibration], e: Any) -> Any:
+    """The frame's evidence with its camera's calibration error removed (if one is known)."""
+    return cals[e.camera_id].remove(e) if e.camera_id in cals else e
+
+
 def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfig) -> SharedChecks:
     """All run-level checks on the measurements (in trajectory order)."""
     from pgt_check.geometry.shared_errors import (
@@ -515,7 +520,7 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
         # this run's own shared error cannot be taken for calibration; what is left of the
         # calibration is this camera's change since that run
         cals = trusted_calibration(v.calibration_from, sorted(intrinsics))
-        rest = [cals[e.camera_id].remove(e) if e.camera_id in cals else e for e in ev]
+        rest = [_without(cals, e) for e in ev]
         # calibration only: the change is what the trusted calibration leaves unexplained (a
         # joint fit would trade part of it against a world correction, and re-split the same
         # run's calibration differently)
@@ -530,10 +535,8 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
     if (v.remove_calibration or v.calibration_from) and cals:
         # the user states that the shared camera-frame error is calibration: the evidence is
         # corrected by it, and registration / drift are judged on what remains
-        def without(e: Any) -> Any:
-            return cals[e.camera_id].remove(e) if e.camera_id in cals else e
-
-        ev, all_ev, mode = [without(e) for e in ev], [without(e) for e in all_ev], "none"
+        ev, all_ev = [_without(cals, e) for e in ev], [_without(cals, e) for e in all_ev]
+        mode = "none"
     kw = {"calibration": mode, "calibration_translation": trans}
     reg, sim = (
         _shared_or_not(

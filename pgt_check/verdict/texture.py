@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from pgt_check.measure.record import FrameMeasurement
+from pgt_check.verdict.calibration import camera_matrix
 from pgt_check.verdict.status import FINDING, INCONCLUSIVE, NOT_CHECKED, PASSED
 
 #: renders whose colours come from the mesh (their feature matches are texture evidence)
@@ -33,10 +34,9 @@ def texture_entry(measurements: Sequence[FrameMeasurement], threshold: float) ->
         geo = [parts[s] for s in GEOMETRIC_SOURCES if s in parts]
         if "raw" not in parts or not geo:
             continue
-        fx, fy, cx, cy = m.intrinsics
         frames.append(
             FramePoints(
-                np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1]], np.float64),
+                camera_matrix(m.intrinsics),
                 *parts["raw"],
                 np.concatenate([g[0] for g in geo]),
                 np.concatenate([g[1] for g in geo]),
