@@ -33,16 +33,19 @@ from pgt_check.config import RunConfig
 from pgt_check.evaluation import (
     change_intrinsics,
     drift_trajectory,
+    move_pose,
     move_trajectory,
     perturb_trajectory,
     roc_auc,
     shared_transform,
     time_offset_trajectory,
 )
+from pgt_check.geometry.transforms import apply_rigid, invert_rigid
 from pgt_check.io import read_trajectory
 from pgt_check.measure import FrameChecker, pick_references
 from pgt_check.types import Trajectory
 from pgt_check.verdict import judge_run
+from pgt_check.verdict.calibration import camera_matrix
 
 
 def _subset(traj: Trajectory, n: int) -> Trajectory:
@@ -181,14 +184,10 @@ def _world_move(truth: dict) -> bool:
     return any(k in truth for k in ("deg", "t", "scale"))
 
 
-def _corrected(world_from_cam: np.ndarray, c: np.ndarray) -> np.ndarray:
-    """``world_from_cam`` moved by the correction ``c`` (corrected_world_from_world, rigid or
-    similarity: the centre is mapped by ``c``, the rotation by its rotation part)."""
-    s = float(np.cbrt(np.linalg.det(c[:3, :3])))
-    out = np.eye(4)
-    out[:3, :3] = (c[:3, :3] / s) @ world_from_cam[:3, :3]
-    out[:3, 3] = c[:3, :3] @ world_from_cam[:3, 3] + c[:3, 3]
-    return out
+def _project(k: np.ndarray, world_from_cam: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Pixels (N, 2) of world points ``x`` (N, 3) in a camera with intrinsics ``k``."""
+    u = apply_rigid(invert_rigid(world_from_cam), x) @ k.T
+    return u[:, :2] / u[:, 2:]
 
 
 def true_effect_px(ms, given: Trajectory, correction: np.ndarray | None = None) -> float:
@@ -201,20 +200,12 @@ def true_effect_px(ms, given: Trajectory, correction: np.ndarray | None = None) 
     for m in ms:
         if m.evidence is None or m.frame_id not in poses or m.intrinsics is None:
             continue
-        fx, fy, cx, cy = m.intrinsics
-        k = np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]])
+        k = camera_matrix(m.intrinsics)
         w = np.asarray(m.world_from_cam, np.float64)
-        x = np.asarray(m.evidence.pts_cam, np.float64) @ w[:3, :3].T + w[:3, 3]
-
-        def project(world_from_cam: np.ndarray) -> np.ndarray:
-            c = np.linalg.inv(world_from_cam)
-            u = (x @ c[:3, :3].T + c[:3, 3]) @ k.T
-            return u[:, :2] / u[:, 2:]
-
-        checked = w if correction is None else _corrected(w, correction)
-        per.append(
-            np.median(np.linalg.norm(project(poses[m.frame_id]) - project(checked), axis=1))
-        )
+        x = apply_rigid(w, np.asarray(m.evidence.pts_cam, np.float64))
+        checked = w if correction is None else move_pose(w, correction)
+        d = _project(k, poses[m.frame_id], x) - _project(k, checked, x)
+        per.append(np.median(np.linalg.norm(d, axis=1)))
     return float(np.median(per)) if per else float("nan")
 
 
@@ -335,7 +326,7 @@ def independent_check(name: str, traj: Trajectory, rows: list[dict]) -> dict | N
         pairs.append((deg, float(err), r["verdict"] != "PASS"))
     if len(pairs) < 3:
         return None
-    deg, err, flagged = (np.array(x) for x in zip(*pairs))
+    deg, err, flagged = (np.array(x) for x in zip(*pairs, strict=True))
     rho = float(np.corrcoef(_rank(deg), _rank(err))[0, 1])
     agree = deg < 1.0
     return {
@@ -511,8 +502,6 @@ def _calibration_from_section(results: list[dict]) -> list[str]:
         for res in results
         for r in res.get("calibration_from", [])
     ]
-    if not rows:
-        return []
     head = [
         "dataset", "case", "flagged", "FAIL / UNV.", "bad flagged", "good flagged",
         "registration", "deg", "transl.", "px", "true px", "px left after correction",
@@ -520,13 +509,14 @@ def _calibration_from_section(results: list[dict]) -> list[str]:
         "drift",
         "verdict AUC",
     ]  # fmt: skip
-    return [
-        "\n## 7-Scenes with the calibration of a trusted run (`--calibration-from`)\n",
+    return _section(
+        "7-Scenes with the calibration of a trusted run (`--calibration-from`)",
         "The calibration estimated on the given poses' run (its summary.json) is removed "
         "from each case instead of one estimated on the same run, so a misregistration "
-        "cannot be taken for calibration.\n",
-        md_table(head, rows),
-    ]
+        "cannot be taken for calibration.",
+        head,
+        rows,
+    )
 
 
 def _independent_section(results: list[dict]) -> list[str]:
@@ -539,23 +529,22 @@ def _independent_section(results: list[dict]) -> list[str]:
         for res in results
         if (r := res.get("independent"))
     ]
-    if not rows:
-        return []
     head = [
         "dataset", "frames with a reprojected reference", "Spearman (error vs disagreement)",
         "flagged where sources agree (< 1 deg)", "flagged where they disagree (>= 1 deg)",
         "median error px, agree", "median error px, disagree",
     ]  # fmt: skip
-    return [
-        "\n## Are the flagged 7-Scenes given frames wrong?\n",
+    return _section(
+        "Are the flagged 7-Scenes given frames wrong?",
         "The given 7-Scenes poses (D-SLAM) are compared with the independent COLMAP SfM "
         "poses shipped beside them: for every frame judged through a reprojected reference, "
         "how much the two sources disagree on the frame's pose relative to that reference "
         "(deg; 1 deg is ~9 px at f = 525), against the reprojected path's corner error. "
         "Where the sources disagree, at least one of them is wrong by that much, so a flag "
-        "there is a finding, not a false alarm on a correct pose.\n",
-        md_table(head, rows),
-    ]
+        "there is a finding, not a false alarm on a correct pose.",
+        head,
+        rows,
+    )
 
 
 def _preset_section(results: list[dict]) -> list[str]:
@@ -573,20 +562,26 @@ def _preset_section(results: list[dict]) -> list[str]:
         for res in results
         for r in res.get("presets", [])
     ]
-    if not rows:
-        return []
     head = [
         "dataset", "preset", "case", "flagged", "FAIL / UNV.", "bad flagged", "good flagged",
         "registration", "deg", "px", "drift", "drift AUC", "verdict AUC", "evidence",
         "s/frame", "run checks s",
     ]  # fmt: skip
-    return [
-        "\n## Presets\n",
+    return _section(
+        "Presets",
         "The key cases under each `--preset` (`fast`: SIFT 320 px, raw only, no PnP; "
         "`balanced`: SIFT 320 px + auto reprojection; `accurate`: XFeat 640 px + auto "
-        "reprojection), with the same run-level checks and the edge path on auto.\n",
-        md_table(head, rows),
-    ]
+        "reprojection), with the same run-level checks and the edge path on auto.",
+        head,
+        rows,
+    )
+
+
+def _section(title: str, intro: str, head: list[str], rows: list[list]) -> list[str]:
+    """A report section (heading, introduction, table); none without rows."""
+    if not rows:
+        return []
+    return [f"\n## {title}\n", intro + "\n", md_table(head, rows)]
 
 
 def _errs(r: dict) -> str:
