@@ -107,9 +107,13 @@ class Judgement:
         return both == {Verdict.PASS.value, Verdict.FAIL.value}
 
 
-def _calibrated(m: FrameMeasurement, path: PathMeasurement | None, shared: Any) -> Any:
-    """The path's homography with the camera's estimated calibration error removed."""
-    if path is None or path.photo_from_render is None or shared is None:
+def _calibrated(
+    m: FrameMeasurement, path: PathMeasurement | None, config: VerdictConfig, shared: Any
+) -> Any:
+    """The path's homography with the camera's estimated calibration error removed, where the
+    config asks for it (``remove_calibration`` / ``calibration_from``); else None."""
+    removing = config.remove_calibration or config.calibration_from
+    if not removing or path is None or path.photo_from_render is None or shared is None:
         return None
     h_cal = shared.calibration_homography(m.frame_id, m.camera_id)
     if h_cal is None or path.evidence is not Evidence.ABSOLUTE:
@@ -129,11 +133,10 @@ def path_outcomes(
 ) -> dict[str, tuple[Verdict, str] | None]:
     """What each path (raw, enhanced, edges) alone says, after removing the camera's estimated
     calibration error from absolute paths when the config asks for it."""
-    removing = config.remove_calibration or config.calibration_from
     out = {}
     for name in ("raw", "enhanced", "edges"):
         p = getattr(m, name)
-        h = _calibrated(m, p, shared) if removing else None
+        h = _calibrated(m, p, config, shared)
         out[name] = None if p is None else path_outcome(m, p, config, h)
     return out
 
@@ -164,7 +167,7 @@ def _error_ratio(m: FrameMeasurement, name: str, config: VerdictConfig, shared: 
     if p is None or p.corner_error_px is None:
         return float("nan")
     err = p.corner_error_px
-    h = _calibrated(m, p, shared) if config.remove_calibration or config.calibration_from else None
+    h = _calibrated(m, p, config, shared)
     if h is not None:
         from pgt_check.geometry.homography import corner_error
 
