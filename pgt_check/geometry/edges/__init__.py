@@ -20,18 +20,21 @@ Steps of ``align_edges``:
     whose orientation is within one bin (22.5 deg) of the point's. The best score farther than
     3 tau from the best one (a second peak: repeated structure; or a ridge: parallel edges only)
     gives the ambiguity, normalised by the median score of all shifts.
-(b) refinement from two starts, the best shift as a translation and as the camera rotation
-    that produces it (``rotation_homography``, which carries the keystone of a real rotation):
-    re-search of the shift at a narrow truncation, then point-to-line iterative closest edge
-    (oriented correspondences from per-bin distance transforms with labels, Tukey IRLS,
-    Levenberg damping) from shift through similarity and affine to ``model``, then ``model``
-    with the Tukey scale annealed from tau to ``final_scale`` x tau. Only the start with the
-    better narrow score is refined.
+(b) refinement from up to three starts: the best shift as a translation, as the camera
+    rotation that produces it (``rotation_homography``, which carries the keystone of a real
+    rotation), and the affine map fitting the best shifts of 3 x 3 image tiles near it
+    (``tiles.tile_start``: zoom and perspective larger than tau). Each start: re-search of the
+    shift at a narrow truncation, then point-to-line iterative closest edge (oriented
+    correspondences from per-bin distance transforms with labels, Tukey IRLS, Levenberg
+    damping) from shift through similarity and affine to ``model``, then ``model`` with the
+    Tukey scale annealed from tau to ``final_scale`` x tau. The refined start with the lowest
+    robust cost wins.
 
 Pure numpy / OpenCV / scipy. Modules: ``config`` (settings, kinds, reasons), ``results``
 (result types), ``distance`` (labelled distance transforms), ``render``
-(``geometric_edges``), ``photo`` (``photo_edges``), ``search`` (shift search, ambiguity), ``refine``
-(start matrices, polish, robust refinement), ``align`` (``align_edges``).
+(``geometric_edges``), ``photo`` (``photo_edges``), ``search`` (shift search, ambiguity), ``tiles``
+(the tile-shift start), ``refine`` (start matrices, polish, robust refinement), ``align``
+(``align_edges``).
 """
 
 from __future__ import annotations

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import logging
 import math
 import time
@@ -20,6 +21,7 @@ from pgt_check.geometry.edges.refine import (
 )
 from pgt_check.geometry.edges.results import EdgeAlignment, EdgeMatches, PhotoEdges, RenderEdges
 from pgt_check.geometry.edges.search import ShiftSearch, bins_of, search_shifts
+from pgt_check.geometry.edges.tiles import tile_start
 from pgt_check.geometry.homography import check_homography, corner_error
 
 logger = logging.getLogger(__name__)
@@ -65,7 +67,11 @@ def _failure(
     return EdgeAlignment(**base)
 
 
-def _start(
+#: the tile start wins only with a robust cost this much lower than the shift start's
+TILE_COST_RATIO = 1.0
+
+
+def _refined(
     re: RenderEdges,
     pe: PhotoEdges,
     bins: np.ndarray,
@@ -73,13 +79,49 @@ def _start(
     tau: float,
     config: EdgeAlignConfig,
 ) -> np.ndarray:
-    """The refinement start: the best shift as a translation or as the camera rotation that
-    produces it, whichever puts more edges exactly on photo edges (narrow score), polished."""
+    """The refined start: the best shift as a translation or as the camera rotation that
+    produces it, whichever puts more edges exactly on photo edges (narrow score), polished and
+    refined; replaced by the refined affine map of the tile shifts (``tiles.tile_start``) where
+    that has a clearly lower robust cost (``TILE_COST_RATIO``)."""
     starts = [translation_matrix(*shift)]
     if re.camera_K is not None and np.hypot(*shift) > 0.5:
         starts.append(rotation_homography(re.camera_K, *shift))
     polished = [polish(re, pe, bins, h0, tau, config) for h0 in starts]
-    return max(polished, key=lambda hs: hs[1])[0]
+    hmat, cost = refine(re, pe, bins, max(polished, key=lambda hs: hs[1])[0], tau, config)
+    tiled = tile_start(re, pe, bins, shift, tau, config)
+    if tiled is not None:
+        h_t, cost_t = refine(re, pe, bins, polish(re, pe, bins, tiled, tau, config)[0], tau, config)
+        if cost_t < TILE_COST_RATIO * cost:
+            return h_t
+    return hmat
+
+
+def _ambiguity_after(
+    re: RenderEdges,
+    pe: PhotoEdges,
+    bins: np.ndarray,
+    hmat: np.ndarray,
+    found: ShiftSearch,
+    tau: float,
+    config: EdgeAlignConfig,
+) -> ShiftSearch:
+    """The ambiguity judged again around the refined alignment: the shift search of the render
+    edges moved by ``hmat``. A motion that no single shift fits (a zoom, a strong keystone)
+    spreads the shift scores over several peaks, one per image part, and reads as ambiguous;
+    once aligned by the model, its edges peak at one shift. A repeated structure or a ridge of
+    parallel edges stays ambiguous (the second peak is still there)."""
+    moved = dataclasses.replace(re, points=warp_points(hmat, re.points))
+    again = search_shifts(moved, pe, bins, tau, config, {})
+    if again is None or np.hypot(*again.best_shift) > tau or again.ambiguous:
+        return found
+    second = None if again.second_shift is None else found.best_shift + again.second_shift
+    return dataclasses.replace(
+        found,
+        second_shift=second,
+        second_score=again.second_score,
+        ambiguity=again.ambiguity,
+        ambiguous=False,
+    )
 
 
 def _evaluate(
@@ -166,9 +208,11 @@ def align_edges(
         return _failure(
             EdgeReason.NO_OVERLAP, re, pe, tau, config, timings, support_identity=support_id
         )
-    # (b) refinement of the better start
+    # (b) refinement of each start; the lowest robust cost wins
     t2 = time.perf_counter()
-    hmat = refine(re, pe, bins, _start(re, pe, bins, found.best_shift, tau, config), tau, config)[0]
+    hmat = _refined(re, pe, bins, found.best_shift, tau, config)
+    if found.ambiguous:
+        found = _ambiguity_after(re, pe, bins, hmat, found, tau, config)
     timings["refine"] = time.perf_counter() - t2
 
     support, matches = _evaluate(re, pe, bins, hmat, tau)

@@ -88,6 +88,12 @@ class EdgeAlignConfig:
     min_scale_px: float = 1.5
     #: before refining, re-search the shift within +- this (px) at the narrow final scale
     polish_radius_px: int = 3
+    #: a third start (``tiles.tile_start``): the affine map fitting the best shifts of a
+    #: tile_grid x tile_grid split of the render edges, each searched within +- tile_radius x
+    #: diagonal of the global best shift (motions that vary across the image by more than the
+    #: Tukey scale: zoom, perspective); 0 or 1 = off
+    tile_grid: int = 3
+    tile_radius: float = 0.03
     #: best shift farther than ``ambiguity_separation`` x tau from the best (a second peak or a
     #: ridge of parallel edges) whose score above the median shift score is at least this share
     #: of the best's -> ambiguous

@@ -1,0 +1,81 @@
+"""A start for the refinement from local shifts: the best shift of the render edges of each
+image tile, near the global best shift, and the affine map that fits those tile shifts.
+
+A single shift cannot start a motion that varies across the image by more than the Tukey
+scale (a camera moved towards the scene by a few % zooms the image; a translation moves near
+parts more than far ones): the refinement then ignores the far-off edges as outliers and stops
+short of the zoom (castle, trajectory moved by 4 % of the scene depth: 36 px motion, 4.2 px
+median error of the aligned homography from a shift start, 3.1 px with this start). The tile
+shifts see the variation directly."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pgt_check.geometry.edges.config import EdgeAlignConfig
+from pgt_check.geometry.edges.results import PhotoEdges, RenderEdges
+from pgt_check.geometry.edges.search import _ScoreMaps, subset
+
+#: tiles with fewer render edge points are left out
+TILE_MIN_POINTS = 40
+#: render edge points over all tiles (evenly spread subset)
+TILE_POINTS = 3000
+
+
+def _tile_shift(
+    maps: _ScoreMaps, pts: np.ndarray, bins: np.ndarray, centre: np.ndarray, radius: int,
+    min_inside: float,
+) -> np.ndarray:
+    """Best integer shift of ``pts`` within +-``radius`` of ``centre``: 2 px grid, then 1 px."""
+    best = centre
+    for step, r in ((2, radius), (1, 2)):
+        offs = np.arange(-r, r + 1, step, dtype=np.float64)
+        gx, gy = np.meshgrid(best[0] + offs, best[1] + offs)
+        shifts = np.stack([gx.ravel(), gy.ravel()], axis=1)
+        best = shifts[int(np.argmax(maps.scores(pts, bins, shifts, min_inside)))]
+    return best
+
+
+def tile_start(
+    re: RenderEdges,
+    pe: PhotoEdges,
+    bins: np.ndarray,
+    shift: np.ndarray,
+    tau: float,
+    config: EdgeAlignConfig,
+) -> np.ndarray | None:
+    """photo_from_render (3x3 affine) fitting the best shifts of ``config.tile_grid`` x
+    ``config.tile_grid`` tiles (each searched within +-``config.tile_radius`` x diagonal of
+    ``shift``; RANSAC over the tile centres, inlier distance tau / 2, at least 3 px); None
+    with the tiles off or fewer than 4 tiles with enough edges or no consistent affine map."""
+    import cv2
+
+    grid = int(config.tile_grid)
+    if grid < 2 or len(re) == 0:
+        return None
+    shift = np.asarray(shift, dtype=np.float64)
+    radius = max(2, int(round(config.tile_radius * math.hypot(re.width, re.height))))
+    maps = _ScoreMaps.build(pe, tau, pad=int(np.abs(shift).max()) + radius + 4)
+    sub = subset(len(re), TILE_POINTS)
+    pts, b = re.points[sub], bins[sub]
+    tx = np.clip((pts[:, 0] / re.width * grid).astype(np.int64), 0, grid - 1)
+    ty = np.clip((pts[:, 1] / re.height * grid).astype(np.int64), 0, grid - 1)
+    src, dst = [], []
+    for tile in range(grid * grid):
+        m = tx + grid * ty == tile
+        if m.sum() < TILE_MIN_POINTS:
+            continue
+        s = _tile_shift(maps, pts[m], b[m], shift, radius, config.min_inside)
+        c = pts[m].mean(axis=0)
+        src.append(c)
+        dst.append(c + s)
+    if len(src) < 4:
+        return None
+    a, _ = cv2.estimateAffine2D(
+        np.asarray(src), np.asarray(dst), ransacReprojThreshold=max(3.0, 0.5 * tau)
+    )
+    if a is None or not np.all(np.isfinite(a)):
+        return None
+    return np.vstack([a, [0.0, 0.0, 1.0]])
