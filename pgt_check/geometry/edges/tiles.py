@@ -26,11 +26,12 @@ TILE_POINTS = 3000
 
 def _tile_shift(
     maps: _ScoreMaps, pts: np.ndarray, bins: np.ndarray, centre: np.ndarray, radius: int,
-    min_inside: float,
+    step: int, min_inside: float,
 ) -> np.ndarray:
-    """Best integer shift of ``pts`` within +-``radius`` of ``centre``: 2 px grid, then 1 px."""
+    """Best integer shift of ``pts`` within +-``radius`` of ``centre``: a ``step`` px grid (the
+    score's basin is tau wide), then 1 px around its best."""
     best = centre
-    for step, r in ((2, radius), (1, 2)):
+    for step, r in ((step, radius), (1, step)):
         offs = np.arange(-r, r + 1, step, dtype=np.float64)
         gx, gy = np.meshgrid(best[0] + offs, best[1] + offs)
         shifts = np.stack([gx.ravel(), gy.ravel()], axis=1)
@@ -57,6 +58,7 @@ def tile_start(
         return None
     shift = np.asarray(shift, dtype=np.float64)
     radius = max(2, int(round(config.tile_radius * math.hypot(re.width, re.height))))
+    step = max(1, int(tau // 3))
     maps = _ScoreMaps.build(pe, tau, pad=int(np.abs(shift).max()) + radius + 4)
     sub = subset(len(re), TILE_POINTS)
     pts, b = re.points[sub], bins[sub]
@@ -67,7 +69,7 @@ def tile_start(
         m = tx + grid * ty == tile
         if m.sum() < TILE_MIN_POINTS:
             continue
-        s = _tile_shift(maps, pts[m], b[m], shift, radius, config.min_inside)
+        s = _tile_shift(maps, pts[m], b[m], shift, radius, step, config.min_inside)
         c = pts[m].mean(axis=0)
         src.append(c)
         dst.append(c + s)
