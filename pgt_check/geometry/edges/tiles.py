@@ -31,8 +31,8 @@ def _tile_shift(
     """Best integer shift of ``pts`` within +-``radius`` of ``centre``: a ``step`` px grid (the
     score's basin is tau wide), then 1 px around its best."""
     best = centre
-    for step, r in ((step, radius), (1, step)):
-        offs = np.arange(-r, r + 1, step, dtype=np.float64)
+    for grid_step, r in ((step, radius), (1, step)):
+        offs = np.arange(-r, r + 1, grid_step, dtype=np.float64)
         gx, gy = np.meshgrid(best[0] + offs, best[1] + offs)
         shifts = np.stack([gx.ravel(), gy.ravel()], axis=1)
         best = shifts[int(np.argmax(maps.scores(pts, bins, shifts, min_inside)))]

@@ -49,6 +49,29 @@ def test_edge_size_config():
     assert RunConfig.from_dict({}).edges.resize_max == 1024
     with pytest.raises(ConfigError, match="edges.resize_max"):
         RunConfig.from_dict({"edges": {"resize_max": 4}})
+    assert RunConfig.from_dict({}).edges.tile_grid == 3
+    with pytest.raises(ConfigError, match="edges.tile_grid"):
+        RunConfig.from_dict({"edges": {"tile_grid": -1}})
+
+
+@pytest.mark.parametrize("grid", [0, 3])
+def test_tile_grid_reaches_the_alignment(monkeypatch, grid):
+    import pgt_check.geometry.edges as edges
+    from pgt_check.config import EdgeConfig
+    from pgt_check.measure.edge_path import measure_edges
+    from pgt_check.render.base import Render
+    from pgt_check.types import Camera
+
+    seen = []
+    real = edges.align_edges
+    monkeypatch.setattr(edges, "align_edges", lambda r, p, c: seen.append(c) or real(r, p, c))
+    cam = Camera("PINHOLE", 64, 48, (60.0, 60.0, 31.5, 23.5))
+    depth = np.full((48, 64), 3.0, np.float32)
+    depth[10:30, 20:40] = 2.0
+    render = Render(np.zeros((48, 64, 3), np.float32), depth, depth > 0, "shaded")
+    measure_edges(render, np.zeros((48, 64, 3), np.float32), cam, (1.0, 1.0), cam,
+                  EdgeConfig(tile_grid=grid))
+    assert [c.tile_grid for c in seen] == [grid]
 
 
 @pytest.mark.shared_data
