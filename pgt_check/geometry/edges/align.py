@@ -107,8 +107,16 @@ def _ambiguity_after(
     spreads the shift scores over several peaks, one per image part, and reads as ambiguous;
     once aligned by the model, its edges peak at one shift. A repeated structure or a ridge of
     parallel edges stays ambiguous (the second peak is still there)."""
-    moved = dataclasses.replace(re, points=warp_points(hmat, re.points))
-    again = search_shifts(moved, pe, bins, tau, config, {})
+    q = warp_points(hmat, re.points)
+    inside = np.all(np.isfinite(q), axis=1)
+    inside &= (q[:, 0] >= 0) & (q[:, 0] <= re.width - 1) & (q[:, 1] >= 0) & (q[:, 1] <= re.height - 1)
+    if inside.sum() < config.min_edges:
+        return found
+    moved = dataclasses.replace(
+        re, points=q[inside], normals=re.normals[inside], depth=re.depth[inside],
+        kind=re.kind[inside],
+    )  # fmt: skip
+    again = search_shifts(moved, pe, bins[inside], tau, config, {})
     if again is None or np.hypot(*again.best_shift) > tau or again.ambiguous:
         return found
     second = None if again.second_shift is None else found.best_shift + again.second_shift

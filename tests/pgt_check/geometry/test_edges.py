@@ -293,6 +293,25 @@ def test_a_zoom_larger_than_tau_is_recovered_from_the_tile_start(zoom, seed):
     assert corner_distance(start, warp) < 0.7 * corner_distance(translation(*shift), warp)
 
 
+def test_ambiguity_judged_again_ignores_edges_moved_out_of_the_image():
+    """The re-judged ambiguity searches the render edges moved by the refined homography; a
+    distorted one (clutter in a near view) can move many far outside the photo, which must
+    not index past the score maps (it did on a 7-Scenes frame)."""
+    from pgt_check.geometry.edges.align import _ambiguity_after, auto_tau
+    from pgt_check.geometry.edges.search import bins_of, search_shifts
+
+    z = blocks_depth(seed=1)
+    re, pe = geometric_edges(z, K), photo_edges(photo_from_depth(z))
+    bins = bins_of(re.normals, pe.n_bins)
+    tau, cfg = auto_tau(W, H), EdgeAlignConfig()
+    found = dataclasses.replace(search_shifts(re, pe, bins, tau, cfg, {}), ambiguous=True)
+    stretch = np.array([[3.0, 0.0, -2.0 * W], [0.0, 3.0, -H], [0.0, 0.0, 1.0]])
+    for hmat in (stretch, translation(3.0 * W, 0.0)):
+        assert _ambiguity_after(re, pe, bins, hmat, found, tau, cfg) is found
+    # aligned (identity), the blocks peak at one shift: no longer ambiguous
+    assert not _ambiguity_after(re, pe, bins, np.eye(3), found, tau, cfg).ambiguous
+
+
 def test_tile_start_off_or_without_enough_tiles():
     from pgt_check.geometry.edges.search import bins_of
     from pgt_check.geometry.edges.tiles import tile_start
