@@ -111,6 +111,10 @@ def _add_method_args(p: argparse.ArgumentParser) -> None:
                    help="geometric-edge path (mesh silhouettes and creases vs photo edges; "
                    "absolute evidence without texture): auto (default: where the raw feature "
                    "path is not decisive), always, never")
+    g.add_argument("--edges-tile-grid", type=int, default=None, metavar="N",
+                   help="the edge alignment also starts from the shifts of N x N image tiles "
+                   "(default 0 = off; 3 recovers the rotation / translation split of a "
+                   "misregistration on alike views, at a cost: README, edge path)")
     g.add_argument("--correct", default=None, choices=["none", "fail", "all"],
                    help="correct the poses of FAIL frames (default), all frames or none: "
                    "render -> match -> PnP rounds; writes corrected_trajectory.txt (input's "
@@ -206,6 +210,7 @@ def _cli_overrides(args: argparse.Namespace) -> dict[str, Any]:
         ("enhance", "reference", "mode"): args.reference,
         ("pose", "enabled"): False if args.no_pose_estimate else None,
         ("edges", "mode"): args.edges,
+        ("edges", "tile_grid"): args.edges_tile_grid,
         ("verdict", "shared_threshold_px"): args.shared_threshold_px,
         ("verdict", "shared_checks"): False if args.no_shared_checks else None,
         ("verdict", "remove_calibration"): True if args.remove_calibration else None,

@@ -193,11 +193,15 @@ class EdgeConfig:
     #: ~0.4 s/frame on the castle)
     lead_on_shaded: bool = True
     #: the refinement also starts from the affine map of the best shifts of tile_grid x
-    #: tile_grid image tiles (0 = off): a motion that varies across the image by more than one
-    #: shift can start (a zoom from a camera moved along its view) is then aligned, and with it
-    #: the pooled registration tells a translation from a rotation (castle moved by 4 % of the
-    #: depth: translation estimated 0.10 for 0.36 units without, 0.30 with; reports/shared_errors.md)
-    tile_grid: int = 3
+    #: tile_grid image tiles (0 = off, the default; 3 = on): a motion that varies across the
+    #: image by more than one shift can start (a zoom from a camera moved along its view) is
+    #: then aligned, and with it the pooled registration tells a translation from a rotation
+    #: (castle moved by 4 % of the depth: translation estimated 0.10 for 0.36 units without,
+    #: 0.27 with). Off by default: on near, cluttered views with a real camera offset (the
+    #: 100 given 7-Scenes frames) it fitted clutter on a few frames (89 PASS / 1 FAIL / 10
+    #: UNVERIFIABLE instead of 95 / 0 / 5) and it costs ~0.1 s/frame
+    #: (reports/shared_errors_tiles.md)
+    tile_grid: int = 0
 
     def __post_init__(self) -> None:
         if self.resize_max == 0:

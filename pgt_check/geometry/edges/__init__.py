@@ -20,15 +20,16 @@ Steps of ``align_edges``:
     whose orientation is within one bin (22.5 deg) of the point's. The best score farther than
     3 tau from the best one (a second peak: repeated structure; or a ridge: parallel edges only)
     gives the ambiguity, normalised by the median score of all shifts.
-(b) refinement from up to three starts: the best shift as a translation, as the camera
-    rotation that produces it (``rotation_homography``, which carries the keystone of a real
-    rotation), and the affine map fitting the best shifts of 3 x 3 image tiles near it
-    (``tiles.tile_start``: zoom and perspective larger than tau). Each start: re-search of the
+(b) refinement from the best shift as a translation or as the camera rotation that produces
+    it (``rotation_homography``, which carries the keystone of a real rotation), whichever
+    puts more edges exactly on photo edges, and, with ``tile_grid`` (off by default), from the
+    affine map fitting the best shifts of 3 x 3 image tiles near it (``tiles.tile_start``:
+    zoom and perspective larger than tau; the lower robust cost wins). Each start: re-search of the
     shift at a narrow truncation, then point-to-line iterative closest edge (oriented
     correspondences from per-bin distance transforms with labels, Tukey IRLS, Levenberg
     damping) from shift through similarity and affine to ``model``, then ``model`` with the
-    Tukey scale annealed from tau to ``final_scale`` x tau. The refined start with the lowest
-    robust cost wins.
+    Tukey scale annealed from tau to ``final_scale`` x tau. Where the shift search reads the
+    result as ambiguous, the ambiguity is judged again around the refined alignment.
 
 Pure numpy / OpenCV / scipy. Modules: ``config`` (settings, kinds, reasons), ``results``
 (result types), ``distance`` (labelled distance transforms), ``render``

@@ -91,8 +91,8 @@ class EdgeAlignConfig:
     #: a third start (``tiles.tile_start``): the affine map fitting the best shifts of a
     #: tile_grid x tile_grid split of the render edges, each searched within +- tile_radius x
     #: diagonal of the global best shift (motions that vary across the image by more than the
-    #: Tukey scale: zoom, perspective); 0 or 1 = off
-    tile_grid: int = 3
+    #: Tukey scale: zoom, perspective); 0 or 1 = off (the default; 3 = on)
+    tile_grid: int = 0
     tile_radius: float = 0.03
     #: ... tried only where the best shift is at least this x tau: smaller motions vary across
     #: the image by less than tau, which the shift start reaches; on cluttered near views at

@@ -278,17 +278,18 @@ def test_a_zoom_larger_than_tau_is_recovered_from_the_tile_start(zoom, seed):
     warp = _zoom(zoom, 9.0, -6.0)
     z = blocks_depth(seed=seed, n=10)
     re, pe = geometric_edges(z, K), photo_edges(photo_from_depth(z, warp))
-    al = align_edges(re, pe)
+    tiles = EdgeAlignConfig(tile_grid=3)
+    al = align_edges(re, pe, tiles)
     assert al.success, al.reason
     assert corner_distance(al.photo_from_render, warp) < 0.6
-    without = align_edges(re, pe, EdgeAlignConfig(tile_grid=0))
+    without = align_edges(re, pe)  # the default: no tile start
     assert corner_distance(without.photo_from_render, warp) > 3.0
     # the shift search alone reads the zoom as several peaks (ambiguous); judged again around
     # the refined alignment, it is one
     assert not al.ambiguous
     # the start itself carries the zoom: nearer the truth than the best shift
     shift = np.array(al.shift)
-    start = tile_start(re, pe, bins_of(re.normals, pe.n_bins), shift, 3.0, EdgeAlignConfig())
+    start = tile_start(re, pe, bins_of(re.normals, pe.n_bins), shift, 3.0, tiles)
     assert start is not None
     assert corner_distance(start, warp) < 0.7 * corner_distance(translation(*shift), warp)
 
@@ -321,9 +322,12 @@ def test_tile_start_off_or_without_enough_tiles():
     re, pe = geometric_edges(z, K), photo_edges(photo_from_depth(z, warp))
     bins = bins_of(re.normals, pe.n_bins)
     shift = np.array([5.0, -3.0])
-    assert tile_start(re, pe, bins, shift, 3.0, EdgeAlignConfig(tile_grid=0)) is None
+    tiles = EdgeAlignConfig(tile_grid=3)
+    assert tile_start(re, pe, bins, shift, 3.0, EdgeAlignConfig()) is None  # off by default
+    # below tile_min_shift x tau the shift start reaches the motion: no tile start
+    assert tile_start(re, pe, bins, shift, 6.0, tiles) is None
     # a shift: every tile finds it, the affine map is that shift
-    h = tile_start(re, pe, bins, shift, 3.0, EdgeAlignConfig())
+    h = tile_start(re, pe, bins, shift, 3.0, tiles)
     assert h is not None and corner_distance(h, warp) < 1.5
     # edges in one corner only: fewer than 4 tiles with enough points
     corner = re.points[:, 0] < W / 3
@@ -331,7 +335,7 @@ def test_tile_start_off_or_without_enough_tiles():
     few = dataclasses.replace(
         re, **{k: getattr(re, k)[corner] for k in ("points", "normals", "depth", "kind")}
     )
-    assert tile_start(few, pe, bins[corner], shift, 3.0, EdgeAlignConfig()) is None
+    assert tile_start(few, pe, bins[corner], shift, 3.0, tiles) is None
 
 
 def test_matches_lie_on_photo_edges_and_carry_depth():

@@ -49,7 +49,7 @@ def test_edge_size_config():
     assert RunConfig.from_dict({}).edges.resize_max == 1024
     with pytest.raises(ConfigError, match="edges.resize_max"):
         RunConfig.from_dict({"edges": {"resize_max": 4}})
-    assert RunConfig.from_dict({}).edges.tile_grid == 3
+    assert RunConfig.from_dict({}).edges.tile_grid == 0
     with pytest.raises(ConfigError, match="edges.tile_grid"):
         RunConfig.from_dict({"edges": {"tile_grid": -1}})
 
