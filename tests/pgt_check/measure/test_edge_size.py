@@ -121,3 +121,12 @@ def test_edges_lead_on_a_colourless_mesh_and_leave_out_the_raw_path(shared_data)
     assert [m.edges.corner_error_px for m in plain] == pytest.approx(
         [m.edges.corner_error_px for m in led], abs=1e-6
     )
+
+
+def test_edges_tile_grid_from_the_command_line():
+    from pgt_check.cli import build_parser, load_config
+
+    args = build_parser().parse_args(["traj.txt", "--mesh", "m.ply", "--edges-tile-grid", "3"])
+    assert load_config(args).edges.tile_grid == 3
+    args = build_parser().parse_args(["traj.txt", "--mesh", "m.ply"])
+    assert load_config(args).edges.tile_grid == 0
