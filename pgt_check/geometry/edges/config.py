@@ -94,12 +94,6 @@ class EdgeAlignConfig:
     #: Tukey scale: zoom, perspective); 0 or 1 = off (the default; 3 = on)
     tile_grid: int = 0
     tile_radius: float = 0.03
-    #: ... tried only where the best shift is at least this x tau: smaller motions vary across
-    #: the image by less than tau, which the shift start reaches; on cluttered near views at
-    #: (almost) right poses the tile start could fit clutter with a distorted homography
-    #: (7-Scenes kitchen frames 790-900: 17-27 px corner error from the tiles, 10-16 px
-    #: from the shift start)
-    tile_min_shift: float = 1.0
     #: best shift farther than ``ambiguity_separation`` x tau from the best (a second peak or a
     #: ridge of parallel edges) whose score above the median shift score is at least this share
     #: of the best's -> ambiguous

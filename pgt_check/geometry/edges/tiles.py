@@ -50,13 +50,17 @@ def tile_start(
     """photo_from_render (3x3 affine) fitting the best shifts of ``config.tile_grid`` x
     ``config.tile_grid`` tiles (each searched within +-``config.tile_radius`` x diagonal of
     ``shift``; RANSAC over the tile centres, inlier distance tau / 2, at least 3 px); None
-    with the tiles off, a best shift below ``config.tile_min_shift`` x tau, fewer than 4 tiles
-    with enough edges or no consistent affine map."""
+    with the tiles off, fewer than 4 tiles with enough edges or no consistent affine map.
+
+    Not limited to large shifts: frames whose motion partly cancels in the mean shift (a
+    rotation against a translation) still vary across the image; trying the tiles only from a
+    best shift of tau on made the pooled estimate worse (castle 2 deg + 4 %: translation off
+    38 % instead of 26 %; 7-Scenes with a trusted calibration: 60 % instead of 8 %)."""
     import cv2
 
     grid = int(config.tile_grid)
     shift = np.asarray(shift, dtype=np.float64)
-    if grid < 2 or len(re) == 0 or np.hypot(*shift) < config.tile_min_shift * tau:
+    if grid < 2 or len(re) == 0:
         return None
     radius = max(2, int(round(config.tile_radius * math.hypot(re.width, re.height))))
     step = max(1, int(tau // 3))
