@@ -28,8 +28,9 @@ Steps of ``align_edges``:
     shift at a narrow truncation, then point-to-line iterative closest edge (oriented
     correspondences from per-bin distance transforms with labels, Tukey IRLS, Levenberg
     damping) from shift through similarity and affine to ``model``, then ``model`` with the
-    Tukey scale annealed from tau to ``final_scale`` x tau. Where the shift search reads the
-    result as ambiguous, the ambiguity is judged again around the refined alignment.
+    Tukey scale annealed from tau to ``final_scale`` x tau. With ``tile_grid``, where the
+    shift search reads the result as ambiguous, the ambiguity is judged again around the
+    refined alignment (a zoom spreads the shift scores over several peaks).
 
 Pure numpy / OpenCV / scipy. Modules: ``config`` (settings, kinds, reasons), ``results``
 (result types), ``distance`` (labelled distance transforms), ``render``

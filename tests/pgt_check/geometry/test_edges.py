@@ -304,7 +304,7 @@ def test_ambiguity_judged_again_ignores_edges_moved_out_of_the_image():
     z = blocks_depth(seed=1)
     re, pe = geometric_edges(z, K), photo_edges(photo_from_depth(z))
     bins = bins_of(re.normals, pe.n_bins)
-    tau, cfg = auto_tau(W, H), EdgeAlignConfig()
+    tau, cfg = auto_tau(W, H), EdgeAlignConfig(tile_grid=3)
     found = dataclasses.replace(search_shifts(re, pe, bins, tau, cfg, {}), ambiguous=True)
     stretch = np.array([[3.0, 0.0, -2.0 * W], [0.0, 3.0, -H], [0.0, 0.0, 1.0]])
     for hmat in (stretch, translation(3.0 * W, 0.0)):
