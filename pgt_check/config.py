@@ -197,10 +197,10 @@ class EdgeConfig:
     #: image by more than one shift can start (a zoom from a camera moved along its view) is
     #: then aligned, and with it the pooled registration tells a translation from a rotation
     #: (castle moved by 4 % of the depth: translation estimated 0.10 for 0.36 units without,
-    #: 0.27 with). Off by default: on near, cluttered views with a real camera offset (the
-    #: 100 given 7-Scenes frames) it fitted clutter on a few frames (89 PASS / 1 FAIL / 10
+    #: 0.25 with). Off by default: on near, cluttered views with a real camera offset (the
+    #: 100 given 7-Scenes frames) it fitted clutter on a few frames (88 PASS / 1 FAIL / 11
     #: UNVERIFIABLE instead of 95 / 0 / 5) and it costs ~0.1 s/frame
-    #: (reports/shared_errors_tiles.md)
+    #: (reports/shared_errors_tiles.md, README)
     tile_grid: int = 0
 
     def __post_init__(self) -> None:
