@@ -121,6 +121,10 @@ def _add_method_args(p: argparse.ArgumentParser) -> None:
                    "format) and bad_frames.txt")
     g.add_argument("--correct-rounds", type=int, default=None,
                    help="render -> match -> PnP rounds per corrected frame (default 3)")
+    g.add_argument("--registration-rounds", type=int, default=None, metavar="N",
+                   help="when the registration check fails, N rounds of measuring up to 40 "
+                   "frames again at the corrected poses to refine its estimate (default 3; 0 = "
+                   "off); writes registered_trajectory.txt")
 
 
 def _add_verdict_args(p: argparse.ArgumentParser) -> None:
@@ -218,6 +222,7 @@ def _cli_overrides(args: argparse.Namespace) -> dict[str, Any]:
         ("verdict", "calibration_from"): args.calibration_from,
         ("correct", "frames"): args.correct,
         ("correct", "rounds"): args.correct_rounds,
+        ("correct", "registration_rounds"): args.registration_rounds,
         ("report_details",): args.report_details,
         ("absolute_paths",): True if args.absolute_paths else None,
         # 0 = original size: MatchConfig turns it into None

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pgt_check.geometry.transforms import axis_angle_to_rotmat
+from pgt_check.geometry.transforms import axis_angle_to_rotmat, move_pose
 from pgt_check.types import Frame, Trajectory, check_shape
 
 
@@ -104,16 +104,6 @@ def shared_transform(
     m[:3, :3] = scale * r
     m[:3, 3] = c - scale * r @ c + translation * _random_unit(rng)
     return m
-
-
-def move_pose(world_from_cam: np.ndarray, moved_from_world: np.ndarray) -> np.ndarray:
-    """One pose moved by a rigid / similarity world transform: the centre mapped by it, the
-    rotation by its rotation part (the scale leaves the camera's axes alone)."""
-    s = float(np.cbrt(np.linalg.det(moved_from_world[:3, :3])))
-    out = np.eye(4)
-    out[:3, :3] = (moved_from_world[:3, :3] / s) @ world_from_cam[:3, :3]
-    out[:3, 3] = moved_from_world[:3, :3] @ world_from_cam[:3, 3] + moved_from_world[:3, 3]
-    return out
 
 
 def move_trajectory(traj: Trajectory, moved_from_world: np.ndarray) -> Trajectory:

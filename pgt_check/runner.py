@@ -40,7 +40,8 @@ logger = logging.getLogger(__name__)
 __all__ = [
     "RunInterrupted", "check_frames", "content_hash", "frame_input_keys",
     "images_outside_dataset", "load_trajectory", "log_progress", "measurement_fingerprint",
-    "panel_writer", "preflight", "run", "stored_measurements", "write_report_assets",
+    "measure_plain", "panel_writer", "preflight", "run", "stored_measurements",
+    "write_report_assets",
 ]
 
 
@@ -203,11 +204,18 @@ def check_frames(
     )
     judged = judge_run(measurements, config)
     rows = judged.rows
+    traj = trajectory if trajectory is not None else Trajectory(tuple(frames))
+    shared_extra = judged.summary_extra()
+    if judged.shared is not None:  # a failed registration check: its estimate refined
+        from pgt_check.registration_refine import refine_run
+
+        shared_extra["shared_errors"] = refine_run(
+            traj, measurements, judged.shared, config, measure_plain, out
+        )
     corrections: dict[str, Any] = {}
     if config.correct.frames != "none":  # corrected poses (pgt_check.corrections)
         from pgt_check.corrections import correct_run
 
-        traj = trajectory if trajectory is not None else Trajectory(tuple(frames))
         rows, corrections = correct_run(traj, measurements, rows, config, checker_factory, out)
     assets = write_report_assets(
         frames, rows, config, checker_factory, measurement_fingerprint(config, inputs)
@@ -223,11 +231,26 @@ def check_frames(
             "worker_crashes": stats.worker_crashes,
         },
         **(extra or {}),
-        **judged.summary_extra(),
+        **shared_extra,
         **corrections,
         "wall_time_s": time.perf_counter() - t0,
     }
     return write_outputs(out, rows, config, extra=summary_extra, assets=assets)
+
+
+def measure_plain(frames: Sequence[Frame], config: RunConfig) -> list[FrameMeasurement]:
+    """Measure ``frames`` with ``config`` (its executor; no store, no references: the
+    absolute paths only), in any order. Raises RunInterrupted after a Ctrl-C / SIGTERM (the
+    main pass's frames stay stored)."""
+    from pgt_check.executor import iter_results, stop_on_sigint
+
+    factory = functools.partial(build_frame_checker, config, None)
+    with stop_on_sigint() as stop:
+        results = iter_results(frames, factory, config, stop=stop)
+        ms = list(_progress(results, len(frames), "pgt-check registration"))
+        if stop.is_set() and len(ms) < len(frames):
+            raise RunInterrupted(len(ms), len(frames), str(config.out))
+    return ms
 
 
 def _open_store(config: RunConfig, ids: list[str], inputs: dict[str, str] | None) -> Any:

@@ -100,6 +100,24 @@ def apply_rigid(a_from_b: np.ndarray, points_b: np.ndarray) -> np.ndarray:
     return points_b @ a_from_b[:3, :3].T + a_from_b[:3, 3]
 
 
+def move_pose(world_from_cam: np.ndarray, moved_from_world: np.ndarray) -> np.ndarray:
+    """One (4, 4) pose moved by a rigid / similarity world transform (4, 4): the centre mapped
+    by it, the rotation by its rotation part (a scale leaves the camera's axes alone). Returns a
+    rigid (4, 4) world_from_cam (a registration correction applied to a pose)."""
+    world_from_cam = np.asarray(world_from_cam, dtype=np.float64)
+    moved_from_world = np.asarray(moved_from_world, dtype=np.float64)
+    check_shape("world_from_cam", world_from_cam, (4, 4))
+    check_shape("moved_from_world", moved_from_world, (4, 4))
+    det = float(np.linalg.det(moved_from_world[:3, :3]))
+    if not det > 0:
+        raise ValueError(f"moved_from_world: not a rotation times a positive scale (det {det})")
+    s = float(np.cbrt(det))
+    out = np.eye(4)
+    out[:3, :3] = (moved_from_world[:3, :3] / s) @ world_from_cam[:3, :3]
+    out[:3, 3] = moved_from_world[:3, :3] @ world_from_cam[:3, 3] + moved_from_world[:3, 3]
+    return out
+
+
 def rotation_angle_deg(r: np.ndarray) -> float:
     """Geodesic angle of a (3, 3) rotation, in degrees (clipped, stable near 0 and 180)."""
     r = np.asarray(r, dtype=np.float64)

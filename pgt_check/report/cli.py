@@ -11,6 +11,7 @@ import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from pgt_check._cli import parse_args
 from pgt_check.config import RunConfig, merge
@@ -63,6 +64,30 @@ def load_run(out_dir: Path) -> tuple[list[FrameMeasurement], dict]:
         raise InputError(f"{rec_path}: {err}") from err
     except (KeyError, ValueError, TypeError) as err:
         raise InputError(f"{rec_path}: a record is malformed ({type(err).__name__}: {err})") from err
+
+
+def _shared_extra(judged: Any, out: Path) -> dict[str, Any]:
+    """The run-level section, with the run's registration refinement where it started from
+    this judgement's estimate (other verdict settings may change the estimate: then the
+    refinement is stale and left out, with a note)."""
+    from pgt_check.registration_refine import (
+        REFINED_FILE,
+        apply_refinement,
+        load_refinement,
+        needs_refinement,
+    )
+
+    extra = judged.summary_extra()
+    if judged.shared is None:
+        return extra
+    shared = extra["shared_errors"]
+    refined = load_refinement(out, shared)
+    if refined is None and needs_refinement(shared) and (out / REFINED_FILE).is_file():
+        print(f"pgt-check report: note: {REFINED_FILE} was measured for another registration "
+              "estimate (other verdict settings); the estimate shown is not refined",
+              file=sys.stderr)
+    extra["shared_errors"] = apply_refinement(shared, refined)
+    return extra
 
 
 def _warn_stale_auto_decisions(records: list[FrameMeasurement], config: RunConfig) -> None:
@@ -171,7 +196,7 @@ def report_main(argv: Sequence[str]) -> int:
         }
         judged = judge_run(records, config)
         rows = add_correction_columns(judged.rows, load_corrections(out))
-        summary = write_outputs(out, rows, config, {**extra, **judged.summary_extra()})
+        summary = write_outputs(out, rows, config, {**extra, **_shared_extra(judged, out)})
     except (InputError, OSError) as err:
         print(f"pgt-check report: error: {err}", file=sys.stderr)
         return 2

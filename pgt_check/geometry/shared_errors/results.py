@@ -67,12 +67,9 @@ class RegistrationEstimate:
         """Apply the correction to one (4, 4) pose; returns a rigid (4, 4) pose."""
         if self.corrected_world_from_world is None:
             raise ValueError(f"no correction ({self.reason})")
-        m = self.corrected_world_from_world
-        s = float(np.cbrt(np.linalg.det(m[:3, :3])))
-        out = np.eye(4)
-        out[:3, :3] = (m[:3, :3] / s) @ world_from_cam[:3, :3]
-        out[:3, 3] = m[:3, :3] @ world_from_cam[:3, 3] + m[:3, 3]
-        return out
+        from pgt_check.geometry.transforms import move_pose
+
+        return move_pose(world_from_cam, self.corrected_world_from_world)
 
     def to_json(self) -> dict:
         return _to_json(self)
