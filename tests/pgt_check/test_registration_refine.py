@@ -22,8 +22,8 @@ from pgt_check.registration_refine import (
     REGISTERED_NAME,
     apply_refinement,
     load_refinement,
-    refine_frames,
     refine_fingerprint,
+    refine_frames,
     refine_registration,
     refine_run,
     save_refinement,
@@ -244,7 +244,6 @@ def test_refine_frames_leaves_out_frames_with_own_errors_and_spreads_the_rest(mo
 
 def test_config_and_cli_reach_the_rounds():
     from pgt_check.cli import build_parser, load_config
-
     from pgt_check.errors import ConfigError
 
     with pytest.raises(ConfigError, match="registration_rounds"):
