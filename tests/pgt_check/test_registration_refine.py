@@ -15,7 +15,7 @@ import pytest
 
 from pgt_check.config import RunConfig
 from pgt_check.enhance.base import Evidence
-from pgt_check.evaluation import move_trajectory, shared_transform
+from pgt_check.evaluation import _look_at, move_trajectory, shared_transform
 from pgt_check.geometry.transforms import invert_rigid, rotation_angle_deg
 from pgt_check.measure import AbsoluteEvidence, FrameMeasurement, PathMeasurement
 from pgt_check.registration_refine import (
@@ -38,23 +38,13 @@ REACH = 0.6
 WORLD = np.random.default_rng(5).uniform([-1.5, -1.5, 0.0], [1.5, 1.5, 1.6], size=(400, 3))
 
 
-def _look_at(eye, target):
-    z = np.asarray(target, float) - eye
-    z /= np.linalg.norm(z)
-    x = np.cross(z, [0, 0, 1.0])
-    x /= np.linalg.norm(x)
-    m = np.eye(4)
-    m[:3, :3] = np.stack([x, np.cross(z, x), z], axis=1)
-    m[:3, 3] = eye
-    return m
-
-
 def _trajectory(n: int = 24) -> Trajectory:
     frames = []
     for i in range(n):
         a = 1.2 * i / n  # an arc of views, as a sweep along a facade
         eye = np.array([3.0 * np.cos(a), 3.0 * np.sin(a), 1.5])
-        frames.append(Frame(f"f{i:03d}", CAM, _look_at(eye, [0, 0, 0.8]), timestamp=float(i),
+        frames.append(Frame(f"f{i:03d}", CAM, _look_at(eye, np.array([0, 0, 0.8])),
+                            timestamp=float(i),
                             image_path=f"img/f{i:03d}.jpg"))
     return Trajectory(tuple(frames), "synthetic", "lamar")
 
