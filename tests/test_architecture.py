@@ -15,7 +15,7 @@ LAYERS = {
     "measure": 2,
     "verdict": 3,
     "store": 3,
-    "report": 4,
+    "report": 4, "registration_refine": 4,
     "executor": 5, "inputs": 5, "runner": 5, "corrections": 5, "compare": 5,
     "enhance_cli": 5, "enhance_refs": 5,
     "cli": 6, "__main__": 6, "api": 6,
