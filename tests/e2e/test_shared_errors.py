@@ -141,6 +141,16 @@ def test_real_moved_trajectory_fails_the_gate(shared_data, dataset, deg, frac, t
     assert _flagged(rows) >= 0.9
     if dataset == "castle":  # colourless mesh: no texture evidence to compare
         assert "texture" not in summary["shared_errors"]
+    if dataset == "castle" and not deg:
+        # the registered trajectory the run wrote passes the registration check
+        moved_in = tmp_path / "moved" / "in"
+        registered = read_trajectory(
+            tmp_path / "moved" / "out" / "registered_trajectory.txt", "lamar",
+            sensors=moved_in / "sensors.txt", images=moved_in / "images.txt",
+        )
+        rc2, again, _ = _run(registered, root / "mesh.ply", tmp_path / "registered", *extra)
+        assert again["shared_errors"]["registration"]["status"] == "passed", again[
+            "shared_errors"]["registration"]["message"]
 
 
 @pytest.mark.shared_data
