@@ -298,13 +298,14 @@ class CorrectConfig:
     rounds: int = 3
     #: PnP bootstrap resamples for the uncertainty (0 = the last update only)
     bootstrap: int = 12
-    #: when the registration check fails: rounds of measuring frames again at the poses the
-    #: estimate corrects and fitting what is left (``pgt_check.registration_refine``; 0 = off).
-    #: The first estimate's rotation / translation split is off by up to 70-90 % where the
-    #: misregistration zooms the images; three rounds bring castle 2 deg + 4 % to 6 % / 7 %
-    registration_rounds: int = 3
+    #: when the registration check fails: at most this many rounds of measuring frames again
+    #: at the poses the estimate corrects and fitting what is left, stopping once what is left
+    #: is below the shared threshold twice (``pgt_check.registration_refine``; 0 = off). The
+    #: first estimate's rotation / translation split is off by up to 70-90 % where the
+    #: misregistration zooms the images; castle: 3 rounds, 7-Scenes (noisier evidence) 3-6
+    registration_rounds: int = 8
     #: frames measured per round (evenly spaced; the pooled fit needs a few dozen)
-    registration_frames: int = 40
+    registration_frames: int = 30
 
     def __post_init__(self) -> None:
         if self.rounds < 1:
