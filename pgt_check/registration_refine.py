@@ -338,10 +338,10 @@ def apply_refinement(
 
 
 def save_refinement(out_dir: str | Path, refined: RefinedRegistration) -> Path:
-    from pgt_check.report.files import atomic_write_text
-
     path = Path(out_dir) / REFINED_FILE
-    atomic_write_text(path, json.dumps(refined.to_json(), indent=1) + "\n")
+    tmp = path.with_name(path.name + ".tmp")  # written whole, then renamed
+    tmp.write_text(json.dumps(refined.to_json(), indent=1) + "\n", encoding="utf-8")
+    tmp.replace(path)
     return path
 
 
