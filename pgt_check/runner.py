@@ -40,7 +40,7 @@ logger = logging.getLogger(__name__)
 __all__ = [
     "RunInterrupted", "check_frames", "content_hash", "frame_input_keys",
     "images_outside_dataset", "load_trajectory", "log_progress", "measurement_fingerprint",
-    "measure_plain", "panel_writer", "preflight", "run", "stored_measurements",
+    "PlainMeasure", "panel_writer", "preflight", "run", "stored_measurements",
     "write_report_assets",
 ]
 
@@ -209,9 +209,13 @@ def check_frames(
     if judged.shared is not None:  # a failed registration check: its estimate refined
         from pgt_check.registration_refine import refine_run
 
-        shared_extra["shared_errors"] = refine_run(
-            traj, measurements, judged.shared, config, measure_plain, out
-        )
+        measure = PlainMeasure()
+        try:
+            shared_extra["shared_errors"] = refine_run(
+                traj, measurements, judged.shared, config, measure, out
+            )
+        finally:
+            measure.close()
     corrections: dict[str, Any] = {}
     if config.correct.frames != "none":  # corrected poses (pgt_check.corrections)
         from pgt_check.corrections import correct_run
@@ -238,19 +242,48 @@ def check_frames(
     return write_outputs(out, rows, config, extra=summary_extra, assets=assets)
 
 
-def measure_plain(frames: Sequence[Frame], config: RunConfig) -> list[FrameMeasurement]:
-    """Measure ``frames`` with ``config`` (its executor; no store, no references: the
-    absolute paths only), in any order. Raises RunInterrupted after a Ctrl-C / SIGTERM (the
-    main pass's frames stay stored)."""
-    from pgt_check.executor import iter_results, stop_on_sigint
+class PlainMeasure:
+    """``measure(frames, config)`` for the registration refinement's rounds: the absolute
+    paths only (no store, no references), with ``config``'s executor, in any order. In serial
+    mode one checker is kept over all rounds (the mesh and renderer are built once); call
+    ``close`` at the end. Raises RunInterrupted after a Ctrl-C / SIGTERM (the main pass's
+    frames stay stored)."""
 
-    factory = functools.partial(build_frame_checker, config, None)
-    with stop_on_sigint() as stop:
-        results = iter_results(frames, factory, config, stop=stop)
-        ms = list(_progress(results, len(frames), "pgt-check registration"))
-        if stop.is_set() and len(ms) < len(frames):
-            raise RunInterrupted(len(ms), len(frames), str(config.out))
-    return ms
+    def __init__(self) -> None:
+        self._checker: Any = None
+
+    def __call__(self, frames: Sequence[Frame], config: RunConfig) -> list[FrameMeasurement]:
+        from pgt_check.executor import iter_results, stop_on_sigint
+
+        factory: Callable[[], Any] = functools.partial(build_frame_checker, config, None)
+        if config.executor == "serial":
+            if self._checker is None:
+                self._checker = factory()
+            factory = functools.partial(_Borrowed, self._checker)
+        with stop_on_sigint() as stop:
+            results = iter_results(frames, factory, config, stop=stop)
+            ms = list(_progress(results, len(frames), "pgt-check registration"))
+            if stop.is_set() and len(ms) < len(frames):
+                raise RunInterrupted(len(ms), len(frames), str(config.out))
+        return ms
+
+    def close(self) -> None:
+        if self._checker is not None:
+            self._checker.close()
+            self._checker = None
+
+
+class _Borrowed:
+    """A checker lent to one executor pass: closing it is left to its owner."""
+
+    def __init__(self, checker: Any) -> None:
+        self._checker = checker
+
+    def measure(self, frame: Frame, keep: Any = None) -> FrameMeasurement:
+        return self._checker.measure(frame, keep)
+
+    def close(self) -> None:
+        pass
 
 
 def _open_store(config: RunConfig, ids: list[str], inputs: dict[str, str] | None) -> Any:

@@ -246,3 +246,33 @@ def test_config_and_cli_reach_the_rounds():
     assert load_config(args).correct.registration_rounds == 0
     args = build_parser().parse_args(["t.txt", "--mesh", "m.ply"])
     assert load_config(args).correct.registration_rounds == 8
+
+
+def test_the_runners_measure_keeps_one_serial_checker_over_the_rounds(monkeypatch):
+    """``runner.PlainMeasure`` (what a run hands the refinement): in serial mode the checker
+    (mesh, renderer) is built once for all rounds, closed once at the end, and each round's
+    frames come back measured."""
+    from pgt_check import runner
+
+    built, closed = [], []
+
+    class Checker:
+        def measure(self, frame, keep=None):
+            return frame.frame_id
+
+        def close(self):
+            closed.append(1)
+
+    def factory(config, references):
+        built.append(config)
+        return Checker()
+
+    monkeypatch.setattr(runner, "build_frame_checker", factory)
+    config = RunConfig.from_dict({"input": {"trajectory": "t", "mesh": "m"}})
+    frames = _trajectory(6).frames
+    measure = runner.PlainMeasure()
+    for _ in range(3):
+        assert sorted(measure(frames, config)) == [f.frame_id for f in frames]
+    assert len(built) == 1 and closed == []
+    measure.close()
+    assert closed == [1]
