@@ -32,6 +32,7 @@ from pgt_check.measure import (
     build_frame_checker,
     pick_references,
 )
+from pgt_check.measure.steps import format_exception
 from pgt_check.types import Frame, Trajectory
 from pgt_check.verdict import judge_run
 
@@ -214,6 +215,13 @@ def check_frames(
             shared_extra["shared_errors"] = refine_run(
                 traj, measurements, judged.shared, config, measure, out
             )
+        except RunInterrupted:
+            raise
+        except Exception as err:  # the verdicts and the first estimate stand without it
+            if config.fail_fast:
+                raise
+            logger.error("the registration refinement failed (%s); the first estimate is "
+                         "reported", format_exception(err))
         finally:
             measure.close()
     corrections: dict[str, Any] = {}

@@ -276,3 +276,33 @@ def test_the_runners_measure_keeps_one_serial_checker_over_the_rounds(monkeypatc
     assert len(built) == 1 and closed == []
     measure.close()
     assert closed == [1]
+
+
+def test_a_failing_refinement_leaves_the_run_and_its_first_estimate(tmp_path, monkeypatch):
+    """The refinement is a correction step: if it breaks, the run still writes its outputs
+    (verdicts and the first estimate), and says so in the log."""
+    import pgt_check.registration_refine as rr
+    from pgt_check.measure import MeasureReason, failed_measurement
+    from pgt_check.runner import check_frames
+
+    class Checker:
+        def measure(self, frame, keep=None):
+            return failed_measurement(frame, MeasureReason.IMAGE_MISSING)
+
+        def close(self):
+            pass
+
+    def broken(*args, **kwargs):
+        raise RuntimeError("refinement broke")
+
+    monkeypatch.setattr(rr, "refine_run", broken)
+    config = RunConfig.from_dict({"input": {"trajectory": "t", "mesh": "m"},
+                                  "out": str(tmp_path / "out"), "report_details": 0})
+    summary = check_frames(list(_trajectory(4).frames), config, Checker)
+    assert summary["counts"]["UNVERIFIABLE"] == 4
+    assert "refinement" not in summary["shared_errors"]["registration"]
+    assert (tmp_path / "out" / "summary.json").is_file()
+    strict = RunConfig.from_dict({"input": {"trajectory": "t", "mesh": "m"}, "fail_fast": True,
+                                  "out": str(tmp_path / "out2"), "report_details": 0})
+    with pytest.raises(RuntimeError, match="refinement broke"):
+        check_frames(list(_trajectory(4).frames), strict, Checker)
