@@ -83,7 +83,9 @@ class RefinedRegistration:
     """The refined corrections (corrected_world_from_world, nested lists) and their rounds.
 
     ``start``: the main pass's rigid correction the rounds started from; ``origin``: the
-    centroid of the checked camera centres (the translation is that point's displacement);
+    centroid of the checked camera centres of every measured frame (the refined translation
+    is that point's displacement; the first pass's is about the centroid of the frames with
+    evidence, a difference of (R - I) times their offset: negligible for small angles);
     ``stopped``: why the rounds ended ("converged", "round limit", or the round whose
     residual fit did not succeed)."""
 
