@@ -306,3 +306,46 @@ def test_a_failing_refinement_leaves_the_run_and_its_first_estimate(tmp_path, mo
                                   "out": str(tmp_path / "out2"), "report_details": 0})
     with pytest.raises(RuntimeError, match="refinement broke"):
         check_frames(list(_trajectory(4).frames), strict, Checker)
+
+
+@pytest.mark.parametrize(
+    ("residuals", "n_rounds", "stopped"),
+    [
+        # (status, effect px) per round; the shared threshold is 2.4 px
+        ([("failed", 5.0), ("passed", 1.5), ("passed", 1.2), ("passed", 1.0)], 3,
+         "converged (passed twice)"),
+        ([("failed", 5.0), ("passed", 0.4), ("passed", 1.2)], 2, "converged"),
+        ([("failed", 5.0), ("inconclusive", 2.5), ("passed", 1.5), ("failed", 3.0)] * 3, 8,
+         "round limit"),
+        ([("failed", 5.0), (None, None)], 2, "round 2: no residual fit (ill_conditioned)"),
+    ],
+)
+def test_the_rounds_stop_rules(moved_case, monkeypatch, residuals, n_rounds, stopped):
+    """Rounds end when what is left is below 1/4 of the shared threshold, when it passes the
+    threshold twice in a row, when a residual fit fails, or at the round limit."""
+    import pgt_check.verdict.shared as shared_mod
+
+    true, checked, move, config, ms, judged = moved_case
+    small = np.eye(4)
+    small[:3, 3] = (0.001, 0.0, 0.0)
+    seq = iter(residuals)
+
+    class Checks:
+        def __init__(self, status, effect):
+            self.status, self.effect = status, effect
+
+        def summary(self):
+            ok = self.status is not None
+            return {"threshold_px": 2.4, "registration": {
+                "status": self.status or "not_checked", "reason": "" if ok else "ill_conditioned",
+                "angle_deg": 0.1 if ok else None, "translation": 0.001 if ok else None,
+                "effect_px": self.effect, "corrected_world_from_world": small.tolist() if ok
+                else None}}
+
+    monkeypatch.setattr(shared_mod, "run_shared_checks", lambda m, c: Checks(*next(seq)))
+    refined = refine_registration(checked.frames, ms, judged.shared, config, FakeMeasure(true))
+    assert len(refined.rounds) == n_rounds and refined.stopped == stopped
+    fitted = [r for r in refined.rounds if r.total_angle_deg is not None]
+    # the composed correction moves by one small step per fitted round
+    step = np.linalg.matrix_power(small, len(fitted)) @ np.asarray(refined.start)
+    assert np.allclose(refined.rigid, step)
