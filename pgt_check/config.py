@@ -302,7 +302,7 @@ class CorrectConfig:
     #: at the poses the estimate corrects and fitting what is left, stopping once what is left
     #: is below the shared threshold twice (``pgt_check.registration_refine``; 0 = off). The
     #: first estimate's rotation / translation split is off by up to 70-90 % where the
-    #: misregistration zooms the images; castle: 3 rounds, 7-Scenes (noisier evidence) 3-6
+    #: misregistration zooms the images; measured: castle 1-3 rounds, 7-Scenes (noisier) 2-5
     registration_rounds: int = 8
     #: frames measured per round (evenly spaced; the pooled fit needs a few dozen)
     registration_frames: int = 30
