@@ -256,7 +256,7 @@ def refined_estimate(key: str, t: Trajectory, mesh: Path, cfg: RunConfig, ms) ->
 
         t0 = time.perf_counter()
         try:
-            refined = refine_registration(t.frames, ms, j.shared, cfg, measure_fn)
+            refined = refine_registration(t.frames, ms, j.shared.summary(), cfg, measure_fn)
         finally:
             for c in checkers:
                 c.close()

@@ -142,14 +142,9 @@ def refine_frames(
 
 
 def evidence_config(config: RunConfig) -> RunConfig:
-    """The main config for absolute evidence only: no enhancement, no report panels, no
-    corrections (the verdict settings, calibration handling included, stay)."""
-    return replace(
-        config,
-        enhance=replace(config.enhance, mode="never"),
-        correct=replace(config.correct, frames="none", registration_rounds=0),
-        report_details=0,
-    )
+    """The main config for absolute evidence only: no enhancement, no report panels (the
+    verdict settings, calibration handling included, stay)."""
+    return replace(config, enhance=replace(config.enhance, mode="never"), report_details=0)
 
 
 def refine_fingerprint(config: RunConfig) -> str:
@@ -172,19 +167,18 @@ def _f(x: Any) -> float | None:
 def refine_registration(
     frames: Sequence[Frame],
     measurements: Sequence[FrameMeasurement],
-    shared: Any,
+    summary: Mapping[str, Any],
     config: RunConfig,
     measure: MeasureFn,
 ) -> RefinedRegistration | None:
     """Rounds of measure-at-the-corrected-poses -> residual fit -> compose (module docstring).
 
-    ``shared``: the main pass's ``SharedChecks``; ``measure(frames, config)``: the absolute
+    ``summary``: the main pass's ``shared_errors`` section; ``measure(frames, config)``: the absolute
     evidence of the frames at their (moved) poses, in any order. None when there is nothing to
     refine (``needs_refinement`` false, rounds 0, or no frame to measure)."""
     from pgt_check.verdict.shared import run_shared_checks
 
     rounds = config.correct.registration_rounds
-    summary = shared.summary()
     if rounds <= 0 or not needs_refinement(summary):
         return None
     todo = refine_frames(measurements, frames, config.correct.registration_frames)
@@ -380,25 +374,24 @@ def registered_trajectory(trajectory: Trajectory, refined: RefinedRegistration) 
 def refine_run(
     trajectory: Trajectory,
     measurements: Sequence[FrameMeasurement],
-    shared: Any,
+    summary: dict[str, Any],
     config: RunConfig,
     measure: MeasureFn,
     out: str | Path,
 ) -> dict[str, Any]:
     """The correction step for a failed registration check: reuse the stored refinement of
-    this start or run the rounds, save it, write ``registered_trajectory.txt``; returns the
-    summary's ``shared_errors`` section with the refined corrections."""
+    this start or run the rounds, save it, write ``registered_trajectory.txt``; returns
+    ``summary`` (the main pass's ``shared_errors`` section) with the refined corrections."""
     from pgt_check.io.writers import write_trajectory_file
 
     out = Path(out)
-    summary = shared.summary()
     refined = None
     if config.correct.registration_rounds > 0 and needs_refinement(summary):
         refined = load_refinement(out, summary, refine_fingerprint(config))
         if refined is not None:
             logger.info("registration refinement reused from %s", out / REFINED_FILE)
         else:
-            refined = refine_registration(trajectory.frames, measurements, shared, config, measure)
+            refined = refine_registration(trajectory.frames, measurements, summary, config, measure)
             if refined is not None:
                 save_refinement(out, refined)
     path = out / REGISTERED_NAME

@@ -213,7 +213,7 @@ def check_frames(
         measure = PlainMeasure()
         try:
             shared_extra["shared_errors"] = refine_run(
-                traj, measurements, judged.shared, config, measure, out
+                traj, measurements, shared_extra["shared_errors"], config, measure, out
             )
         except RunInterrupted:
             raise

@@ -128,7 +128,7 @@ def test_first_estimate_is_biased_and_rounds_converge(moved_case):
     # one fit on evidence that stops short: the correction is underestimated
     assert reg["angle_deg"] < 0.8 * DEG
     fake = FakeMeasure(true)
-    refined = refine_registration(checked.frames, ms, judged.shared, config, fake)
+    refined = refine_registration(checked.frames, ms, judged.shared.summary(), config, fake)
     assert refined is not None and len(refined.rounds) >= 2
     # every round measures at poses closer to the truth than the round before
     offs = [_off(call, true) for call in fake.calls]
@@ -156,7 +156,8 @@ def test_first_estimate_is_biased_and_rounds_converge(moved_case):
 
 def test_the_similarity_entry_keeps_its_first_estimate(moved_case):
     true, checked, move, config, ms, judged = moved_case
-    refined = refine_registration(checked.frames, ms, judged.shared, config, FakeMeasure(true))
+    refined = refine_registration(checked.frames, ms, judged.shared.summary(), config,
+                                  FakeMeasure(true))
     first = judged.shared.summary()["similarity"]
     assert apply_refinement(judged.shared.summary(), refined)["similarity"] == first
 
@@ -169,7 +170,7 @@ def test_nothing_to_refine_when_the_registration_passes():
     judged = judge_run(ms, config)
     assert judged.shared.summary()["registration"]["status"] == "passed"
     fake.calls.clear()
-    assert refine_registration(true.frames, ms, judged.shared, config, fake) is None
+    assert refine_registration(true.frames, ms, judged.shared.summary(), config, fake) is None
     assert fake.calls == []
 
 
@@ -179,7 +180,7 @@ def test_rounds_zero_switches_it_off(moved_case, tmp_path):
                                "correct": {"registration_rounds": 0}})
     fake = FakeMeasure(true)
     (tmp_path / REGISTERED_NAME).write_text("stale\n")
-    summary = refine_run(checked, ms, judged.shared, off, fake, tmp_path)
+    summary = refine_run(checked, ms, judged.shared.summary(), off, fake, tmp_path)
     assert fake.calls == [] and "refinement" not in summary["registration"]
     assert not (tmp_path / REGISTERED_NAME).exists()  # a stale file is not left behind
 
@@ -191,7 +192,7 @@ def test_refine_run_writes_the_registered_trajectory_and_reuses_the_stored_resul
 
     true, checked, move, config, ms, judged = moved_case
     fake = FakeMeasure(true)
-    summary = refine_run(checked, ms, judged.shared, config, fake, tmp_path)
+    summary = refine_run(checked, ms, judged.shared.summary(), config, fake, tmp_path)
     n_calls = len(fake.calls)
     assert n_calls >= 2 and summary["registration"]["refinement"]["rounds"]
     files = write_lamar(checked, tmp_path / "in")  # sensors and images to read it with
@@ -202,14 +203,15 @@ def test_refine_run_writes_the_registered_trajectory_and_reuses_the_stored_resul
            for r, t in zip(registered.frames, true.frames, strict=True)]  # read back in order
     assert np.mean(off) < 0.2 * _off(checked.frames, true)
     # resumed / rebuilt: the stored refinement of the same start is reused, not measured
-    again = refine_run(checked, ms, judged.shared, config, fake, tmp_path)
+    again = refine_run(checked, ms, judged.shared.summary(), config, fake, tmp_path)
     assert len(fake.calls) == n_calls
     assert json.dumps(again, sort_keys=True) == json.dumps(summary, sort_keys=True)
 
 
 def test_a_stored_refinement_of_another_start_or_settings_is_stale(moved_case, tmp_path):
     true, checked, move, config, ms, judged = moved_case
-    refined = refine_registration(checked.frames, ms, judged.shared, config, FakeMeasure(true))
+    refined = refine_registration(checked.frames, ms, judged.shared.summary(), config,
+                                  FakeMeasure(true))
     save_refinement(tmp_path, refined)
     summary = judged.shared.summary()
     assert load_refinement(tmp_path, summary, refine_fingerprint(config)) is not None
@@ -343,7 +345,8 @@ def test_the_rounds_stop_rules(moved_case, monkeypatch, residuals, n_rounds, sto
                 else None}}
 
     monkeypatch.setattr(shared_mod, "run_shared_checks", lambda m, c: Checks(*next(seq)))
-    refined = refine_registration(checked.frames, ms, judged.shared, config, FakeMeasure(true))
+    refined = refine_registration(checked.frames, ms, judged.shared.summary(), config,
+                                  FakeMeasure(true))
     assert len(refined.rounds) == n_rounds and refined.stopped == stopped
     fitted = [r for r in refined.rounds if r.total_angle_deg is not None]
     # the composed correction moves by one small step per fitted round
