@@ -14,7 +14,8 @@ import typing
 from pathlib import Path
 from typing import Any, Literal
 
-from pgt_check.errors import ConfigError
+from pgt_check.errors import ConfigError, InputError
+from pgt_check.files import MAX_SMALL_JSON_BYTES, read_text_limited
 
 
 def check_range(
@@ -120,19 +121,21 @@ def from_dict(cls: type, data: dict[str, Any]):
 def load_config_file(path: str | Path) -> dict[str, Any]:
     """Read a JSON or TOML config file into a dict (validated later by ``from_dict``)."""
     path = Path(path)
-    if not path.is_file():
+    if not path.exists():
         raise ConfigError(f"config file not found: {path}")
     try:
-        text = path.read_text(encoding="utf-8")
+        text = read_text_limited(path, MAX_SMALL_JSON_BYTES, "config file")
         if path.suffix == ".toml":
             import tomllib
 
             data = tomllib.loads(text)
         else:
             data = json.loads(text)
-    except OSError as err:
-        raise ConfigError(f"{path}: cannot read config: {err.strerror or err}") from err
-    except ValueError as err:  # JSON / TOML syntax, and undecodable bytes
+    except InputError as err:  # a special or oversized file, bytes that are not UTF-8
+        raise ConfigError(f"cannot read config: {err}") from err
+    except RecursionError:
+        raise ConfigError(f"{path}: cannot parse config: nested too deeply") from None
+    except ValueError as err:  # JSON / TOML syntax
         raise ConfigError(f"{path}: cannot parse config: {err}") from err
     if not isinstance(data, dict):
         raise ConfigError(

@@ -44,6 +44,19 @@ def load_trajectory(config: RunConfig) -> Trajectory:
     return traj
 
 
+def check_side_inputs(config: RunConfig, frames: Sequence[Frame]) -> None:
+    """Validate the run's other input files before any frame is measured (a typo must not cost
+    the whole run): ``--calibration-from`` (a trusted summary.json with an estimate for every
+    camera of ``frames``). Raises InputError."""
+    from pgt_check.measure.record import camera_key
+    from pgt_check.verdict.calibration import trusted_calibration
+
+    if config.verdict.calibration_from:
+        trusted_calibration(
+            config.verdict.calibration_from, sorted({camera_key(f.camera) for f in frames})
+        )
+
+
 def preflight(config: RunConfig, references: Any = None, panel_sink: Any = None) -> Any:
     """Build the frame checker once before the run: the mesh is loaded and validated, the
     renderer, matcher and (unless ``enhance.mode`` is never) the enhancer are built.

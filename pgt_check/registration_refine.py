@@ -36,6 +36,7 @@ from typing import Any
 import numpy as np
 
 from pgt_check.config import RunConfig
+from pgt_check.files import atomic_write_text
 from pgt_check.geometry.transforms import move_pose, rotation_angle_deg
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.types import Frame, Trajectory
@@ -335,9 +336,7 @@ def apply_refinement(
 
 def save_refinement(out_dir: str | Path, refined: RefinedRegistration) -> Path:
     path = Path(out_dir) / REFINED_FILE
-    tmp = path.with_name(path.name + ".tmp")  # written whole, then renamed
-    tmp.write_text(json.dumps(refined.to_json(), indent=1) + "\n", encoding="utf-8")
-    tmp.replace(path)
+    atomic_write_text(path, json.dumps(refined.to_json(), indent=1) + "\n")  # whole, renamed
     return path
 
 

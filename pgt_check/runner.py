@@ -18,6 +18,7 @@ from typing import Any
 from pgt_check.config import RunConfig
 from pgt_check.errors import InputError
 from pgt_check.inputs import (  # re-exported: tests and callers patch / import them here
+    check_side_inputs,
     content_hash,
     frame_input_keys,
     images_outside_dataset,
@@ -33,6 +34,7 @@ from pgt_check.measure import (
     pick_references,
 )
 from pgt_check.measure.steps import format_exception
+from pgt_check.store import mesh_content_hash
 from pgt_check.types import Frame, Trajectory
 from pgt_check.verdict import judge_run
 
@@ -41,7 +43,7 @@ logger = logging.getLogger(__name__)
 __all__ = [
     "RunInterrupted", "check_frames", "content_hash", "frame_input_keys",
     "images_outside_dataset", "load_trajectory", "log_progress", "measurement_fingerprint",
-    "PlainMeasure", "panel_writer", "preflight", "run", "stored_measurements",
+    "PlainMeasure", "panel_writer", "preflight", "run", "run_trajectory", "stored_measurements",
     "write_report_assets",
 ]
 
@@ -98,24 +100,43 @@ def run(config: RunConfig) -> dict[str, Any]:
     """
     t0 = time.perf_counter()
     traj = load_trajectory(config)
+    return run_trajectory(traj, config, t0=t0)
+
+
+def run_trajectory(
+    traj: Trajectory, config: RunConfig, *, t0: float | None = None
+) -> dict[str, Any]:
+    """``run`` on an already read trajectory (the Python API passes in-memory ones): the one
+    path from frames to outputs, so the CLI and the API key stored measurements alike (the
+    mesh's content hash with its side files in the fingerprint, ``frame_input_keys`` per
+    record): a moved pose, a replaced photo or a changed mesh is never reused from ``out``."""
+    t0 = time.perf_counter() if t0 is None else t0
     frames = list(traj.frames)
     if config.limit is not None:
         frames = frames[: config.limit]
-    logger.info("checking %d frames of %s (%s)", len(frames), traj.source, traj.format)
+    logger.info("checking %d frames of %s (%s)", len(frames), traj.source or "a trajectory",
+                traj.format or "in-memory")
+    check_side_inputs(config, frames)
     references = pick_references(traj, frames, config)
-    t_hash = time.perf_counter()
-    inputs = {"mesh": content_hash(config.input.mesh)}
-    keys = frame_input_keys(frames, references)
-    logger.info("hashed the inputs in %.2f s", time.perf_counter() - t_hash)
-    sink = panel_writer(config, measurement_fingerprint(config, inputs))
+    checker = preflight(config, references)  # loads the mesh: its side files are known here
+    try:
+        t_hash = time.perf_counter()
+        inputs = {"mesh": mesh_content_hash(config.input.mesh, _side_files(checker))}
+        keys = frame_input_keys(frames, references)
+        logger.info("hashed the inputs in %.2f s", time.perf_counter() - t_hash)
+        sink = panel_writer(config, measurement_fingerprint(config, inputs))
+        if sink is not None:
+            checker.panel_sink = sink
+    except BaseException:
+        checker.close()
+        raise
     factory = functools.partial(build_frame_checker, config, references, panel_sink=sink)
-    checker = preflight(config, references, panel_sink=sink)
     if config.executor == "serial":  # the serial executor reuses the checker built here
         factory = _ReuseFirst(checker, factory)
     else:
         checker.close()
-    outside = images_outside_dataset(config, frames)
-    extra: dict[str, Any] = {"trajectory_format": traj.format}
+    extra: dict[str, Any] = {"trajectory_format": traj.format or "in-memory"}
+    outside = images_outside_dataset(config, frames) if config.input.trajectory else []
     if outside:
         extra["images_outside_dataset"] = {"count": len(outside), "examples": outside[:5]}
         extra["warnings"] = [
@@ -129,6 +150,13 @@ def run(config: RunConfig) -> dict[str, Any]:
     finally:
         if isinstance(factory, _ReuseFirst):
             factory.close_unused()
+
+
+def _side_files(checker: Any) -> tuple[str, ...]:
+    """The files the checker's mesh loader read besides the mesh file (``MeshData.side_files``;
+    none for a checker without a loaded mesh)."""
+    mesh = getattr(checker, "_mesh", None) or getattr(checker, "mesh", None)
+    return tuple(getattr(mesh, "side_files", ()) or ())
 
 
 class _ReuseFirst:
@@ -179,21 +207,44 @@ def check_frames(
     config: RunConfig,
     checker_factory: Callable[[], Any],
     *,
+    input_keys: dict[str, str],
+    inputs: dict[str, str],
     extra: dict[str, Any] | None = None,
     t0: float | None = None,
-    input_keys: dict[str, str] | None = None,
-    inputs: dict[str, str] | None = None,
     trajectory: Trajectory | None = None,
 ) -> dict[str, Any]:
     """Measure ``frames`` (skipping those already in the store), then write the outputs.
 
     ``input_keys`` (frame id -> ``frame_input_keys``): a stored record counts as done only if
-    it carries the same key; ``inputs`` (run-wide content hashes) enter the fingerprint.
+    it carries the same key; ``inputs`` (run-wide content hashes, ``{"mesh": ...}``) enter the
+    fingerprint. Both are required: a stored measurement is reused only on matching content.
 
     Measurements stream from the executor into ``out/records.jsonl`` as frames finish; the
     outputs are built from the store in ``frames`` order, so a resumed run writes the same
-    frames.csv as an uninterrupted one (timing columns aside).
+    frames.csv as an uninterrupted one (timing columns aside). The store's lock is held until
+    the output set is complete (``outputs.complete.json``): a second run into the same ``out``
+    cannot write between the measurements and the outputs built from them.
     """
+    with _open_store(config, [f.frame_id for f in frames], inputs) as store:
+        return _check_frames_locked(
+            store, frames, config, checker_factory, extra=extra, t0=t0, input_keys=input_keys,
+            inputs=inputs, trajectory=trajectory,
+        )
+
+
+def _check_frames_locked(
+    store: Any,
+    frames: Sequence[Frame],
+    config: RunConfig,
+    checker_factory: Callable[[], Any],
+    *,
+    extra: dict[str, Any] | None,
+    t0: float | None,
+    input_keys: dict[str, str],
+    inputs: dict[str, str],
+    trajectory: Trajectory | None,
+) -> dict[str, Any]:
+    """``check_frames`` with the store open (and locked) by the caller."""
     from pgt_check.executor import ExecutorStats
     from pgt_check.report.outputs import write_outputs
 
@@ -201,7 +252,7 @@ def check_frames(
     out = Path(config.out)
     stats = ExecutorStats()
     measurements, n_reused = _measure_into_store(
-        frames, config, checker_factory, stats, input_keys=input_keys, inputs=inputs
+        store, frames, config, checker_factory, stats, input_keys=input_keys
     )
     judged = judge_run(measurements, config)
     rows = judged.rows
@@ -294,7 +345,7 @@ class _Borrowed:
         pass
 
 
-def _open_store(config: RunConfig, ids: list[str], inputs: dict[str, str] | None) -> Any:
+def _open_store(config: RunConfig, ids: list[str], inputs: dict[str, str]) -> Any:
     """The run's ``RecordStore`` context manager; an unusable ``--out`` is an InputError."""
     from pgt_check.store import RecordStore
 
@@ -319,15 +370,15 @@ def _open_store(config: RunConfig, ids: list[str], inputs: dict[str, str] | None
 
 
 def _measure_into_store(
+    store: Any,
     frames: Sequence[Frame],
     config: RunConfig,
     checker_factory: Callable[[], Any],
     stats: Any,
     *,
-    input_keys: dict[str, str] | None,
-    inputs: dict[str, str] | None,
+    input_keys: dict[str, str],
 ) -> tuple[list[FrameMeasurement], int]:
-    """Measure the frames not yet stored (streaming each record into the store) and return all
+    """Measure the frames not yet in ``store`` (streaming each record into it) and return all
     measurements in ``frames`` order plus the number of frames reused from the store. Raises
     RunInterrupted when a Ctrl-C / SIGTERM stopped the run before every frame was done."""
     from pgt_check.executor import iter_results, stop_on_sigint
@@ -335,40 +386,34 @@ def _measure_into_store(
 
     out = Path(config.out)
     ids = [f.frame_id for f in frames]
-    with _open_store(config, ids, inputs) as store:
-        remove_completion_marker(out)  # the output set is incomplete from here on
-        done = _done_ids(store, ids, input_keys)
-        if done:
-            logger.info("%d of %d frames already measured with these settings and inputs: "
-                        "skipped", len(done), len(frames))
-        stale = store.done_ids().intersection(ids) - done
-        if stale:
-            logger.info("%d frames whose inputs changed (pose, camera or image content) are "
-                        "measured again", len(stale))
-        todo = (f for f in frames if f.frame_id not in done)
-        with stop_on_sigint() as stop:
-            results = iter_results(todo, checker_factory, config, stop=stop, stats=stats)
-            for m in _progress(results, len(frames) - len(done), "pgt-check"):
-                rec = m.to_json()
-                if input_keys is not None:
-                    rec["input_key"] = input_keys.get(m.frame_id, "")
-                store.append(rec)
-            interrupted = stop.is_set()
-        if interrupted:
-            n_done = len(_done_ids(store, ids, input_keys))
-            if n_done < len(ids):
-                logger.warning(
-                    "interrupted: %d/%d frames done, stored in %s", n_done, len(ids), out
-                )
-                raise RunInterrupted(n_done, len(ids), str(out))
-        return stored_measurements(store.records_in_order(ids)), len(done)
+    remove_completion_marker(out)  # the output set is incomplete from here on
+    done = _done_ids(store, ids, input_keys)
+    if done:
+        logger.info("%d of %d frames already measured with these settings and inputs: "
+                    "skipped", len(done), len(frames))
+    stale = store.done_ids().intersection(ids) - done
+    if stale:
+        logger.info("%d frames whose inputs changed (pose, camera or image content) are "
+                    "measured again", len(stale))
+    todo = (f for f in frames if f.frame_id not in done)
+    with stop_on_sigint() as stop:
+        results = iter_results(todo, checker_factory, config, stop=stop, stats=stats)
+        for m in _progress(results, len(frames) - len(done), "pgt-check"):
+            rec = m.to_json()
+            rec["input_key"] = input_keys.get(m.frame_id, "")
+            store.append(rec)
+        interrupted = stop.is_set()
+    if interrupted:
+        n_done = len(_done_ids(store, ids, input_keys))
+        if n_done < len(ids):
+            logger.warning("interrupted: %d/%d frames done, stored in %s", n_done, len(ids), out)
+            raise RunInterrupted(n_done, len(ids), str(out))
+    return stored_measurements(store.records_in_order(ids)), len(done)
 
 
-def _done_ids(store: Any, ids: Sequence[str], input_keys: dict[str, str] | None) -> set[str]:
+def _done_ids(store: Any, ids: Sequence[str], input_keys: dict[str, str]) -> set[str]:
     """Frames of ``ids`` whose latest current record also has the current input key."""
     latest = store.latest(ids)
-    if input_keys is None:
-        return set(latest)
     return {fid for fid, rec in latest.items() if rec.get("input_key") == input_keys.get(fid)}
 
 

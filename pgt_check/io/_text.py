@@ -9,7 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pgt_check.errors import FormatError, InputError
+from pgt_check.errors import FormatError
+from pgt_check.files import MAX_INPUT_TEXT_BYTES, read_text_limited
 from pgt_check.geometry.transforms import QuaternionError, make_rigid, quat_to_rotmat
 
 logger = logging.getLogger(__name__)
@@ -19,15 +20,9 @@ QUAT_WARN_TOLERANCE = 1e-4
 
 
 def read_text(path: Path) -> list[str]:
-    """All lines of a UTF-8 text file; InputError if missing, FormatError if not text."""
-    if not path.is_file():
-        raise InputError(f"{path}: file not found")
-    try:
-        return path.read_text(encoding="utf-8-sig").splitlines()
-    except UnicodeDecodeError as err:
-        raise FormatError(path, None, f"expected a UTF-8 text file; got {err.reason}") from err
-    except OSError as err:
-        raise InputError(f"{path}: cannot read ({err.strerror or err})") from err
+    """All lines of a UTF-8 text file (a BOM allowed); InputError if missing, not a regular file
+    or larger than ``MAX_INPUT_TEXT_BYTES``, FormatError if not text."""
+    return read_text_limited(path, MAX_INPUT_TEXT_BYTES).splitlines()
 
 
 def data_lines(path: Path, *, allow_empty: bool = False) -> list[tuple[int, str]]:

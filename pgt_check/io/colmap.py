@@ -8,13 +8,16 @@ OpenCV camera axes; ``cameras.{txt,bin}`` hold COLMAP camera models in the COLMA
 from __future__ import annotations
 
 import logging
+import os
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from pgt_check.errors import FormatError, InputError
+from pgt_check.files import regular_file_size
 from pgt_check.geometry.transforms import invert_rigid
+from pgt_check.io._text import QuaternionCounter
 from pgt_check.io.camera import camera_from_colmap
 from pgt_check.types import Camera, Frame, Trajectory
 
@@ -64,14 +67,46 @@ def default_images_dir(model_dir: Path) -> Path:
     return model_dir
 
 
-def _cam_from_world(image: object) -> np.ndarray:
-    """(4, 4) cam_from_world of a pycolmap Image (a method in pycolmap >= 3.12, a property before)."""
+def _cam_from_world(image: object, quats: QuaternionCounter | None = None) -> np.ndarray:
+    """(4, 4) cam_from_world of a pycolmap Image (a method in pycolmap >= 3.12, a property before).
+
+    With ``quats``, the stored quaternion is checked as the TUM / LaMAR readers check theirs
+    (pycolmap keeps it as written: a zero quaternion would read as the identity): FormatError
+    beyond the norm tolerance, normalised with a counted warning otherwise."""
     pose = image.cam_from_world  # type: ignore[attr-defined]
     if callable(pose):
         pose = pose()
     matrix = np.eye(4)
     matrix[:3, :] = np.asarray(pose.matrix(), dtype=np.float64)
+    quat = getattr(getattr(pose, "rotation", None), "quat", None)
+    if quats is not None and quat is not None:
+        x, y, z, w = (float(v) for v in np.asarray(quat, dtype=np.float64))  # Eigen: xyzw
+        try:
+            matrix[:3, :3] = quats.rotation(None, (w, x, y, z))
+        except FormatError as err:
+            raise FormatError(
+                quats.path, None, f"image {getattr(image, 'name', '?')!r}: {err.message}"
+            ) from None
     return matrix
+
+
+#: largest COLMAP model file handed to pycolmap (bytes; points3D of big models is large)
+MAX_MODEL_FILE_BYTES = 8 * 1024**3
+
+
+def _check_model_files(model_dir: Path) -> None:
+    """Every model file present is a regular file of bounded size (pycolmap would block on a
+    FIFO or read a device without end)."""
+    for name in MODEL_FILES:
+        for ext in ("txt", "bin"):
+            file = model_dir / f"{name}.{ext}"
+            if os.path.lexists(file):
+                size = regular_file_size(file, "COLMAP model file")
+                if size > MAX_MODEL_FILE_BYTES:
+                    raise InputError(
+                        f"{file}: COLMAP model file of {size} bytes, more than the "
+                        f"{MAX_MODEL_FILE_BYTES} read at most"
+                    )
 
 
 def load_model(model_dir: Path) -> tuple[Any, dict[int, Camera]]:
@@ -80,13 +115,16 @@ def load_model(model_dir: Path) -> tuple[Any, dict[int, Camera]]:
         import pycolmap
     except ImportError as err:
         raise InputError("reading COLMAP models needs pycolmap: pip install pycolmap") from err
+    _check_model_files(model_dir)
     try:
         reconstruction = pycolmap.Reconstruction(str(model_dir))
-    except (RuntimeError, ValueError, OSError) as err:
+    except (RuntimeError, ValueError, OSError, IndexError, KeyError) as err:
         message = " ".join(str(err).split())
-        raise FormatError(
-            model_dir, None, f"expected a readable COLMAP model; pycolmap failed: {message}"
-        ) from None
+        what = (
+            "a consistent COLMAP model (each image's camera among the cameras)"
+            if isinstance(err, (IndexError, KeyError)) else "a readable COLMAP model"
+        )
+        raise FormatError(model_dir, None, f"expected {what}; pycolmap failed: {message}") from None
     cameras_file = next(
         model_dir / f"cameras.{e}" for e in ("txt", "bin") if (model_dir / f"cameras.{e}").is_file()
     )
@@ -106,8 +144,19 @@ def cameras_by_image_name(path: str | Path) -> tuple[dict[str, Camera], list[Cam
     if model_dir is None:
         raise FormatError(path, None, "expected a COLMAP model with cameras.txt or cameras.bin")
     reconstruction, cameras = load_model(model_dir)
-    by_name = {im.name: cameras[im.camera_id] for im in reconstruction.images.values()}
+    by_name = {im.name: _camera_of(model_dir, cameras, im) for im in reconstruction.images.values()}
     return by_name, list(cameras.values())
+
+
+def _camera_of(model_dir: Path, cameras: dict[int, Camera], image: Any) -> Camera:
+    """The Camera of a pycolmap image; FormatError when its camera id is not in the model."""
+    cam = cameras.get(image.camera_id)
+    if cam is None:
+        raise FormatError(
+            model_dir, None, f"image {image.name!r} refers to camera id {image.camera_id}, which "
+            f"the model does not have (cameras: {sorted(cameras)[:10]})"
+        )
+    return cam
 
 
 def read_colmap(path: str | Path, *, images: str | Path | None = None) -> Trajectory:
@@ -135,20 +184,26 @@ def read_colmap(path: str | Path, *, images: str | Path | None = None) -> Trajec
         raise InputError(f"{root}: images folder not found")
     frames: list[Frame] = []
     unposed: list[str] = []
+    images_file = next(
+        (model_dir / f"images.{e}" for e in ("txt", "bin") if (model_dir / f"images.{e}").is_file()),
+        model_dir,
+    )
+    quats = QuaternionCounter(images_file)
     for image in reconstruction.images.values():
         if not getattr(image, "has_pose", True):
             unposed.append(image.name)
             continue
-        world_from_cam = invert_rigid(_cam_from_world(image))
+        world_from_cam = invert_rigid(_cam_from_world(image, quats))
         frames.append(
             Frame(
                 frame_id=image.name,
-                camera=cameras[image.camera_id],
+                camera=_camera_of(model_dir, cameras, image),
                 world_from_cam=world_from_cam,
                 image_path=image.name,
                 image_file=root / image.name,
             )
         )
+    quats.report()
     if unposed:
         logger.warning(
             "%s: skipped %d image(s) without a pose (first: %s)",

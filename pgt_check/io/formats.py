@@ -2,12 +2,12 @@
 
 from __future__ import annotations
 
-import json
 import logging
 from collections.abc import Callable
 from pathlib import Path
 
 from pgt_check.errors import InputError
+from pgt_check.files import MAX_INPUT_TEXT_BYTES, load_json_limited
 from pgt_check.io._text import read_text
 from pgt_check.io.colmap import colmap_model_dir, read_colmap
 from pgt_check.io.hloc import read_hloc
@@ -82,8 +82,8 @@ def detect_format(path: str | Path) -> str:
         )
     if path.suffix.lower() == ".json":
         try:
-            data = json.loads(path.read_text(encoding="utf-8"))
-        except (json.JSONDecodeError, UnicodeDecodeError, OSError) as err:
+            data = load_json_limited(path, MAX_INPUT_TEXT_BYTES)
+        except InputError as err:
             raise InputError(f"{path}: cannot tell the format: not readable JSON ({err})") from None
         if isinstance(data, dict) and "frames" in data:
             return "nerfstudio"

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 
 from pgt_check.errors import InputError, PixelCapError
+from pgt_check.files import read_bytes_limited, regular_file_size
 
 logger = logging.getLogger(__name__)
 
@@ -22,6 +23,20 @@ IMAGE_EXTENSIONS = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".ppm", ".
 #: before decoding: a decoded RGB float32 image takes 12 bytes per pixel plus the 8-bit buffer,
 #: so 100 MP bound one frame's photo at ~1.5 GB per worker
 DEFAULT_MAX_IMAGE_PIXELS = 100_000_000
+
+#: bytes an image file may have per pixel of the cap (uncompressed 16-bit RGBA) plus room for
+#: its metadata: a bigger file is refused before it is read
+MAX_BYTES_PER_PIXEL = 8
+MAX_METADATA_BYTES = 16 * 1024**2
+#: the largest image file read at all (OpenCV decodes at most 2 GiB buffers)
+MAX_IMAGE_FILE_BYTES = 2**31 - 1
+
+
+def image_byte_limit(max_pixels: int | None) -> int:
+    """The largest image file read for a pixel cap of ``max_pixels`` (None = no cap)."""
+    if max_pixels is None:
+        return MAX_IMAGE_FILE_BYTES
+    return min(MAX_IMAGE_FILE_BYTES, MAX_BYTES_PER_PIXEL * max_pixels + MAX_METADATA_BYTES)
 
 
 def check_pixel_cap(path: str | Path, max_pixels: int | None) -> None:
@@ -54,20 +69,30 @@ def load_image(path: str | Path, max_pixels: int | None = DEFAULT_MAX_IMAGE_PIXE
 
     8- and 16-bit integer images are scaled by their type's maximum; grayscale is repeated to
     three channels; an alpha channel is dropped. Raises InputError if the file is missing or
-    cannot be decoded, PixelCapError (before decoding) if its header declares more than
-    ``max_pixels`` pixels (None = no cap).
+    cannot be decoded or is not a regular file, PixelCapError (before reading) if the file is
+    larger than ``image_byte_limit(max_pixels)`` or its header declares more than ``max_pixels``
+    pixels (None = no pixel cap; the file size is still bounded).
     """
     import cv2  # heavy: imported on first use
 
     path = Path(path)
     if not path.is_file():
         raise InputError(f"{path}: image not found")
+    limit = image_byte_limit(max_pixels)
+    size = regular_file_size(path, "image")
+    if size > limit:
+        raise PixelCapError(
+            f"{path}: image file of {size} bytes is larger than the {limit} bytes read for "
+            f"images of at most {max_pixels} pixels (--max-image-pixels)"
+        )
     check_pixel_cap(path, max_pixels)
+    # read as bytes (works for non-ASCII paths, unlike imread), bounded while reading too
+    data = np.frombuffer(read_bytes_limited(path, limit, "image"), dtype=np.uint8)
     try:
-        data = np.fromfile(path, dtype=np.uint8)  # works for non-ASCII paths, unlike imread
-    except OSError as err:
-        raise InputError(f"{path}: cannot read image ({err.strerror or err})") from err
-    image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+        image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED) if data.size else None
+    except cv2.error as err:
+        raise InputError(f"{path}: cannot decode image ({' '.join(str(err).split())[:160]})"
+                         ) from None
     if image is None:
         raise InputError(f"{path}: cannot decode image (unsupported or corrupt file)")
     if image.ndim == 3 and image.shape[2] == 1:

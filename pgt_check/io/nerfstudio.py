@@ -26,6 +26,7 @@ from typing import Any
 import numpy as np
 
 from pgt_check.errors import FormatError, InputError
+from pgt_check.files import MAX_INPUT_TEXT_BYTES, load_json_limited
 from pgt_check.io._text import UniqueKeys
 from pgt_check.io.camera import COLMAP_PIXEL_OFFSET
 from pgt_check.io.images import image_size
@@ -42,17 +43,9 @@ SUPPORTED_MODELS = ("OPENCV", "PINHOLE", "SIMPLE_PINHOLE")
 
 
 def load_json(path: Path) -> Any:
-    if not path.is_file():
-        raise InputError(f"{path}: file not found")
-    try:
-        with path.open(encoding="utf-8") as fh:
-            return json.load(fh)
-    except json.JSONDecodeError as err:
-        raise FormatError(
-            path, err.lineno, f"expected valid JSON; got {err.msg} (column {err.colno})"
-        ) from None
-    except UnicodeDecodeError as err:
-        raise FormatError(path, None, f"expected a UTF-8 JSON file; got {err.reason}") from None
+    """A JSON file (UTF-8, a BOM allowed) of at most ``MAX_INPUT_TEXT_BYTES``; InputError /
+    FormatError for a missing, special or oversized file, bad JSON or too deep nesting."""
+    return load_json_limited(path, MAX_INPUT_TEXT_BYTES)
 
 
 def _number(path: Path, where: str, key: str, value: Any) -> float:
@@ -61,6 +54,16 @@ def _number(path: Path, where: str, key: str, value: Any) -> float:
             path, None, f"{where}: expected a finite number for {key!r}; got {value!r}"
         )
     return float(value)
+
+
+def _field_of_view(path: Path, where: str, key: str, num: dict[str, float]) -> float:
+    """A field of view in radians, strictly between 0 and pi (a focal length exists)."""
+    angle = num[key]
+    if not 0.0 < angle < math.pi:
+        raise FormatError(
+            path, None, f"{where}: expected {key!r} in (0, pi) radians; got {angle!r}"
+        )
+    return angle
 
 
 def _resolve_image(directory: Path, file_path: str) -> Path:
@@ -103,13 +106,13 @@ def _camera(path: Path, where: str, values: dict[str, Any], image: Path) -> Came
     if "fl_x" in num:
         fx = num["fl_x"]
     elif "camera_angle_x" in num:
-        fx = 0.5 * width / math.tan(0.5 * num["camera_angle_x"])
+        fx = 0.5 * width / math.tan(0.5 * _field_of_view(path, where, "camera_angle_x", num))
     else:
         raise FormatError(path, None, f"{where}: expected 'fl_x' or 'camera_angle_x'; got neither")
     if "fl_y" in num:
         fy = num["fl_y"]
     elif "camera_angle_y" in num:
-        fy = 0.5 * height / math.tan(0.5 * num["camera_angle_y"])
+        fy = 0.5 * height / math.tan(0.5 * _field_of_view(path, where, "camera_angle_y", num))
     else:
         fy = fx
     cx = num.get("cx", width / 2.0) - COLMAP_PIXEL_OFFSET

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from pgt_check.files import atomic_write_text
 from pgt_check.geometry.transforms import invert_rigid, rotmat_to_quat
 from pgt_check.types import Camera, Trajectory
 
@@ -150,9 +151,7 @@ def write_trajectory_file(trajectory: Trajectory, path: str | Path) -> str:
         text = lamar_trajectory_text(trajectory)
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(path)
+    atomic_write_text(path, text)
     return fmt
 
 

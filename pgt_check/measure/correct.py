@@ -134,9 +134,9 @@ def save_corrections(
 ) -> Path:
     path = Path(out_dir) / CORRECTIONS_FILE
     doc = {"fingerprint": fingerprint, "corrections": [c.to_json() for c in corrections]}
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(doc, indent=1) + "\n", encoding="utf-8")
-    tmp.replace(path)
+    from pgt_check.files import atomic_write_text
+
+    atomic_write_text(path, json.dumps(doc, indent=1) + "\n")
     return path
 
 

@@ -1,14 +1,7 @@
-"""File writing shared by the output writers."""
+"""File writing shared by the output writers (``pgt_check.files``, re-exported here)."""
 
 from __future__ import annotations
 
-import os
-from pathlib import Path
+from pgt_check.files import atomic_write_bytes, atomic_write_text
 
-
-def atomic_write_text(path: Path, text: str) -> None:
-    """Write to a temporary name beside ``path`` and rename, so readers never see half a file."""
-    path = Path(path)
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text, encoding="utf-8")
-    os.replace(tmp, path)
+__all__ = ["atomic_write_bytes", "atomic_write_text"]

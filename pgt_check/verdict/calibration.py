@@ -121,23 +121,71 @@ def frame_homographies(
     return per_cam, per_frame
 
 
+def _trusted_entry(path: str, cam_id: str, entry: Any) -> CameraCalibration | None:
+    """One camera's entry of a trusted summary, checked strictly (InputError naming the field):
+    None when it carries no estimate (rotation and focal scale both null or absent)."""
+    where = f"{path}: shared_errors.calibration[{cam_id!r}]"
+    if not isinstance(entry, Mapping):
+        raise InputError(f"{where}: expected a table; got {type(entry).__name__}")
+    rot, scale, trans = entry.get("rotation"), entry.get("focal_scale"), entry.get("translation")
+    if rot is None and scale is None:
+        return None
+    try:
+        r = np.asarray(rot, dtype=np.float64)
+    except (TypeError, ValueError):
+        r = np.zeros(0)
+    if r.shape != (3, 3) or not np.all(np.isfinite(r)):
+        raise InputError(f"{where}.rotation: expected a finite 3x3 matrix; got {rot!r:.80}")
+    if not np.allclose(r @ r.T, np.eye(3), atol=1e-6) or np.linalg.det(r) <= 0:
+        raise InputError(f"{where}.rotation: expected a rotation matrix (orthonormal, det +1)")
+    if isinstance(scale, bool) or not isinstance(scale, (int, float)) or not (
+        math.isfinite(scale) and scale > 0
+    ):
+        raise InputError(f"{where}.focal_scale: expected a positive finite number; got {scale!r}")
+    t = np.zeros(3)
+    if trans is not None:
+        try:
+            t = np.asarray(trans, dtype=np.float64).reshape(-1)
+        except (TypeError, ValueError):
+            t = np.zeros(0)
+        if t.shape != (3,) or not np.all(np.isfinite(t)):
+            raise InputError(f"{where}.translation: expected 3 finite numbers; got {trans!r:.80}")
+    return CameraCalibration(r, float(scale), t)
+
+
+def load_trusted_calibrations(path: str) -> dict[str, CameraCalibration]:
+    """Every usable per-camera calibration of a trusted run's summary.json
+    (``shared_errors.calibration``), each entry checked: InputError for a file that is missing,
+    special, oversized or not JSON, a section of the wrong shape, a malformed estimate (a
+    rotation that is not 3x3 orthonormal, a focal scale that is not a positive number,
+    non-finite values) or no usable estimate at all."""
+    from pgt_check.files import MAX_SMALL_JSON_BYTES, load_json_limited
+
+    try:
+        doc = load_json_limited(path, MAX_SMALL_JSON_BYTES, "--calibration-from summary")
+    except InputError as err:
+        raise InputError(f"--calibration-from: {err}") from None
+    shared = doc.get("shared_errors") if isinstance(doc, dict) else None
+    se = shared.get("calibration") if isinstance(shared, dict) else None
+    if not isinstance(se, dict):
+        raise InputError(
+            f"{path}: expected the summary.json of a pgt-check run with a table "
+            "shared_errors.calibration (--calibration-from)"
+        )
+    usable = {}
+    for c, e in se.items():
+        cal = _trusted_entry(path, str(c), e)
+        if cal is not None:
+            usable[str(c)] = cal
+    if not usable:
+        raise InputError(f"{path}: no camera has a calibration estimate (--calibration-from)")
+    return usable
+
+
 def trusted_calibration(path: str, camera_ids: Sequence[str]) -> dict[str, CameraCalibration]:
     """Calibration errors per camera from a trusted run's summary.json
     (``shared_errors.calibration``), for this run's cameras (``--calibration-from``)."""
-    import json
-    from pathlib import Path
-
-    try:
-        se = json.loads(Path(path).read_text(encoding="utf-8"))["shared_errors"]["calibration"]
-    except (OSError, ValueError, KeyError, TypeError) as err:
-        raise InputError(
-            f"{path}: no shared_errors.calibration of a pgt-check run ({err})"
-        ) from err
-    usable = {}
-    for c, e in se.items():
-        cal = CameraCalibration.from_summary(e) if isinstance(e, dict) else None
-        if cal is not None:
-            usable[c] = cal
+    usable = load_trusted_calibrations(path)
     out = {}
     for cam_id in camera_ids:
         cal = usable.get(cam_id)
@@ -151,6 +199,7 @@ def trusted_calibration(path: str, camera_ids: Sequence[str]) -> dict[str, Camer
                 other,
             )
         if cal is None:
-            raise InputError(f"{path}: no calibration estimate for camera {cam_id!r}")
+            raise InputError(f"{path}: no calibration estimate for camera {cam_id!r} "
+                             f"(--calibration-from; it has {', '.join(map(repr, usable))})")
         out[cam_id] = cal
     return out

@@ -1,0 +1,173 @@
+"""Reading and writing the user's files safely (no dependency inside the package but ``errors``).
+
+Reading: every input file is a regular file (a device, FIFO or directory is refused before it is
+opened: ``/dev/zero`` would never end, a FIFO would block) and is read only up to a size bound
+checked before reading (``read_bytes_limited``, ``read_text_limited``, ``load_json_limited``).
+
+Writing: ``atomic_write_bytes`` / ``atomic_write_text`` write to a fresh temporary file beside
+the destination (created exclusively, so an existing file or symlink of that name is never
+followed) and rename it over the destination: a symlink at the destination is replaced, never
+written through, and readers never see half a file. Text is encoded so that any name the
+filesystem allows (undecodable bytes, control characters) can be written (``safe_text``).
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import re
+import stat
+import tempfile
+from pathlib import Path
+from typing import Any
+
+from pgt_check.errors import FormatError, InputError
+
+logger = logging.getLogger(__name__)
+
+#: largest pose file / image list / sensors file / transforms.json read (bytes)
+MAX_INPUT_TEXT_BYTES = 512 * 1024**2
+#: largest config file, summary.json, run.json or other small JSON document read (bytes)
+MAX_SMALL_JSON_BYTES = 64 * 1024**2
+
+__all__ = [
+    "MAX_INPUT_TEXT_BYTES",
+    "MAX_SMALL_JSON_BYTES",
+    "atomic_write_bytes",
+    "atomic_write_text",
+    "load_json_limited",
+    "read_bytes_limited",
+    "read_text_limited",
+    "regular_file_size",
+    "safe_text",
+]
+
+
+def _size_text(n: int) -> str:
+    for unit, scale in (("GiB", 1024**3), ("MiB", 1024**2), ("KiB", 1024)):
+        if n >= scale:
+            return f"{n / scale:.1f} {unit}"
+    return f"{n} bytes"
+
+
+def regular_file_size(path: str | Path, what: str = "file") -> int:
+    """The size of ``path`` after checking that it is a regular file (symlinks followed).
+
+    Raises InputError (naming ``what``) for a missing path and for anything that is not a
+    regular file: a directory, a device such as ``/dev/zero``, a FIFO or a socket."""
+    try:
+        st = os.stat(path)
+    except FileNotFoundError:
+        raise InputError(f"{path}: {what} not found") from None
+    except OSError as err:
+        raise InputError(f"{path}: cannot read {what} ({err.strerror or err})") from None
+    if not stat.S_ISREG(st.st_mode):
+        kind = "a directory" if stat.S_ISDIR(st.st_mode) else "not a regular file"
+        raise InputError(f"{path}: expected a regular file as {what}; got {kind}")
+    return int(st.st_size)
+
+
+def read_bytes_limited(path: str | Path, limit: int, what: str = "file") -> bytes:
+    """The bytes of the regular file ``path``; InputError if it is larger than ``limit`` bytes
+    (checked on its size before reading, and again while reading: a file that grows is cut)."""
+    size = regular_file_size(path, what)
+    if size > limit:
+        raise InputError(
+            f"{path}: {what} is {_size_text(size)}, more than the {_size_text(limit)} read at most"
+        )
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    except OSError as err:
+        raise InputError(f"{path}: cannot read {what} ({err.strerror or err})") from None
+    with os.fdopen(fd, "rb") as fh:
+        if not stat.S_ISREG(os.fstat(fh.fileno()).st_mode):  # replaced since the check
+            raise InputError(f"{path}: expected a regular file as {what}")
+        try:
+            data = fh.read(limit + 1)
+        except OSError as err:
+            raise InputError(f"{path}: cannot read {what} ({err.strerror or err})") from None
+    if len(data) > limit:
+        raise InputError(f"{path}: {what} is larger than the {_size_text(limit)} read at most")
+    return data
+
+
+def read_text_limited(path: str | Path, limit: int = MAX_INPUT_TEXT_BYTES, what: str = "file"
+                      ) -> str:
+    """A UTF-8 text file (a leading BOM is dropped) of at most ``limit`` bytes; FormatError for
+    bytes that are not UTF-8, InputError for a file that is missing, special or too large."""
+    data = read_bytes_limited(path, limit, what)
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as err:
+        raise FormatError(path, None, f"expected a UTF-8 text file; got {err.reason} at byte "
+                          f"{err.start}") from None
+
+
+def parse_json_text(path: str | Path, text: str) -> Any:
+    """``json.loads`` with every failure a FormatError (syntax, nesting too deep)."""
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as err:
+        raise FormatError(
+            path, err.lineno, f"expected valid JSON; got {err.msg} (column {err.colno})"
+        ) from None
+    except RecursionError:
+        raise FormatError(path, None, "expected JSON; got values nested too deeply") from None
+    except ValueError as err:  # e.g. an integer literal with too many digits
+        raise FormatError(path, None, f"expected valid JSON; got {err}") from None
+
+
+def load_json_limited(path: str | Path, limit: int = MAX_SMALL_JSON_BYTES, what: str = "file"
+                      ) -> Any:
+    """A JSON document (UTF-8, a BOM allowed) of at most ``limit`` bytes."""
+    return parse_json_text(path, read_text_limited(path, limit, what))
+
+
+# lone surrogates (undecodable bytes of a file name, as Python decodes them) and control
+# characters (C0, DEL, C1, line and paragraph separators): escaped wherever text is written
+_UNSAFE = re.compile("[\x00-\x1f\x7f-\x9f\u2028\u2029\ud800-\udfff]")
+
+
+def _escape(match: re.Match[str]) -> str:
+    ch = match.group(0)
+    code = ord(ch)
+    if 0xDC80 <= code <= 0xDCFF:  # an undecodable byte (surrogateescape): show the byte
+        return f"\\x{code - 0xDC00:02x}"
+    return {"\n": "\\n", "\r": "\\r", "\t": "\\t"}.get(
+        ch, f"\\x{code:02x}" if code <= 0xFF else f"\\u{code:04x}"
+    )
+
+
+def safe_text(value: Any) -> str:
+    """``str(value)`` that fits on one line of any UTF-8 text output: control characters become
+    ``\\n``, ``\\x07``..., undecodable file-name bytes ``\\xff``, lone surrogates ``\\udxxx``."""
+    text = "" if value is None else str(value)
+    return _UNSAFE.sub(_escape, text)
+
+
+def atomic_write_bytes(path: str | Path, data: bytes) -> None:
+    """Write ``data`` to ``path`` through a new temporary file beside it, then rename.
+
+    The temporary file is created exclusively (an existing file or symlink is never opened), a
+    symlink at ``path`` is replaced (never written through), and on any failure the
+    temporary file is removed."""
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name[:80]}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            fh.write(data)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise
+
+
+def atomic_write_text(path: str | Path, text: str) -> None:
+    """``atomic_write_bytes`` of ``text`` as UTF-8. Lone surrogates (undecodable bytes of a file
+    name that reached the text unescaped) are written as ``\\udcff``-style escapes instead of
+    failing (format-aware writers escape them first: ``safe_text``)."""
+    atomic_write_bytes(path, text.encode("utf-8", errors="backslashreplace"))
