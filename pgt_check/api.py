@@ -57,11 +57,8 @@ def check(
     columns are the DataFrame's; ``df.attrs["summary"]`` is summary.json, ``df.attrs["out"]``
     the output folder.
     """
-    import functools
-
     from pgt_check.config import load_config_file
-    from pgt_check.measure import build_frame_checker, pick_references
-    from pgt_check.runner import check_frames, load_trajectory
+    from pgt_check.runner import load_trajectory, run_trajectory
 
     if isinstance(config, RunConfig):
         base = config.to_dict()
@@ -87,12 +84,8 @@ def check(
         traj = trajectory
     else:
         traj = load_trajectory(cfg)
-    frames = list(traj.frames)[: cfg.limit] if cfg.limit is not None else list(traj.frames)
-    references = pick_references(traj, frames, cfg)
-    summary = check_frames(
-        frames, cfg, functools.partial(build_frame_checker, cfg, references),
-        extra={"trajectory_format": traj.format or "in-memory"}, t0=t0, trajectory=traj,
-    )
+    # the CLI's own path: the same content keys decide what ``out`` may reuse
+    summary = run_trajectory(traj, cfg, t0=t0)
     df = frames_dataframe(_rows(Path(cfg.out), cfg))  # the stored rows, as frames.csv has them
     df.attrs["summary"] = summary
     df.attrs["out"] = str(cfg.out)

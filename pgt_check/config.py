@@ -11,19 +11,43 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import logging
 import math
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, Literal
 
 from pgt_check.config_load import check_name as _check_name
 from pgt_check.config_load import check_range as _check_range
-from pgt_check.config_load import from_dict, load_config_file, merge  # re-exported
+from pgt_check.config_load import from_dict, merge  # re-exported
+from pgt_check.config_load import load_config_file as _read_config_file
 
 __all__ = [
-    "MEASUREMENT_SECTIONS", "PRESETS", "CorrectConfig", "EdgeConfig", "EnhanceConfig",
-    "HomographyConfig", "InputConfig", "MatchConfig", "PoseConfig", "ReferenceConfig",
-    "RenderConfig", "RunConfig", "VerdictConfig", "from_dict", "load_config_file", "merge",
+    "ACTION_KEYS", "MEASUREMENT_SECTIONS", "PRESETS", "CorrectConfig", "EdgeConfig",
+    "EnhanceConfig", "HomographyConfig", "InputConfig", "MatchConfig", "PoseConfig",
+    "ReferenceConfig", "RenderConfig", "RunConfig", "VerdictConfig", "from_dict",
+    "load_config_file", "merge",
 ]
+
+logger = logging.getLogger(__name__)
+
+#: one-shot actions of a run, not settings: given on each command line (``--resume``,
+#: ``--overwrite``), never replayed from a config file (a run's config.json once stored them)
+ACTION_KEYS = ("resume", "overwrite")
+
+
+def load_config_file(path: str | Path) -> dict[str, Any]:
+    """A JSON or TOML config file as settings (``config_load.load_config_file``), without the
+    one-shot actions of ``ACTION_KEYS``: replaying a run's config.json must neither discard
+    its stored records (``overwrite``) nor fail as replay-and-resume (``resume``). An action
+    set in the file is ignored with a WARNING naming the option to pass instead."""
+    data = _read_config_file(path)
+    for key in ACTION_KEYS:
+        if key in data and data.pop(key) is not False:
+            logger.warning("%s: %r is a one-shot action, not a setting: ignored (pass --%s "
+                           "on the command line)", path, key, key)
+    return data
+
 
 #: config sections whose change invalidates stored per-frame measurements
 MEASUREMENT_SECTIONS = ("input", "render", "match", "homography", "enhance", "edges", "pose")
@@ -360,6 +384,11 @@ class RunConfig:
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
+
+    def settings_dict(self) -> dict[str, Any]:
+        """``to_dict`` without the one-shot actions (``ACTION_KEYS``): what config.json
+        stores, so that ``--config OUT/config.json`` replays the settings only."""
+        return {k: v for k, v in self.to_dict().items() if k not in ACTION_KEYS}
 
     def measurement_settings(self) -> dict[str, Any]:
         """Every setting that changes a per-frame measurement.

@@ -53,6 +53,26 @@ def check_name(section: str, key: str, value: str, table: Any) -> None:
         raise ValueError(f"{section}.{key}: unknown {value!r} (allowed: {', '.join(table)})")
 
 
+#: spellings of a boolean accepted from the command line and config files (case-insensitive)
+BOOL_WORDS = {
+    "true": True, "yes": True, "on": True, "1": True,
+    "false": False, "no": False, "off": False, "0": False,
+}
+
+
+def parse_bool(value: Any) -> bool:
+    """A boolean from a config value or a command-line word: true/false, yes/no, on/off, 1/0
+    (strings in any case, surrounding blanks ignored; the integers 1 and 0). Anything else
+    raises ValueError: a typo ('ture') must not read as false and switch a check off."""
+    if isinstance(value, bool):
+        return value
+    if isinstance(value, int) and value in (0, 1):
+        return bool(value)
+    if isinstance(value, str) and value.strip().lower() in BOOL_WORDS:
+        return BOOL_WORDS[value.strip().lower()]
+    raise ValueError(f"expected true/false (or yes/no, on/off, 1/0), got {value!r}")
+
+
 def _check_value(cls_name: str, name: str, tp: Any, value: Any) -> Any:
     origin = typing.get_origin(tp)
     if origin is Literal:
@@ -80,9 +100,10 @@ def _check_value(cls_name: str, name: str, tp: Any, value: Any) -> Any:
             raise ConfigError(f"{cls_name}.{name}: expected a table, got {value!r}")
         return from_dict(tp, value)
     if tp is bool:
-        if not isinstance(value, bool):
-            raise ConfigError(f"{cls_name}.{name}: expected true/false, got {value!r}")
-        return value
+        try:
+            return parse_bool(value)
+        except ValueError as err:
+            raise ConfigError(f"{cls_name}.{name}: {err}") from None
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ConfigError(f"{cls_name}.{name}: expected an integer, got {value!r}")

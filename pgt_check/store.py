@@ -73,6 +73,28 @@ def content_hash(path: str | Path) -> str:
     return h.hexdigest()[:32]
 
 
+def mesh_content_hash(path: str | Path, side_files: Iterable[str] = ()) -> str:
+    """The content hash of a mesh as its loader read it: ``content_hash`` of the mesh file and
+    of each side file it read (``MeshData.side_files``: OBJ materials and textures, glTF
+    buffers and images; ``"missing:<name>"`` entries are hashed as the name). A mesh without
+    side files (PLY, GLB) hashes as its file alone."""
+    import hashlib
+
+    main = content_hash(path)
+    side = list(side_files)
+    if not side:
+        return main
+    h = hashlib.sha256(f"{main};".encode())
+    folder = Path(path).absolute().parent
+    for name in side:
+        if name.startswith("missing:"):
+            key, digest = name, "missing"
+        else:  # named relative to the mesh: a moved dataset folder keeps its hash
+            key, digest = os.path.relpath(name, folder), content_hash(name)
+        h.update(f"{key}={digest};".encode())
+    return "mesh+side:" + h.hexdigest()[:32]
+
+
 RECORDS_FILE = "records.jsonl"
 RUN_FILE = "run.json"
 FINGERPRINT_KEY = "_fingerprint"

@@ -19,7 +19,8 @@ def test_defaults_round_trip():
         ({"match": {"max_keypoints": "many"}}, "expected an integer"),
         ({"render": {"shading": "glossy"}}, "not one of"),
         ({"verdict": {"threshold_px": "x"}}, "does not fit"),
-        ({"fail_fast": 1}, "true/false"),
+        ({"fail_fast": 2}, "true/false"),
+        ({"verdict": {"shared_checks": "ture"}}, "true/false"),
     ],
 )
 def test_bad_config_is_an_error(data, msg):

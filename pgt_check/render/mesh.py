@@ -42,6 +42,9 @@ class MeshData:
     face_texture: (F,) int32 index into ``textures`` (-1 = no texture), or None.
     shading: "vertex" | "texture" | "shaded" (the colour source the renderer uses).
     offset: (3,) float64 recentring offset (world); the renderer works in ``vertices - offset``.
+    side_files: the files the loader read besides the mesh file itself (OBJ materials and
+    textures, glTF external buffers and images), as absolute paths in the order read; a file
+    the mesh referred to but that was not found is ``"missing:<name as referenced>"``.
     """
 
     vertices: np.ndarray
@@ -52,6 +55,7 @@ class MeshData:
     textures: tuple[np.ndarray, ...] = ()
     face_texture: np.ndarray | None = None
     offset: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    side_files: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         v = np.ascontiguousarray(self.vertices, dtype=np.float64)
@@ -369,5 +373,48 @@ def load_mesh(path: str | Path, shading: str = "auto") -> MeshData:
         raise FileNotFoundError(f"mesh not found: {path}")
     import trimesh
 
-    loaded = trimesh.load(str(path), process=False)
-    return mesh_from_trimesh(loaded, shading=shading, source=str(path))
+    resolver = _recording_resolver(path)
+    loaded = trimesh.load(str(path), process=False, resolver=resolver)
+    mesh = mesh_from_trimesh(loaded, shading=shading, source=str(path))
+    side = tuple(dict.fromkeys(resolver.read))  # first-read order, each file once
+    if side:
+        logger.debug("%s: read %d side files (%s)", path, len(side), ", ".join(side[:5]))
+    return replace(mesh, side_files=side)
+
+
+def _recording_resolver(path: Path) -> Any:
+    """A trimesh ``FilePathResolver`` for ``path`` that records every file it hands to the
+    loader (``.read``): the content a run's mesh hash must cover besides the mesh file. It
+    resolves names exactly as trimesh's own does (it calls it); a name it cannot resolve is
+    recorded as ``missing:<name>`` (the file appearing later changes the hash)."""
+    from trimesh.resolvers import FilePathResolver
+
+    class RecordingResolver(FilePathResolver):
+        def __init__(self, source: str, read: list[str]) -> None:
+            super().__init__(source)
+            self.read = read
+
+        def namespaced(self, namespace: str) -> RecordingResolver:
+            return RecordingResolver(str(Path(self.parent) / namespace), self.read)
+
+        def get(self, name: str) -> bytes:
+            try:
+                data = super().get(name)
+            except Exception:
+                self.read.append(f"missing:{name}")
+                raise
+            self.read.append(str(self._resolved(name)))
+            return data
+
+        def _resolved(self, name: str) -> Path:
+            # the candidates of FilePathResolver.get, in its order: the first that exists
+            for candidate in (name.strip(), name.strip().lstrip("/"), Path(name).name):
+                try:
+                    found = self.absolute(candidate)
+                except ValueError:
+                    continue
+                if found.exists():
+                    return found
+            return self.absolute(name)
+
+    return RecordingResolver(str(path.absolute()), [])

@@ -11,7 +11,7 @@ import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from pgt_check._cli import parse_args
 from pgt_check.config import RunConfig, merge
@@ -138,6 +138,25 @@ def _verdict_fields() -> list[tuple[str, type]]:
     return out
 
 
+class _OneLineErrors(argparse.ArgumentParser):
+    """A parser whose usage errors are one line (``pgt-check report: error: ...``, exit 2),
+    without the long usage block (``--help`` shows it)."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
+def _bool_arg(text: str) -> bool:
+    """argparse type of the boolean flags: ``parse_bool``; any other word is a usage error
+    (exit 2), never read as false."""
+    from pgt_check.config_load import parse_bool
+
+    try:
+        return parse_bool(text)
+    except ValueError as err:
+        raise argparse.ArgumentTypeError(str(err)) from None
+
+
 def add_verdict_flags(p: argparse.ArgumentParser) -> None:
     """One ``--name`` flag per ``VerdictConfig`` field (derived, so new fields come along)."""
     from pgt_check.config import VerdictConfig
@@ -147,8 +166,8 @@ def add_verdict_flags(p: argparse.ArgumentParser) -> None:
         default = getattr(VerdictConfig(), name)
         flag = "--" + name.replace("_", "-")
         if tp is bool:
-            g.add_argument(flag, default=None, type=lambda v: v.lower() in ("1", "true", "yes"),
-                           metavar="{true,false}", help=f"(default {default})")
+            g.add_argument(flag, default=None, type=_bool_arg, metavar="{true,false}",
+                           help=f"(default {default}; also yes/no, on/off, 1/0)")
         else:
             g.add_argument(flag, type=tp, default=None, help=f"(default {default})")
 
@@ -158,7 +177,7 @@ def verdict_overrides(args: argparse.Namespace) -> dict:
 
 
 def report_main(argv: Sequence[str]) -> int:
-    p = argparse.ArgumentParser(
+    p = _OneLineErrors(
         prog="pgt-check report", description="Rebuild outputs of a run from its stored records."
     )
     p.add_argument("out_dir")

@@ -212,7 +212,7 @@ def write_outputs(
     out.mkdir(parents=True, exist_ok=True)
     remove_completion_marker(out)
     atomic_write_text(out / "frames.csv", frames_csv_text(records))
-    atomic_write_text(out / "config.json", json.dumps(config.to_dict(), indent=2) + "\n")
+    atomic_write_text(out / "config.json", json.dumps(config.settings_dict(), indent=2) + "\n")
     summary = build_summary(records, config, extra)
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
     if report:
