@@ -3,7 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import logging
+import signal
+import sys
 from collections.abc import Sequence
+from typing import Any
+
+from pgt_check.files import safe_text
 
 
 def parse_args(parser: argparse.ArgumentParser, argv: Sequence[str]) -> argparse.Namespace | int:
@@ -13,3 +19,42 @@ def parse_args(parser: argparse.ArgumentParser, argv: Sequence[str]) -> argparse
         return parser.parse_args(list(argv))
     except SystemExit as exc:
         return int(exc.code or 0)
+
+
+def _raise_interrupt(signum: int, frame: Any) -> None:
+    raise KeyboardInterrupt
+
+
+def install_sigterm_handler() -> None:
+    """SIGTERM (CI cancel, docker stop) ends a command like Ctrl-C: exit 130. pycolmap is
+    imported first where installed, so its crash-dump handler (glog) cannot replace this one
+    later."""
+    try:
+        import pycolmap  # noqa: F401
+    except ImportError:
+        pass
+    try:
+        signal.signal(signal.SIGTERM, _raise_interrupt)
+    except ValueError:  # not the main thread (library use)
+        pass
+
+
+class OneLineFormatter(logging.Formatter):
+    """Log lines that stay one line each: the message's control characters and undecodable
+    file-name bytes are escaped (``safe_text``); a traceback (``-v``) follows unchanged."""
+
+    def formatMessage(self, record: logging.LogRecord) -> str:  # noqa: N802 - logging API
+        record.message = safe_text(record.message)
+        return super().formatMessage(record)
+
+
+def configure_logging(verbose: int, quiet: bool, quiet_level: int = logging.WARNING) -> None:
+    """The ``pgt_check`` logger of a command: ``quiet_level`` with ``quiet``, DEBUG with
+    ``-vv``, else INFO; one line per record on stderr."""
+    level = quiet_level if quiet else (logging.DEBUG if verbose > 1 else logging.INFO)
+    handler = logging.StreamHandler(sys.stderr)
+    handler.setFormatter(OneLineFormatter("[%(levelname)s] %(name)s: %(message)s"))
+    root = logging.getLogger("pgt_check")
+    root.handlers[:] = [handler]
+    root.setLevel(level)
+    root.propagate = True  # library users and test log capture see the records too

@@ -12,16 +12,16 @@ from __future__ import annotations
 
 import argparse
 import logging
-import signal
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 from pgt_check import __version__
-from pgt_check._cli import parse_args
+from pgt_check._cli import configure_logging, install_sigterm_handler, parse_args
 from pgt_check.config import RunConfig, load_config_file, merge
 from pgt_check.errors import ConfigError, InputError
+from pgt_check.files import safe_text
 
 logger = logging.getLogger("pgt_check")
 
@@ -281,6 +281,11 @@ _OPTION_OF = {
     "limit": "--limit",
     "workers": "--workers",
     "report_details": "--report-details",
+    "edges.tile_grid": "--edges-tile-grid",
+    "correct.rounds": "--correct-rounds",
+    "correct.registration_rounds": "--registration-rounds",
+    "verdict.shared_threshold_px": "--shared-threshold-px",
+    "scheduler": "--scheduler",
 }
 
 
@@ -297,34 +302,6 @@ def load_config(args: argparse.Namespace) -> RunConfig:
         if key in _OPTION_OF:
             raise ConfigError(f"{_OPTION_OF[key]} (config {err})") from err
         raise
-
-
-def _raise_interrupt(signum: int, frame: Any) -> None:
-    raise KeyboardInterrupt
-
-
-def install_sigterm_handler() -> None:
-    """SIGTERM (CI cancel, docker stop) ends the run like Ctrl-C: exit 130 with the resume
-    hint. pycolmap is imported first where installed, so its crash-dump handler (glog) cannot
-    replace this one later."""
-    try:
-        import pycolmap  # noqa: F401
-    except ImportError:
-        pass
-    try:
-        signal.signal(signal.SIGTERM, _raise_interrupt)
-    except ValueError:  # not the main thread (library use)
-        pass
-
-
-def configure_logging(verbose: int, quiet: bool) -> None:
-    level = logging.WARNING if quiet else (logging.DEBUG if verbose > 1 else logging.INFO)
-    handler = logging.StreamHandler(sys.stderr)
-    handler.setFormatter(logging.Formatter("[%(levelname)s] %(name)s: %(message)s"))
-    root = logging.getLogger("pgt_check")
-    root.handlers[:] = [handler]
-    root.setLevel(level)
-    root.propagate = True  # library users and test log capture see the records too
 
 
 def shared_error_lines(shared: dict[str, Any]) -> list[str]:
@@ -357,7 +334,8 @@ def _print_summary(summary: dict[str, Any], out: str) -> None:
         print(f"pgt-check: {line}")
     gate = summary["gate"]
     print(f"pgt-check: gate {'PASSED' if gate['passed'] else 'FAILED'}: {gate['explanation']}")
-    print(f"pgt-check: report: {Path(out) / 'report.html'} (all outputs in {out})")
+    print(f"pgt-check: report: {safe_text(Path(out) / 'report.html')} (all outputs in "
+          f"{safe_text(out)})")
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -395,13 +373,15 @@ def main(argv: Sequence[str] | None = None) -> int:
         # read or written
         if args.verbose:
             logger.exception("input error")
-        print(f"pgt-check: error: {_one_line(err)}", file=sys.stderr)
+        print(f"pgt-check: error: {safe_text(_one_line(err))}", file=sys.stderr)
         return EXIT_INPUT
     except RunInterrupted as err:
-        print(f"pgt-check: {err}; resume with: {resume_command(argv)}", file=sys.stderr)
+        print(f"pgt-check: {err}; resume with: {safe_text(resume_command(argv))}",
+              file=sys.stderr)
         return 130
     except KeyboardInterrupt:
-        print(f"pgt-check: aborted; resume with: {resume_command(argv)}", file=sys.stderr)
+        print(f"pgt-check: aborted; resume with: {safe_text(resume_command(argv))}",
+              file=sys.stderr)
         return 130
     _print_summary(summary, config.out)
     return EXIT_PASSED if summary["gate"]["passed"] else EXIT_FAILED

@@ -19,8 +19,6 @@ Exit codes: 0 done, 2 input error.
 from __future__ import annotations
 
 import argparse
-import csv
-import io
 import json
 import logging
 import math
@@ -32,8 +30,9 @@ from typing import Any
 
 import numpy as np
 
-from pgt_check._cli import parse_args
+from pgt_check._cli import configure_logging, install_sigterm_handler, parse_args
 from pgt_check.errors import InputError
+from pgt_check.files import atomic_write_text, check_inputs_not_outputs, safe_text
 from pgt_check.types import Camera, Frame, Trajectory
 
 logger = logging.getLogger(__name__)
@@ -140,6 +139,7 @@ def compare_trajectories(
     """
     from pgt_check.geometry.transforms import pose_difference
 
+    check_compare_options(tie_px, limit)
     all_pairs = pair_frames(a, b)
     if not all_pairs:
         raise InputError(
@@ -181,6 +181,20 @@ def compare_trajectories(
     return CompareResult(rows, res_summary)
 
 
+def check_compare_options(tie_px: float, limit: int | None) -> None:
+    """InputError for a tie width that is not a finite number >= 0 or a limit below 1."""
+    from pgt_check.config_load import check_range
+
+    try:
+        check_range("--tie-px", tie_px, 0)
+        if limit is not None:
+            if isinstance(limit, bool) or not isinstance(limit, int):
+                raise ValueError(f"--limit: expected an integer, got {limit!r}")
+            check_range("--limit", limit, 1)
+    except ValueError as err:
+        raise InputError(str(err)) from None
+
+
 def _render_depth(checker: Any, frame: Frame) -> float | None:
     """Median render depth of ``frame`` at a small size (the scale of the pixel effect)."""
     cam = frame.camera.scaled(min(1.0, 160 / max(frame.camera.width, frame.camera.height)))
@@ -217,12 +231,18 @@ def _winner(ea: float | None, eb: float | None, tie_px: float) -> str:
     return "a" if ea < eb else "b"
 
 
-def _stats(values: Sequence[float | None]) -> dict[str, float | None]:
-    v = np.array([x for x in values if x is not None and math.isfinite(x)], float)
-    if not v.size:
-        return {"median": None, "p90": None, "max": None}
-    return {"median": float(np.median(v)), "p90": float(np.percentile(v, 90)),
-            "max": float(v.max())}
+def _stats(values: Sequence[float | None]) -> dict[str, Any]:
+    """median / p90 / max of the measured values. A non-finite value (a NaN, or an effect
+    without bound: B sees the points behind its camera) is never dropped: it is counted in
+    ``n_not_finite`` and then no finite max is claimed (``max`` None, shown as inf)."""
+    measured = [float(x) for x in values if x is not None]
+    finite = np.array([x for x in measured if math.isfinite(x)], float)
+    n_bad = len(measured) - len(finite)
+    out: dict[str, Any] = {"median": None, "p90": None, "max": None, "n_not_finite": n_bad}
+    if finite.size:
+        out.update(median=float(np.median(finite)), p90=float(np.percentile(finite, 90)),
+                   max=None if n_bad else float(finite.max()))
+    return out
 
 
 def _summary(rows: list[dict[str, Any]], a: Trajectory, b: Trajectory, mesh: str | None,
@@ -251,25 +271,20 @@ def _summary(rows: list[dict[str, Any]], a: Trajectory, b: Trajectory, mesh: str
 
 
 def rows_csv_text(rows: Sequence[dict[str, Any]]) -> str:
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(COMPARE_COLUMNS)
-    for r in rows:
-        vals = []
-        for c in COMPARE_COLUMNS:
-            v = r.get(c)
-            if v is None or (isinstance(v, float) and not math.isfinite(v)):
-                vals.append("")
-            elif isinstance(v, float):
-                vals.append(f"{v:.6g}")
-            else:
-                vals.append(v)
-        w.writerow(vals)
-    return buf.getvalue()
+    """compare.csv: cells as in frames.csv (``csv_cell``: formulas neutralised, one line per
+    row); a shift without bound is written ``inf``."""
+    from pgt_check.report.outputs import csv_text
+
+    shown = [{**r, "shift_px": "inf"} if r.get("shift_px") == math.inf else r for r in rows]
+    return csv_text(COMPARE_COLUMNS, shown)
 
 
 def _fmt(v: Any, spec: str) -> str:
     return "-" if v is None else format(v, spec)
+
+
+def _max(stats: dict[str, Any], spec: str) -> str:
+    return "inf" if stats.get("n_not_finite") else _fmt(stats["max"], spec)
 
 
 def summary_lines(s: dict[str, Any]) -> list[str]:
@@ -277,10 +292,10 @@ def summary_lines(s: dict[str, Any]) -> list[str]:
         f"pgt-check compare: {s['n_frames']} frames in both sources "
         f"({s['n_only_a']} only in A, {s['n_only_b']} only in B)",
         f"pgt-check compare: rotation difference median {_fmt(s['drot_deg']['median'], '.3f')} "
-        f"deg (max {_fmt(s['drot_deg']['max'], '.3f')}); centre distance median "
-        f"{_fmt(s['dt']['median'], '.4g')} (max {_fmt(s['dt']['max'], '.4g')}) scene units; "
+        f"deg (max {_max(s['drot_deg'], '.3f')}); centre distance median "
+        f"{_fmt(s['dt']['median'], '.4g')} (max {_max(s['dt'], '.4g')}) scene units; "
         f"effect in the image median {_fmt(s['shift_px']['median'], '.2f')} px "
-        f"(max {_fmt(s['shift_px']['max'], '.2f')})",
+        f"(max {_max(s['shift_px'], '.2f')})",
     ]
     if "supported" in s:
         w = s["supported"]
@@ -333,8 +348,27 @@ def compare_main(argv: Sequence[str]) -> int:
     args = parse_args(build_parser(), argv)
     if isinstance(args, int):
         return args
-    logging.getLogger("pgt_check").setLevel(logging.WARNING if args.quiet else logging.INFO)
+    configure_logging(0, args.quiet, logging.ERROR)  # -q: errors only
+    install_sigterm_handler()
+    try:
+        return _compare(args)
+    except (InputError, ValueError, OSError) as err:  # ValueError: a bad setting (ConfigError)
+        print(f"pgt-check compare: error: {_error_text(err)}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("pgt-check compare: interrupted", file=sys.stderr)
+        return 130
+
+
+def _error_text(err: BaseException) -> str:
+    if isinstance(err, OSError) and not isinstance(err, InputError) and err.filename:
+        return safe_text(f"{err.filename}: {err.strerror or type(err).__name__}")
+    return safe_text(" ".join(str(err).split("\n")))
+
+
+def _compare(args: argparse.Namespace) -> int:
     from pgt_check.io import read_trajectory
+    from pgt_check.report.outputs import json_safe
 
     settings: dict[str, Any] = {}
     if args.matcher:
@@ -345,23 +379,31 @@ def compare_main(argv: Sequence[str]) -> int:
         settings["enhance"] = {"mode": args.enhance}
     if args.threshold_px is not None:
         settings["verdict"] = {"threshold_px": args.threshold_px}
-    try:
-        cam = {"camera": args.camera} if args.camera else {}
-        a = read_trajectory(args.a, args.format_a, images=args.images, sensors=args.sensors_a,
-                            **cam)
-        b = read_trajectory(args.b, args.format_b, images=args.images, sensors=args.sensors_b,
-                            **cam)
-        res = compare_trajectories(a, b, args.mesh, tie_px=args.tie_px, limit=args.limit,
-                                   settings=settings)
-    except (InputError, ValueError) as err:  # ValueError: a bad setting (ConfigError is one)
-        print(f"pgt-check compare: error: {err}", file=sys.stderr)
-        return 2
+    check_compare_options(args.tie_px, args.limit)
+    if settings:  # checked up front, also without --mesh
+        _checker_config(args.mesh or "", settings)
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "compare.csv").write_text(rows_csv_text(res.rows), encoding="utf-8")
-    (out / "compare.json").write_text(json.dumps(res.summary, indent=2, default=str) + "\n",
-                                      encoding="utf-8")
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out}: exists and is not a folder")
+    check_inputs_not_outputs(
+        [("pose source A", args.a), ("pose source B", args.b), ("mesh", args.mesh),
+         ("sensors file of A", args.sensors_a), ("sensors file of B", args.sensors_b),
+         ("images", args.images)],
+        [out / "compare.csv", out / "compare.json"], "--out",
+    )
+    cam = {"camera": args.camera} if args.camera else {}
+    a = read_trajectory(args.a, args.format_a, images=args.images, sensors=args.sensors_a, **cam)
+    b = read_trajectory(args.b, args.format_b, images=args.images, sensors=args.sensors_b, **cam)
+    res = compare_trajectories(a, b, args.mesh, tie_px=args.tie_px, limit=args.limit,
+                               settings=settings)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as err:
+        raise InputError(f"--out {out}: cannot create the folder ({err.strerror or err})") from None
+    atomic_write_text(out / "compare.csv", rows_csv_text(res.rows))
+    summary = json_safe(res.summary)  # non-finite numbers become null (counted in the stats)
+    atomic_write_text(out / "compare.json", json.dumps(summary, indent=2, default=str) + "\n")
     for line in summary_lines(res.summary):
-        print(line)
-    print(f"pgt-check compare: wrote {out / 'compare.csv'}")
+        print(safe_text(line))
+    print(f"pgt-check compare: wrote {safe_text(out / 'compare.csv')}")
     return 0

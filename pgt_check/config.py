@@ -13,6 +13,7 @@ import hashlib
 import json
 import logging
 import math
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -21,6 +22,13 @@ from pgt_check.config_load import check_name as _check_name
 from pgt_check.config_load import check_range as _check_range
 from pgt_check.config_load import from_dict, merge  # re-exported
 from pgt_check.config_load import load_config_file as _read_config_file
+
+#: upper bounds of the size options (beyond them a run would allocate without bound or hang):
+#: keypoints per image, image sides in px, edge tiles per side, RANSAC iterations
+MAX_KEYPOINTS = 1_000_000
+MAX_IMAGE_SIDE = 65_536
+MAX_TILE_GRID = 16
+MAX_ITERATIONS = 10_000_000
 
 __all__ = [
     "ACTION_KEYS", "MEASUREMENT_SECTIONS", "PRESETS", "CorrectConfig", "EdgeConfig",
@@ -69,7 +77,7 @@ class HomographyConfig:
     def __post_init__(self) -> None:
         _check_range("homography.ransac_threshold_px", self.ransac_threshold_px, 0, lo_open=True)
         _check_range("homography.confidence", self.confidence, 0, 1, lo_open=True, hi_open=True)
-        _check_range("homography.max_iters", self.max_iters, 1)
+        _check_range("homography.max_iters", self.max_iters, 1, MAX_ITERATIONS)
         _check_range("homography.min_matches", self.min_matches, 4)
         _check_range("homography.min_inliers", self.min_inliers, 4)
         _check_range("homography.max_condition", self.max_condition, 1)
@@ -101,7 +109,7 @@ class ReferenceConfig:
         _check_range(r + "max_translation", self.max_translation, 0)
         _check_range(r + "max_rotation_deg", self.max_rotation_deg, 0, 180)
         _check_range(r + "min_frame_gap", self.min_frame_gap, 0)
-        _check_range(r + "count", self.count, 1)
+        _check_range(r + "count", self.count, 1, 1000)
 
 
 @dataclass(frozen=True)
@@ -123,7 +131,7 @@ class InputConfig:
         from pgt_check.registry import FORMATS
 
         _check_name("input", "format", self.format, ("auto", *FORMATS))
-        _check_range("input.max_image_pixels", self.max_image_pixels, 1)
+        _check_range("input.max_image_pixels", self.max_image_pixels, 1, 2**31 - 1)
 
 
 @dataclass(frozen=True)
@@ -152,10 +160,10 @@ class MatchConfig:
         from pgt_check.registry import MATCHERS
 
         _check_name("match", "method", self.method, MATCHERS)
-        _check_range("match.max_keypoints", self.max_keypoints, 1)
+        _check_range("match.max_keypoints", self.max_keypoints, 1, MAX_KEYPOINTS)
         if self.resize_max == 0:  # 0 = the original size (documented CLI meaning)
             object.__setattr__(self, "resize_max", None)
-        _check_range("match.resize_max", self.resize_max, 16)
+        _check_range("match.resize_max", self.resize_max, 16, MAX_IMAGE_SIDE)
 
 
 @dataclass(frozen=True)
@@ -185,8 +193,8 @@ class EnhanceConfig:
         from pgt_check.registry import ENHANCERS
 
         _check_name("enhance", "method", self.method, ENHANCERS)
-        _check_range("enhance.iterations", self.iterations, 1)
-        _check_range("enhance.short_side", self.short_side, 16)
+        _check_range("enhance.iterations", self.iterations, 1, 1000)
+        _check_range("enhance.short_side", self.short_side, 16, MAX_IMAGE_SIDE)
         _check_range("enhance.auto_min_inliers", self.auto_min_inliers, 0)
         _check_range("enhance.auto_margin", self.auto_margin, 0)
 
@@ -230,8 +238,8 @@ class EdgeConfig:
     def __post_init__(self) -> None:
         if self.resize_max == 0:
             object.__setattr__(self, "resize_max", None)
-        _check_range("edges.resize_max", self.resize_max, 16)
-        _check_range("edges.tile_grid", self.tile_grid, 0)
+        _check_range("edges.resize_max", self.resize_max, 16, MAX_IMAGE_SIDE)
+        _check_range("edges.tile_grid", self.tile_grid, 0, MAX_TILE_GRID)
 
 
 @dataclass(frozen=True)
@@ -332,12 +340,30 @@ class CorrectConfig:
     registration_frames: int = 30
 
     def __post_init__(self) -> None:
-        if self.rounds < 1:
-            raise ValueError(f"correct.rounds must be >= 1, got {self.rounds}")
-        if self.bootstrap < 0:
-            raise ValueError(f"correct.bootstrap must be >= 0, got {self.bootstrap}")
-        _check_range("correct.registration_rounds", self.registration_rounds, 0)
-        _check_range("correct.registration_frames", self.registration_frames, 3)
+        _check_range("correct.rounds", self.rounds, 1, 1000)
+        _check_range("correct.bootstrap", self.bootstrap, 0, 10_000)
+        _check_range("correct.registration_rounds", self.registration_rounds, 0, 1000)
+        _check_range("correct.registration_frames", self.registration_frames, 3, 100_000)
+
+
+#: a Dask scheduler address: [tcp|tls|ucx|ws|wss://]host[:port], or inproc://...
+_SCHEDULER = re.compile(
+    r"(?:(?:tcp|tls|ucx|ws|wss)://)?(?:\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9_.-]+)(?::\d{1,5})?"
+    r"|inproc://\S+"
+)
+
+
+def _check_scheduler(address: str | None) -> None:
+    """ValueError unless ``address`` (None = a local cluster) looks like a scheduler address."""
+    if address is None:
+        return
+    m = _SCHEDULER.fullmatch(address)
+    port = address.rsplit(":", 1)[-1] if m and not address.startswith("inproc") else ""
+    if m is None or (port.isdigit() and not 0 < int(port) < 65536):
+        raise ValueError(
+            f"scheduler: expected a Dask scheduler address such as tcp://host:8786; got "
+            f"{address!r}"
+        )
 
 
 @dataclass(frozen=True)
@@ -371,10 +397,11 @@ class RunConfig:
     retries: int = 1
 
     def __post_init__(self) -> None:
-        _check_range("workers", self.workers, 1)
-        _check_range("retries", self.retries, 0)
+        _check_range("workers", self.workers, 1, 4096)
+        _check_range("retries", self.retries, 0, 100)
         _check_range("limit", self.limit, 1)
         _check_range("report_details", self.report_details, 0)
+        _check_scheduler(self.scheduler)
         if self.resume and self.overwrite:
             raise ValueError("resume and overwrite exclude each other: pick one")
 

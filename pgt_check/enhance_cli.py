@@ -37,8 +37,6 @@ Exit codes: 0 done; 2 usage, input or setup error (one line, no traceback).
 from __future__ import annotations
 
 import argparse
-import csv
-import io
 import logging
 import math
 import sys
@@ -48,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from pgt_check._cli import parse_args
+from pgt_check._cli import configure_logging, install_sigterm_handler, parse_args
 from pgt_check.enhance_refs import (  # re-exported: the subcommand's public helpers
     IMAGE_SUFFIXES,
     RenderItem,
@@ -57,7 +55,13 @@ from pgt_check.enhance_refs import (  # re-exported: the subcommand's public hel
     nearest_references,
     pose_renders,
 )
-from pgt_check.errors import InputError
+from pgt_check.errors import InputError, SetupError
+from pgt_check.files import (
+    atomic_write_bytes,
+    atomic_write_text,
+    check_inputs_not_outputs,
+    safe_text,
+)
 from pgt_check.types import Camera, Frame
 
 __all__ = [
@@ -105,7 +109,19 @@ class _Reprojector:
 
         if not Path(mesh).is_file():
             raise InputError(f"mesh not found: {mesh}")
-        self.renderer = make_renderer(load_mesh(mesh, shading=shading))
+        try:
+            loaded = load_mesh(mesh, shading=shading)
+        except (InputError, MemoryError):
+            raise
+        except Exception as err:  # trimesh raises many types for files it cannot read
+            raise InputError(f"{mesh}: cannot load mesh ({type(err).__name__}: "
+                             f"{(str(err).splitlines() or [''])[0][:160]})") from None
+        try:
+            self.renderer = make_renderer(loaded)
+        except (InputError, MemoryError):
+            raise
+        except Exception as err:
+            raise SetupError(f"cannot build the renderer: {type(err).__name__}: {err}") from None
 
     def __call__(self, render: np.ndarray, frame: Frame, photo: np.ndarray,
                  reference: Frame) -> np.ndarray:
@@ -200,11 +216,15 @@ def _fmt(v: float | None, digits: int = 4) -> str:
 
 
 def _csv_text(columns: Sequence[str], rows: Sequence[dict[str, Any]]) -> str:
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=list(columns), lineterminator="\n")
-    w.writeheader()
-    w.writerows(rows)
-    return buf.getvalue()
+    """references.csv / metrics.csv: cells as in frames.csv (formulas neutralised, one line per
+    row, any file name)."""
+    from pgt_check.report.outputs import csv_text
+
+    return csv_text(columns, rows)
+
+
+def _md_cell(value: Any) -> str:
+    return safe_text(value).replace("|", "\\|")
 
 
 def _mean(values: Sequence[float | None]) -> float | None:
@@ -228,7 +248,7 @@ def metrics_markdown(rows: Sequence[dict[str, Any]], method: str) -> str:
         "|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
-        lines.append(f"| {r['render']} | {r['reference']} | " + " | ".join(
+        lines.append(f"| {_md_cell(r['render'])} | {_md_cell(r['reference'])} | " + " | ".join(
             _fmt(num(r, k), 2 if k.startswith("psnr") else 3) or "-" for k in METRIC_COLUMNS[2:]
         ) + " |")
     means = {k: _mean([num(r, k) for r in rows]) for k in METRIC_COLUMNS[2:]}
@@ -239,10 +259,42 @@ def metrics_markdown(rows: Sequence[dict[str, Any]], method: str) -> str:
 
 
 def _save_png(path: Path, image: np.ndarray) -> None:
+    """Write ``image`` as PNG through a temporary file (never through a symlink at ``path``)."""
+    from io import BytesIO
+
     from PIL import Image
 
     path.parent.mkdir(parents=True, exist_ok=True)
-    Image.fromarray(np.round(np.clip(image, 0, 1) * 255).astype(np.uint8)).save(path)
+    buf = BytesIO()
+    Image.fromarray(np.round(np.clip(image, 0, 1) * 255).astype(np.uint8)).save(buf, "PNG")
+    atomic_write_bytes(path, buf.getvalue())
+
+
+def check_enhance_options(args: argparse.Namespace) -> None:
+    """Every numeric option in range, and ``--out`` a folder that holds none of the inputs
+    (InputError naming the option)."""
+    from pgt_check.config_load import check_range
+
+    checks = [("--limit", args.limit, 1, None, False), ("--short-side", args.short_side, 1, None,
+              False), ("--iterations", args.iterations, 1, 1000, False),
+              ("--max-rotation-deg", args.max_rotation_deg, 0, 180, True),
+              ("--translation-scale", args.translation_scale, 0, None, True)]
+    try:
+        for name, value, lo, hi, lo_open in checks:
+            check_range(name, value, lo, hi, lo_open=lo_open)
+    except ValueError as err:
+        raise InputError(str(err)) from None
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"--out {out}: exists and is not a folder")
+    outputs = [out / "images", out / "references.csv", out / "metrics.csv", out / "metrics.md"]
+    check_inputs_not_outputs(
+        [("renders folder", args.renders), ("model", args.model), ("images", args.images),
+         ("sensors file", args.sensors), ("render poses", args.render_poses),
+         ("--gt folder", args.gt), ("mesh", args.mesh), ("weights", args.weights),
+         ("dataparser transforms", args.dataparser_transforms)],
+        outputs, "--out",
+    )
 
 
 def enhance_folder(args: argparse.Namespace) -> dict[str, Any]:
@@ -250,8 +302,9 @@ def enhance_folder(args: argparse.Namespace) -> dict[str, Any]:
     from pgt_check.io import load_image, read_trajectory
     from pgt_check.io.images import resize_image
 
+    check_enhance_options(args)
     files = find_renders(args.renders)
-    if args.limit:
+    if args.limit is not None:
         files = files[: args.limit]
     gt_dir = None
     if args.gt is not None:
@@ -314,16 +367,14 @@ def enhance_folder(args: argparse.Namespace) -> dict[str, Any]:
     finally:
         method.close()
     out.mkdir(parents=True, exist_ok=True)
-    (out / "references.csv").write_text(_csv_text(REFERENCE_COLUMNS, ref_rows), encoding="utf-8")
+    atomic_write_text(out / "references.csv", _csv_text(REFERENCE_COLUMNS, ref_rows))
     summary: dict[str, Any] = {
         "renders": len(items), "enhanced": sum(it.reference is not None for it in items),
         "method": args.method, "with_gt": len(metric_rows),
     }
     if metric_rows:
-        (out / "metrics.csv").write_text(_csv_text(METRIC_COLUMNS, metric_rows),
-                                         encoding="utf-8")
-        (out / "metrics.md").write_text(metrics_markdown(metric_rows, args.method),
-                                        encoding="utf-8")
+        atomic_write_text(out / "metrics.csv", _csv_text(METRIC_COLUMNS, metric_rows))
+        atomic_write_text(out / "metrics.md", metrics_markdown(metric_rows, args.method))
         for k in METRIC_COLUMNS[2:]:
             summary[k] = _mean([float(r[k]) if r[k] else None for r in metric_rows])
     return summary
@@ -384,14 +435,22 @@ def enhance_main(argv: Sequence[str]) -> int:
     args = parse_args(build_parser(), argv)
     if isinstance(args, int):
         return args
-    logging.getLogger("pgt_check").setLevel(logging.WARNING if args.quiet else logging.INFO)
+    configure_logging(0, args.quiet, logging.ERROR)  # -q: errors only
+    install_sigterm_handler()
     try:
         summary = enhance_folder(args)
-    except (InputError, ValueError) as err:
-        print(f"pgt-check enhance: error: {err}", file=sys.stderr)
+    except (InputError, ValueError, OSError) as err:
+        if isinstance(err, OSError) and not isinstance(err, InputError) and err.filename:
+            text = f"{err.filename}: {err.strerror or type(err).__name__}"
+        else:
+            text = " ".join(str(err).split("\n"))
+        print(f"pgt-check enhance: error: {safe_text(text)}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("pgt-check enhance: interrupted", file=sys.stderr)
+        return 130
     print(f"pgt-check enhance: {summary['enhanced']} of {summary['renders']} renders enhanced "
-          f"({summary['method']}) into {Path(args.out) / 'images'}")
+          f"({summary['method']}) into {safe_text(Path(args.out) / 'images')}")
     if summary["with_gt"]:
         print(f"pgt-check enhance: against {summary['with_gt']} photos: PSNR-Y "
               f"{_fmt(summary['psnr_y_raw'], 2)} -> {_fmt(summary['psnr_y_enhanced'], 2)} dB, "

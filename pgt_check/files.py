@@ -19,6 +19,7 @@ import os
 import re
 import stat
 import tempfile
+from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
@@ -36,6 +37,7 @@ __all__ = [
     "MAX_SMALL_JSON_BYTES",
     "atomic_write_bytes",
     "atomic_write_text",
+    "check_inputs_not_outputs",
     "load_json_limited",
     "read_bytes_limited",
     "read_text_limited",
@@ -125,8 +127,9 @@ def load_json_limited(path: str | Path, limit: int = MAX_SMALL_JSON_BYTES, what:
 
 
 # lone surrogates (undecodable bytes of a file name, as Python decodes them) and control
-# characters (C0, DEL, C1, line and paragraph separators): escaped wherever text is written
-_UNSAFE = re.compile("[\x00-\x1f\x7f-\x9f\u2028\u2029\ud800-\udfff]")
+# characters (C0 but tab, DEL, C1, line and paragraph separators): escaped wherever text is
+# written (a tab keeps text on one line and is kept)
+_UNSAFE = re.compile("[\x00-\x08\x0a-\x1f\x7f-\x9f\u2028\u2029\ud800-\udfff]")
 
 
 def _escape(match: re.Match[str]) -> str:
@@ -134,14 +137,15 @@ def _escape(match: re.Match[str]) -> str:
     code = ord(ch)
     if 0xDC80 <= code <= 0xDCFF:  # an undecodable byte (surrogateescape): show the byte
         return f"\\x{code - 0xDC00:02x}"
-    return {"\n": "\\n", "\r": "\\r", "\t": "\\t"}.get(
+    return {"\n": "\\n", "\r": "\\r"}.get(
         ch, f"\\x{code:02x}" if code <= 0xFF else f"\\u{code:04x}"
     )
 
 
 def safe_text(value: Any) -> str:
-    """``str(value)`` that fits on one line of any UTF-8 text output: control characters become
-    ``\\n``, ``\\x07``..., undecodable file-name bytes ``\\xff``, lone surrogates ``\\udxxx``."""
+    """``str(value)`` that fits on one line of any UTF-8 text output: control characters (but
+    tab) become ``\\n``, ``\\x07``..., undecodable file-name bytes ``\\xff``, other lone
+    surrogates ``\\udxxx``."""
     text = "" if value is None else str(value)
     return _UNSAFE.sub(_escape, text)
 
@@ -171,3 +175,25 @@ def atomic_write_text(path: str | Path, text: str) -> None:
     name that reached the text unescaped) are written as ``\\udcff``-style escapes instead of
     failing (format-aware writers escape them first: ``safe_text``)."""
     atomic_write_bytes(path, text.encode("utf-8", errors="backslashreplace"))
+
+
+def _real(path: str | Path) -> str:
+    return os.path.normcase(os.path.realpath(os.fspath(path)))
+
+
+def check_inputs_not_outputs(
+    inputs: Iterable[tuple[str, str | Path | None]], outputs: Iterable[str | Path], option: str
+) -> None:
+    """Refuse a run that would write over its own input: InputError when an input (``(what,
+    path)``; None skipped) is one of the ``outputs`` (files or folders the command writes,
+    symlinks resolved) or lies inside an output folder. ``option`` names the output option."""
+    outs = [_real(o) for o in outputs]
+    for what, path in inputs:
+        if path is None or path == "":
+            continue
+        p = _real(path)
+        for o in outs:
+            if p == o or p.startswith(o.rstrip(os.sep) + os.sep):
+                raise InputError(
+                    f"{option} {o}: would overwrite the {what} {path}; choose another {option}"
+                )

@@ -16,6 +16,7 @@ from typing import Any
 
 from pgt_check.config import RunConfig
 from pgt_check.errors import InputError, MissingExtraError, SetupError
+from pgt_check.files import check_inputs_not_outputs
 from pgt_check.measure import SCHEMA_VERSION
 from pgt_check.store import content_hash
 from pgt_check.types import Frame, Trajectory
@@ -44,13 +45,34 @@ def load_trajectory(config: RunConfig) -> Trajectory:
     return traj
 
 
+def run_output_paths(out: str | Path) -> list[Path]:
+    """Every file and folder a run writes in ``out`` (an input there would be overwritten)."""
+    from pgt_check.corrections import BAD_FRAMES_NAME, CORRECTED_NAME
+    from pgt_check.measure.correct import CORRECTIONS_FILE
+    from pgt_check.registration_refine import REFINED_FILE, REGISTERED_NAME
+    from pgt_check.report.assets import ASSETS_DIR
+    from pgt_check.report.outputs import COMPLETION_MARKER, OUTPUT_FILES
+    from pgt_check.store import RECORDS_FILE, RUN_FILE
+
+    names = {*OUTPUT_FILES, COMPLETION_MARKER, RECORDS_FILE, RUN_FILE, CORRECTIONS_FILE,
+             CORRECTED_NAME, BAD_FRAMES_NAME, REFINED_FILE, REGISTERED_NAME, ASSETS_DIR}
+    return [Path(out) / n for n in sorted(names)]
+
+
 def check_side_inputs(config: RunConfig, frames: Sequence[Frame]) -> None:
     """Validate the run's other input files before any frame is measured (a typo must not cost
-    the whole run): ``--calibration-from`` (a trusted summary.json with an estimate for every
-    camera of ``frames``). Raises InputError."""
+    the whole run): no input is one of the outputs the run writes into ``--out``;
+    ``--calibration-from`` is a trusted summary.json with an estimate for every camera of
+    ``frames``. Raises InputError."""
     from pgt_check.measure.record import camera_key
     from pgt_check.verdict.calibration import trusted_calibration
 
+    inp = config.input
+    named = [("trajectory", inp.trajectory), ("mesh", inp.mesh), ("images", inp.images),
+             ("sensors file", inp.sensors), ("dataparser transforms", inp.dataparser_transforms),
+             ("--calibration-from summary", config.verdict.calibration_from)]
+    named += [("image", f.image_file) for f in frames]
+    check_inputs_not_outputs(named, run_output_paths(config.out), "--out")
     if config.verdict.calibration_from:
         trusted_calibration(
             config.verdict.calibration_from, sorted({camera_key(f.camera) for f in frames})

@@ -63,10 +63,16 @@ def default_workers() -> int:
         return max(1, os.cpu_count() or 1)
 
 
+#: seconds a run may take after SIGTERM to finish its frames in progress before it is ended
+#: anyway (a stuck frame must not outlive the CI cancel; ``docker stop`` kills after 10 s)
+TERM_GRACE_S = 3.0
+
+
 @contextlib.contextmanager
 def stop_on_sigint() -> Iterator[threading.Event]:
     """While active, the first SIGINT or SIGTERM sets the yielded event; a second raises
-    KeyboardInterrupt.
+    KeyboardInterrupt, and so does the end of ``TERM_GRACE_S`` after a SIGTERM (a frame stuck
+    in a call that never returns cannot hold the run).
 
     Outside the main thread (where signal handlers cannot be installed) it only yields an event.
     """
@@ -79,13 +85,23 @@ def stop_on_sigint() -> Iterator[threading.Event]:
         if stop.is_set():
             raise KeyboardInterrupt
         stop.set()
+        if signum == signal.SIGTERM and hasattr(signal, "setitimer"):
+            signal.setitimer(signal.ITIMER_REAL, max(TERM_GRACE_S, 1e-3))
+
+    def deadline(signum: int, frame: Any) -> None:
+        logger.warning("still busy %.0f s after SIGTERM: stopping now", TERM_GRACE_S)
+        raise KeyboardInterrupt
 
     # SIGTERM (CI cancel, docker stop, kill) is handled like SIGINT
-    signums = (signal.SIGINT, signal.SIGTERM)
+    signums = [signal.SIGINT, signal.SIGTERM]
     previous = {s: signal.signal(s, handler) for s in signums}
+    if hasattr(signal, "SIGALRM"):
+        previous[signal.SIGALRM] = signal.signal(signal.SIGALRM, deadline)
     try:
         yield stop
     finally:
+        if hasattr(signal, "setitimer"):
+            signal.setitimer(signal.ITIMER_REAL, 0)
         for s, h in previous.items():
             signal.signal(s, h)
 

@@ -7,15 +7,15 @@ in ``OUT_DIR/assets/`` (listed in ``assets/index.json``) are reused, never re-re
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any, NoReturn
 
-from pgt_check._cli import parse_args
+from pgt_check._cli import install_sigterm_handler, parse_args
 from pgt_check.config import RunConfig, merge
 from pgt_check.errors import InputError
+from pgt_check.files import MAX_SMALL_JSON_BYTES, load_json_limited, regular_file_size, safe_text
 from pgt_check.measure.correct import add_correction_columns, load_corrections
 from pgt_check.measure.record import FrameMeasurement, OldRecordError
 from pgt_check.store import FINGERPRINT_KEY
@@ -35,21 +35,26 @@ def load_run(out_dir: Path) -> tuple[list[FrameMeasurement], dict]:
         out_dir / RUN_FILE,
     )
     for p in (rec_path, cfg_path, run_path):
-        if not p.is_file():
+        if not p.exists():
             raise InputError(f"{p} not found: is {out_dir} a pgt-check output directory?")
-    try:
-        info = json.loads(run_path.read_text())
-        cfg = json.loads(cfg_path.read_text())
-    except ValueError as err:
-        raise InputError(f"{out_dir}: run.json or config.json is not valid JSON ({err})") from err
+    regular_file_size(rec_path, "record store")
+    info = load_json_limited(run_path, MAX_SMALL_JSON_BYTES, "run.json")
+    cfg = load_json_limited(cfg_path, MAX_SMALL_JSON_BYTES, "config.json")
+    if not isinstance(info, dict):
+        raise InputError(f"{run_path}: expected a JSON object; got {type(info).__name__}")
+    if not isinstance(cfg, dict):
+        raise InputError(f"{cfg_path}: expected a JSON object; got {type(cfg).__name__}")
+    ids = info.get("frame_ids")
+    if ids is not None and (
+        not isinstance(ids, list) or not all(isinstance(i, str) for i in ids)
+    ):
+        raise InputError(f"{run_path}: expected 'frame_ids' to be a list of strings")
     latest = {
         str(r["frame_id"]): r
         for r in iter_records(rec_path)
         if r.get(FINGERPRINT_KEY) == info.get("fingerprint")
     }
-    if not isinstance(info, dict):
-        raise InputError(f"{run_path}: expected a JSON object")
-    order = info.get("frame_ids") or list(latest)
+    order = ids or list(latest)
     missing = [fid for fid in order if fid not in latest]
     if missing:
         raise InputError(
@@ -62,7 +67,7 @@ def load_run(out_dir: Path) -> tuple[list[FrameMeasurement], dict]:
         return [FrameMeasurement.from_json(latest[fid]) for fid in order], cfg
     except OldRecordError as err:
         raise InputError(f"{rec_path}: {err}") from err
-    except (KeyError, ValueError, TypeError) as err:
+    except (KeyError, ValueError, TypeError, AttributeError, IndexError) as err:
         raise InputError(f"{rec_path}: a record is malformed ({type(err).__name__}: {err})") from err
 
 
@@ -112,11 +117,11 @@ def _warn_stale_auto_decisions(records: list[FrameMeasurement], config: RunConfi
 def _old_summary(path: Path) -> dict:
     """The previous summary.json (for run facts the records lack); {} if missing or corrupt
     (it is rebuilt anyway)."""
-    if not path.is_file():
+    if not path.exists():
         return {}
     try:
-        old = json.loads(path.read_text(encoding="utf-8"))
-    except (ValueError, OSError):
+        old = load_json_limited(path, MAX_SMALL_JSON_BYTES, "summary.json")
+    except InputError:
         print(f"pgt-check report: note: {path} is unreadable; rebuilding it", file=sys.stderr)
         return {}
     return old if isinstance(old, dict) else {}
@@ -191,6 +196,16 @@ def report_main(argv: Sequence[str]) -> int:
     args = parse_args(p, argv)
     if isinstance(args, int):
         return args
+    install_sigterm_handler()
+    try:
+        return _report(args)
+    except KeyboardInterrupt:
+        print("pgt-check report: interrupted; the outputs are incomplete: run pgt-check report "
+              "again to rebuild them", file=sys.stderr)
+        return 130
+
+
+def _report(args: argparse.Namespace) -> int:
     from pgt_check.report.outputs import outputs_complete, write_outputs
     from pgt_check.verdict import judge_run
 
@@ -213,11 +228,19 @@ def report_main(argv: Sequence[str]) -> int:
                       "images_outside_dataset", "warnings", "executor", "corrections")
             if k in old
         }
-        judged = judge_run(records, config)
+        try:
+            judged = judge_run(records, config)
+        except (KeyError, ValueError, TypeError, AttributeError, IndexError) as err:
+            if isinstance(err, InputError):
+                raise
+            raise InputError(
+                f"{out}: the stored records cannot be judged, one is malformed "
+                f"({type(err).__name__}: {err}); measure again with --overwrite"
+            ) from err
         rows = add_correction_columns(judged.rows, load_corrections(out))
         summary = write_outputs(out, rows, config, {**extra, **_shared_extra(judged, out)})
     except (InputError, OSError) as err:
-        print(f"pgt-check report: error: {err}", file=sys.stderr)
+        print(f"pgt-check report: error: {safe_text(err)}", file=sys.stderr)
         return 2
     c = summary["counts"]
     print(

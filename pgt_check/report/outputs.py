@@ -10,12 +10,14 @@ import logging
 import math
 import platform
 import statistics
+from collections.abc import Mapping, Sequence
 from importlib import metadata
 from pathlib import Path
 from typing import Any
 
 from pgt_check import __version__
 from pgt_check.config import RunConfig
+from pgt_check.files import safe_text
 from pgt_check.measure.columns import MEASUREMENT_COLUMNS, TIMING_COLUMNS
 from pgt_check.measure.correct import CORRECTION_COLUMNS
 from pgt_check.report.files import atomic_write_text
@@ -53,30 +55,46 @@ def _clean(value: Any) -> Any:
     return value
 
 
+json_safe = _clean  # public name: JSON-safe copy of a summary (non-finite floats -> None)
+
+
 #: first characters that make a spreadsheet read a cell as a formula (OWASP CSV injection)
 _FORMULA_START = ("=", "+", "-", "@", "\t", "\r")
 
 
-def _csv_value(value: Any) -> Any:
-    """A frames.csv cell. Text (ids, paths, reasons) starting with ``= + - @``, tab or CR gets a
-    leading ``'`` so spreadsheets show it as text; numbers are never changed (a negative number
-    stays a number)."""
+def csv_cell(value: Any) -> Any:
+    """A cell of every CSV output (frames.csv, compare.csv, references.csv, metrics.csv).
+
+    Text (ids, paths, reasons) starting with ``= + - @``, tab or CR gets a leading ``'`` so
+    spreadsheets show it as text; control characters and undecodable file-name bytes are
+    escaped (``safe_text``: one line per row, always UTF-8); numbers are never changed (a
+    negative number stays a number), non-finite ones are empty."""
     if value is None:
         return ""
+    if isinstance(value, bool):
+        return value
     if isinstance(value, float):
         return "" if not math.isfinite(value) else f"{value:.6g}"
-    if isinstance(value, str) and value.startswith(_FORMULA_START):
-        return "'" + value
+    if isinstance(value, str):
+        return "'" + safe_text(value) if value.startswith(_FORMULA_START) else safe_text(value)
     return value
 
 
-def frames_csv_text(records: list[dict[str, Any]]) -> str:
+_csv_value = csv_cell  # the name older callers use
+
+
+def csv_text(columns: Sequence[str], rows: Sequence[Mapping[str, Any]]) -> str:
+    """A CSV document: the header, then one line per row (cells through ``csv_cell``)."""
     buf = io.StringIO()
     writer = csv.writer(buf, lineterminator="\n")
-    writer.writerow(FRAME_COLUMNS)
-    for r in records:
-        writer.writerow([_csv_value(r.get(c)) for c in FRAME_COLUMNS])
+    writer.writerow(columns)
+    for r in rows:
+        writer.writerow([csv_cell(r.get(c)) for c in columns])
     return buf.getvalue()
+
+
+def frames_csv_text(records: list[dict[str, Any]]) -> str:
+    return csv_text(FRAME_COLUMNS, records)
 
 
 def versions() -> dict[str, str]:
