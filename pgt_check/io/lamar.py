@@ -214,7 +214,9 @@ def read_lamar(
     paths are resolved against; default: ``default_image_root``, the images file's folder or the
     session's ``raw_data/``). frame_id is
     ``"{timestamp}/{sensor_id}"`` as written in the images file. Images without a pose are
-    skipped (one WARNING with the count); frames are sorted by timestamp, then sensor id.
+    skipped (one WARNING with the count); a camera or rig pose without an image stays a frame
+    without one (``image_file`` None: UNVERIFIABLE image_missing, counted by the gate; one
+    WARNING with the count). Frames are sorted by timestamp, then sensor id.
     """
     if images is not None and not Path(images).exists():
         raise InputError(f"{images}: images folder or list file not found")
@@ -273,6 +275,22 @@ def read_lamar(
             files.trajectories.name,
             unposed[0],
         )
+    imaged = {(stamp, sensor) for stamp, sensor, _ in frames}
+    no_image = _poses_without_image(poses, rigs, cameras, imaged)
+    for (stamp, sensor), world_from_cam in no_image.items():
+        # kept: checked as UNVERIFIABLE image_missing (and counted by the gate), never dropped
+        frame_id = f"{_stamp_text(stamp)}/{sensor}"
+        frames.append((stamp, sensor, Frame(frame_id, cameras[sensor], world_from_cam, "", None,
+                                            stamp)))
+    if no_image:
+        logger.warning(
+            "%s: %d camera or rig pose(s) have no image in %s (first: %s); they are "
+            "UNVERIFIABLE image_missing",
+            files.trajectories,
+            len(no_image),
+            files.images.name,
+            "/".join(map(str, next(iter(no_image)))),
+        )
     frames.sort(key=lambda item: (item[0], item[1]))
     logger.info(
         "read %d frames from %s (sensors: %s)", len(frames), files.trajectories, files.sensors.name
@@ -312,6 +330,34 @@ def _camera_pose(
             if world_from_rig is not None:
                 return world_from_rig @ rigs[(rig, sensor_id)]
     return world_from_cam
+
+
+def _poses_without_image(
+    poses: dict, rigs: dict, cameras: dict[str, Camera], imaged: set[tuple[float, str]]
+) -> dict[tuple[float, str], np.ndarray]:
+    """(timestamp, camera id) -> world_from_cam of every pose of the trajectories file that no
+    image row uses: a camera's own pose without an image at its timestamp, and a rig pose none
+    of whose cameras has an image then (its first camera, by id, stands for it). Poses of
+    sensors that are no camera (depth, lidar) are not poses of images and are left out."""
+    cameras_of_rig: dict[str, list[str]] = {}
+    for rig, sensor in sorted(rigs):
+        if sensor in cameras:
+            cameras_of_rig.setdefault(rig, []).append(sensor)
+    out: dict[tuple[float, str], np.ndarray] = {}
+    for (stamp, device), world_from_device in poses.items():
+        if device in cameras:
+            if (stamp, device) not in imaged:
+                out.setdefault((stamp, device), world_from_device)
+        elif device in cameras_of_rig:
+            cams = cameras_of_rig[device]
+            if not any((stamp, c) in imaged for c in cams):
+                out.setdefault((stamp, cams[0]), world_from_device @ rigs[(device, cams[0])])
+    return out
+
+
+def _stamp_text(stamp: float) -> str:
+    """A timestamp as a frame id part: an integer without a decimal point."""
+    return str(int(stamp)) if float(stamp).is_integer() else repr(float(stamp))
 
 
 def _metadata(files: LamarFiles, root: Path) -> dict[str, str]:

@@ -9,6 +9,7 @@ OpenCV convention. The image size is read from each image's header.
 from __future__ import annotations
 
 import logging
+from collections import Counter
 from pathlib import Path
 
 import numpy as np
@@ -65,19 +66,22 @@ def read_pgt(path: str | Path, *, images: str | Path | None = None) -> Trajector
         )
     distinct = set(sizes.values())
     shared = next(iter(distinct)) if len(distinct) == 1 else None
+    # a missing image's frame keeps the most common size (it is UNVERIFIABLE image_missing
+    # either way, never dropped: the camera only matters once the image is there)
+    common = Counter(sizes.values()).most_common(1)[0][0]
     frames: list[Frame] = []
     missing: list[str] = []
     for _line, name, f, world_from_cam in rows:
-        size = sizes.get(name, shared)
         if name not in sizes:
             missing.append(name)
-        if size is None:
-            continue
-        width, height = size
+        width, height = sizes.get(name, common)
         camera = Camera("SIMPLE_PINHOLE", width, height, (f, (width - 1) / 2.0, (height - 1) / 2.0))
         frames.append(Frame(name, camera, world_from_cam, name, root / name))
     if missing:
-        how = "kept with the shared image size" if shared else "skipped (image sizes differ)"
+        how = (
+            "kept with the shared image size" if shared
+            else "kept with the most common image size"
+        ) + " (UNVERIFIABLE image_missing)"
         logger.warning(
             "%s: %d image(s) not found under %s, %s (first: %s)",
             path,

@@ -125,9 +125,10 @@ def read_tum(
     """Read a TUM trajectory; ``camera`` (Camera or spec string) is required.
 
     ``images``: a folder or a list file; default ``rgb.txt`` beside the trajectory, else an
-    ``images/`` folder beside it. frame_id is the timestamp as written. Poses with no image within
-    ``max_time_diff`` seconds (exact match when both timestamps are integers) are dropped with
-    one WARNING giving the count.
+    ``images/`` folder beside it. frame_id is the timestamp as written. A pose with no image within
+    ``max_time_diff`` seconds (exact match when both timestamps are integers) stays a frame
+    without an image (``image_file`` None: UNVERIFIABLE image_missing, counted by the gate), with
+    one WARNING giving the count; no pose matching any image is an InputError.
     """
     path = Path(path)
     if camera is None:
@@ -168,24 +169,27 @@ def read_tum(
     else:
         raise InputError(f"{images}: images folder or list file not found")
     matched = match_images([(s, is_integer_token(t)) for _, t, s, _ in rows], timed, max_time_diff)
-    frames: list[Frame] = []
-    dropped: list[str] = []
-    for (_line, token, stamp, world_from_cam), image in zip(rows, matched, strict=True):
-        if image is None:
-            dropped.append(token)
-            continue
-        frames.append(Frame(token, camera, world_from_cam, image.path_text, image.file, stamp))
-    if dropped:
-        logger.warning(
-            "%s: dropped %d pose(s) with no image in %s (first: %s)",
-            path,
-            len(dropped),
-            images,
-            dropped[0],
-        )
-    if not frames:
+    if not any(image is not None for image in matched):
         raise InputError(
             f"{path}: no pose matched an image in {images} (tolerance {max_time_diff} s)"
+        )
+    frames: list[Frame] = []
+    unmatched: list[str] = []
+    for (_line, token, stamp, world_from_cam), image in zip(rows, matched, strict=True):
+        if image is None:  # kept: checked as UNVERIFIABLE image_missing, never dropped
+            unmatched.append(token)
+            frames.append(Frame(token, camera, world_from_cam, "", None, stamp))
+            continue
+        frames.append(Frame(token, camera, world_from_cam, image.path_text, image.file, stamp))
+    if unmatched:
+        logger.warning(
+            "%s: %d of %d pose(s) have no image in %s (first: %s); they are UNVERIFIABLE "
+            "image_missing",
+            path,
+            len(unmatched),
+            len(rows),
+            images,
+            unmatched[0],
         )
     frames.sort(key=lambda f: f.timestamp)
     logger.info("read %d frames from %s", len(frames), path)

@@ -207,3 +207,68 @@ def test_config_replay_does_not_replay_overwrite_or_resume(cli, base_args, tmp_p
     (tmp_path / "old.json").write_text(json.dumps(old))
     assert cli("--config", tmp_path / "old.json", "-q")[0] == 0
     assert json.loads((out / "summary.json").read_text())["executor"]["frames_reused"] == 2
+
+
+# -- 5. every pose of the input is checked or counted ------------------------------------------
+def test_tum_poses_without_images_are_counted(scene, tmp_path, cli, case):
+    import shutil
+
+    from pgt_check.io import read_trajectory
+    from pgt_check.io.writers import tum_text
+
+    tum = tmp_path / "tum"
+    (tum / "images").mkdir(parents=True)
+    traj = read_trajectory(scene / "trajectories.txt")
+    (tum / "groundtruth.txt").write_text(tum_text(traj))
+    for name in ("frame-000000.jpg", "frame-000001.jpg", "frame-000002.jpg"):
+        shutil.copy(scene / "images" / name, tum / "images" / name)
+    out = tmp_path / "out"
+    rc, stdout, _ = cli(tum / "groundtruth.txt", "--mesh", scene / "mesh.glb", "--camera",
+                        "PINHOLE,320,240,250,250,160,120", "--images", tum / "images", "--out",
+                        out, "--report-details", "0", "--enhance", "never", "-q")
+    summary = json.loads((out / "summary.json").read_text())
+    reasons = [r for r in (out / "frames.csv").read_text().splitlines()[1:] if "image_missing" in r]
+    case("TUM: 24 poses, images for 3", "24 frames (21 image_missing), gate fails (1)",
+         f"{rc}: {summary['n_frames']} frames, {len(reasons)} image_missing")
+    assert len(traj) == 24 and summary["n_frames"] == 24 and len(reasons) == 21
+    assert rc == 1 and summary["gate"]["passed"] is False
+
+
+def test_lamar_poses_without_image_rows_are_counted(scene, cli, base_args, tmp_path, case):
+    images = scene / "images.txt"
+    lines = images.read_text().splitlines()
+    images.write_text("\n".join(lines[:4]) + "\n")  # image rows for 3 of the 24 poses
+    out = tmp_path / "out"
+    args = base_args("--enhance", "never")
+    rc, _, _ = cli(*args[: args.index("--limit")], *args[args.index("--limit") + 2:])
+    summary = json.loads((out / "summary.json").read_text())
+    rows = (out / "frames.csv").read_text().splitlines()[1:]
+    case("LaMAR: 24 poses, image rows for 3", "24 frames (21 image_missing), gate fails (1)",
+         f"{rc}: {summary['n_frames']} frames, "
+         f"{sum('image_missing' in r for r in rows)} image_missing")
+    assert summary["n_frames"] == 24 and sum("image_missing" in r for r in rows) == 21
+    assert rc == 1
+
+
+def test_lamar_rig_pose_without_any_image_is_a_frame(tmp_path):
+    from pgt_check.io import read_trajectory
+
+    (tmp_path / "sensors.txt").write_text(
+        "c0, c0, camera, PINHOLE, 64, 48, 50, 50, 32, 24\n"
+        "c1, c1, camera, PINHOLE, 64, 48, 50, 50, 32, 24\n"
+        "d0, depth, depth, PINHOLE, 64, 48, 50, 50, 32, 24\n"
+    )
+    (tmp_path / "rigs.txt").write_text(
+        "rig, c0, 1, 0, 0, 0, 0, 0, 0\nrig, c1, 1, 0, 0, 0, 0.1, 0, 0\n"
+    )
+    (tmp_path / "trajectories.txt").write_text(
+        "0, rig, 1, 0, 0, 0, 0, 0, 0\n1, rig, 1, 0, 0, 0, 1, 0, 0\n"
+        "2, c1, 1, 0, 0, 0, 2, 0, 0\n3, d0, 1, 0, 0, 0, 3, 0, 0\n"
+    )
+    (tmp_path / "images.txt").write_text("0, c1, a.jpg\n")
+    frames = read_trajectory(tmp_path / "trajectories.txt").by_id()
+    # rig pose 0 is checked through c1's image; rig pose 1 (no image of c0 or c1) and camera
+    # pose 2 are frames without an image; the depth sensor's pose is no image's pose
+    assert sorted(frames) == ["0/c1", "1/c0", "2/c1"]
+    assert frames["1/c0"].image_file is None and frames["2/c1"].image_file is None
+    np.testing.assert_allclose(frames["1/c0"].world_from_cam[:3, 3], [1, 0, 0])

@@ -61,16 +61,21 @@ def test_images_option_and_missing_images(tmp_path: Path, random_rigid, make_ima
         read_pgt(path)
 
 
-def test_missing_images_with_differing_sizes_are_skipped(
+def test_missing_images_with_differing_sizes_are_kept(
     tmp_path: Path, random_rigid, make_image
 ) -> None:
+    # issue #25: a pose is never dropped; its frame is UNVERIFIABLE image_missing downstream
     make_image(tmp_path / "a.png", 40, 30)
     make_image(tmp_path / "b.png", 20, 10)
+    make_image(tmp_path / "d.png", 20, 10)
     path = tmp_path / "pgt.txt"
     path.write_text(
-        "\n".join(pgt_row(n, random_rigid()) for n in ("a.png", "b.png", "c.png")) + "\n"
+        "\n".join(pgt_row(n, random_rigid()) for n in ("a.png", "b.png", "c.png", "d.png"))
+        + "\n"
     )
-    assert [f.frame_id for f in read_pgt(path)] == ["a.png", "b.png"]
+    frames = read_pgt(path).by_id()
+    assert list(frames) == ["a.png", "b.png", "c.png", "d.png"]
+    assert (frames["c.png"].camera.width, frames["c.png"].camera.height) == (20, 10)
 
 
 BAD = {

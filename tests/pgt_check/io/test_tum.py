@@ -44,16 +44,19 @@ def test_float_timestamps_nearest_match(tmp_path: Path, random_rigid, caplog) ->
     )
     with caplog.at_level(logging.WARNING, logger="pgt_check.io.tum"):
         traj = read_tum(path, camera=SPEC, images=images)
-    assert [f.frame_id for f in traj] == stamps[:3]
+    # the pose without an image stays, without an image (UNVERIFIABLE image_missing; #25)
+    assert [f.frame_id for f in traj] == stamps
     assert [f.image_path for f in traj] == [
         "1305031102.180000.png",
         "1305031102.206000.png",
         "1305031102.250000.png",
+        "",
     ]
-    for frame, pose in zip(traj, poses, strict=False):
+    assert traj[3].image_file is None
+    for frame, pose in zip(traj, poses, strict=True):
         assert_allclose(frame.world_from_cam, pose, atol=1e-12)
     assert traj[0].timestamp == pytest.approx(1305031102.175304)
-    assert any("dropped 1 pose" in r.getMessage() for r in caplog.records)
+    assert any("1 of 4 pose(s) have no image" in r.getMessage() for r in caplog.records)
     # a tighter tolerance drops everything that is 5 ms off
     with pytest.raises(InputError, match="no pose matched"):
         read_tum(path, camera=SPEC, images=images, max_time_diff=0.001)
@@ -64,10 +67,12 @@ def test_integer_timestamps_match_exactly(tmp_path: Path, random_rigid) -> None:
     path.write_text("\n".join(tum_row(s, random_rigid()) for s in ("0", "10", "11")) + "\n")
     images = touch(tmp_path / "images", "frame-000000.color.jpg", "frame-000010.color.jpg")
     traj = read_tum(path, camera=SPEC, images=images)
-    # 11 is within 0.02 s of nothing and is an integer: no match with frame 10
+    # 11 is within 0.02 s of nothing and is an integer: no match with frame 10 (kept without
+    # an image: UNVERIFIABLE image_missing)
     assert [(f.frame_id, f.image_path) for f in traj] == [
         ("0", "frame-000000.color.jpg"),
         ("10", "frame-000010.color.jpg"),
+        ("11", ""),
     ]
 
 
