@@ -11,11 +11,13 @@ The frame's own photo is used only with ``mode="self"`` (an upper bound for eval
 
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
 
 from pgt_check.config import ReferenceConfig
+from pgt_check.geometry.transforms import rotmat_to_quat
 from pgt_check.types import Frame
 
 
@@ -40,20 +42,36 @@ def _angles_deg(rotations: np.ndarray, r: np.ndarray) -> np.ndarray:
     return np.degrees(np.arccos(c))
 
 
-def select_references(
-    frames: list[Frame] | tuple[Frame, ...], config: ReferenceConfig = ReferenceConfig()
-) -> dict[str, ReferenceChoice]:
-    """Pick a reference for every frame; returns frame_id -> ReferenceChoice.
+#: slack of the KD-tree bound for rounding (the angle from arccos near 0 is the least exact)
+_BOUND_MARGIN = 1e-6
 
-    Vectorised over the trajectory per frame (O(N^2) in total: fine to ~10^4 frames; larger
-    trajectories should be split into chunks).
+
+def select_references(
+    frames: list[Frame] | tuple[Frame, ...],
+    config: ReferenceConfig = ReferenceConfig(),
+    only: Iterable[str] | None = None,
+) -> dict[str, ReferenceChoice]:
+    """Pick a reference for every frame (or for the frame ids in ``only``: the checked ones;
+    any frame of ``frames`` may serve); returns frame_id -> ReferenceChoice.
+
+    Near-linear: each frame scores only its nearest frames in a KD-tree over
+    ``(c / translation_scale, q * 360 / (pi * rotation_scale_deg))`` (q the unit quaternion,
+    both signs), whose Euclidean distance is a lower bound of the cost (``2 sin(a/4) <= a/2``
+    for the chordal quaternion distance; the time term is >= 0). The neighbourhood is doubled
+    until every frame left out is farther than the chosen ones' cost allows, so the choices
+    are those of scoring every frame: same cost, limits and tie-break (lower trajectory
+    position first).
     """
+    from scipy.spatial import cKDTree
+
     n = len(frames)
+    wanted = None if only is None else set(only)
+    todo = [(i, f) for i, f in enumerate(frames) if wanted is None or f.frame_id in wanted]
     out: dict[str, ReferenceChoice] = {}
     if config.mode == "none":
-        return {f.frame_id: ReferenceChoice((), "reference_disabled") for f in frames}
+        return {f.frame_id: ReferenceChoice((), "reference_disabled") for _, f in todo}
     if config.mode == "self":
-        return {f.frame_id: ReferenceChoice((f.frame_id,), "", 0.0, 0.0) for f in frames}
+        return {f.frame_id: ReferenceChoice((f.frame_id,), "", 0.0, 0.0) for _, f in todo}
     if n == 0:
         return out
     centres = np.array([f.world_from_cam[:3, 3] for f in frames])
@@ -64,25 +82,45 @@ def select_references(
     if t_scale is None:
         extent = float(np.linalg.norm(centres.max(0) - centres.min(0))) if n > 1 else 0.0
         t_scale = max(0.1 * extent, 1e-9)
-    idx = np.arange(n)
-    for i, f in enumerate(frames):
-        dt = np.linalg.norm(centres - centres[i], axis=1)
-        dr = _angles_deg(rotations, rotations[i])
-        cost = dt / t_scale + dr / config.rotation_scale_deg
-        if config.time_scale_s is not None and np.isfinite(stamps[i]):
-            dtime = np.abs(stamps - stamps[i])
-            cost = cost + np.where(np.isfinite(dtime), dtime / config.time_scale_s, 0.0)
-        ok = has_image & (np.abs(idx - i) >= max(1, config.min_frame_gap))
-        ok &= dr <= config.max_rotation_deg
-        if config.max_translation is not None:
-            ok &= dt <= config.max_translation
-        if not ok.any():
+    quats = np.array([rotmat_to_quat(r) for r in rotations])
+    q_scale = 360.0 / (np.pi * config.rotation_scale_deg)
+    embedded = np.hstack([centres / t_scale, quats * q_scale])
+    flipped = np.hstack([centres / t_scale, -quats * q_scale])
+    tree = cKDTree(np.vstack([embedded, flipped]))  # q and -q: the same rotation
+    count = max(1, config.count)
+    gap = max(1, config.min_frame_gap)
+    for i, f in todo:
+        k = min(2 * n, max(32, 8 * count + 4 * gap))
+        while True:
+            dist, found = tree.query(embedded[i], k=k)
+            dist, found = np.atleast_1d(dist), np.atleast_1d(found)
+            near = np.unique(found[np.isfinite(dist)] % n)
+            dt = np.linalg.norm(centres[near] - centres[i], axis=1)
+            dr = _angles_deg(rotations[near], rotations[i])
+            cost = dt / t_scale + dr / config.rotation_scale_deg
+            if config.time_scale_s is not None and np.isfinite(stamps[i]):
+                dtime = np.abs(stamps[near] - stamps[i])
+                cost = cost + np.where(np.isfinite(dtime), dtime / config.time_scale_s, 0.0)
+            ok = has_image[near] & (np.abs(near - i) >= gap)
+            ok &= dr <= config.max_rotation_deg
+            if config.max_translation is not None:
+                ok &= dt <= config.max_translation
+            cand = np.flatnonzero(ok)
+            best = cand[np.argsort(cost[cand], kind="stable")[:count]]
+            reach = float(np.max(dist)) if len(dist) else 0.0  # every frame left out: >= reach
+            if (
+                k >= 2 * n
+                or (len(best) == count and reach > float(cost[best[-1]]) + _BOUND_MARGIN)
+                or (config.max_translation is not None
+                    and reach > config.max_translation / t_scale + q_scale * 2.0)
+            ):
+                break
+            k = min(2 * n, 2 * k)
+        if not len(best):
             out[f.frame_id] = ReferenceChoice((), "no_reference_within_limits")
             continue
-        cand = np.flatnonzero(ok)
-        best = cand[np.argsort(cost[cand], kind="stable")[: max(1, config.count)]]
         j = int(best[0])
         out[f.frame_id] = ReferenceChoice(
-            tuple(frames[int(k)].frame_id for k in best), "", float(dt[j]), float(dr[j])
+            tuple(frames[int(near[m])].frame_id for m in best), "", float(dt[j]), float(dr[j])
         )
     return out

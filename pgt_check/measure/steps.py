@@ -125,7 +125,9 @@ def pick_references(
         return {}
     from pgt_check.enhance.reference import select_references
 
-    choices = select_references(traj.frames, config.enhance.reference)
+    choices = select_references(
+        traj.frames, config.enhance.reference, only=[f.frame_id for f in frames]
+    )
     by_id = traj.by_id()
     refs = {f.frame_id: tuple(by_id[i] for i in choices[f.frame_id].frame_ids) for f in frames}
     missing = sum(not r for r in refs.values())
