@@ -7,8 +7,17 @@ from dataclasses import dataclass
 from typing import Any
 
 from pgt_check.config import RunConfig
+from pgt_check.enhance.base import Evidence
 from pgt_check.measure.record import FrameMeasurement
-from pgt_check.verdict.decide import judge, own_outcomes, path_outcomes, vouched_reference
+from pgt_check.verdict.decide import (
+    Judgement,
+    Verdict,
+    judge,
+    own_outcomes,
+    path_outcomes,
+    vouched_reference,
+)
+from pgt_check.verdict.off_mesh import off_mesh_frames
 from pgt_check.verdict.shared import SharedChecks, run_shared_checks
 
 #: the verdict columns every row gets beside the measurement columns, with their meaning
@@ -37,7 +46,9 @@ class RunJudgement:
 
 
 def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> RunJudgement:
-    """Run-level checks on all measurements (trajectory order), then each frame's judgement.
+    """Run-level checks on all measurements (trajectory order), then each frame's judgement;
+    a frame below ``min_coverage`` whose neighbours see the mesh well FAILs ``off_mesh``
+    (``pgt_check.verdict.off_mesh``).
 
     Measurements are not changed (records.jsonl stays as measured)."""
     ms = list(measurements)
@@ -46,6 +57,14 @@ def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> Ru
     outs = [path_outcomes(m, v, shared) for m in ms]
     own = own_outcomes(ms, v, shared, outs)
     judged = [judge(m, v, shared, own, out) for m, out in zip(ms, outs, strict=True)]
+    # a render that shows (almost) nothing of a mesh its neighbours see well: a gross pose
+    # error, not missing evidence (``verdict.off_mesh``)
+    off = off_mesh_frames(ms, v.min_coverage)
+    judged = [
+        Judgement(Verdict.FAIL, off[m.frame_id], Evidence.ABSOLUTE.value, "", "")
+        if m.frame_id in off else j
+        for m, j in zip(ms, judged, strict=True)
+    ]
     # second pass: a frame judged through a reference the run does not pass is judged
     # through another tried reference that it passes, where one aligned (``vouched_reference``)
     first = {m.frame_id: j.verdict for m, j in zip(ms, judged, strict=True)}

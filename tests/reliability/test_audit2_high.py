@@ -272,3 +272,67 @@ def test_lamar_rig_pose_without_any_image_is_a_frame(tmp_path):
     assert sorted(frames) == ["0/c1", "1/c0", "2/c1"]
     assert frames["1/c0"].image_file is None and frames["2/c1"].image_file is None
     np.testing.assert_allclose(frames["1/c0"].world_from_cam[:3, 3], [1, 0, 0])
+
+
+# -- 4. the worse the pose, the softer the verdict: no more -----------------------------------
+def test_frame_moved_30m_off_the_mesh_fails(scene, tmp_path, cli, case):
+    from pgt_check.api import check
+    from pgt_check.io import read_trajectory
+    from pgt_check.types import Trajectory
+
+    frames = list(read_trajectory(scene / "trajectories.txt").frames[:7])
+    moved = frames[3].world_from_cam.copy()
+    moved[2, 3] += 30.0  # 30 m up: the render shows nothing of the room
+    frames[3] = frames[3].with_pose(moved)
+    out = tmp_path / "out"
+    df = check(Trajectory(frames), scene / "mesh.glb", out=str(out), **FAST)
+    case("a frame moved 30 m off the mesh (neighbours see it well)", "FAIL off_mesh, gate fails",
+         f"{df.loc[3, 'verdict']} {df.loc[3, 'reason'][:60]}; gate passed: "
+         f"{df.attrs['summary']['gate']['passed']}")
+    assert df.loc[3, "verdict"] == "FAIL" and df.loc[3, "reason"].startswith("off_mesh")
+    assert list(df["verdict"]).count("PASS") == 6
+    assert df.attrs["summary"]["gate"]["passed"] is False
+    # re-judging the stored records gives the same verdict
+    rc, _, _ = cli("report", out)
+    rows = (out / "frames.csv").read_text().splitlines()
+    assert rc == 1 and "off_mesh" in rows[4]
+
+
+def _measured(coverages: list[float | None], min_coverage: float = 0.05):
+    """Measurements with these render coverages (None: not rendered, image missing)."""
+    from dataclasses import replace
+
+    from pgt_check.measure.record import MeasureReason, failed_measurement
+    from pgt_check.types import Camera, Frame
+
+    cam = Camera("PINHOLE", 64, 48, (50.0, 50.0, 32.0, 24.0))
+    out = []
+    for i, c in enumerate(coverages):
+        frame = Frame(str(i), cam, np.eye(4), f"{i}.png")
+        if c is None:
+            out.append(failed_measurement(frame, MeasureReason.IMAGE_MISSING))
+            continue
+        low = MeasureReason.LOW_COVERAGE if c < min_coverage else MeasureReason.NONE
+        out.append(replace(failed_measurement(frame, low), coverage=c))
+    return out
+
+
+def test_off_mesh_compares_with_the_neighbourhood():
+    from pgt_check.verdict.off_mesh import off_mesh_frames
+
+    # one frame sees nothing among frames that see the mesh well; a missing image between
+    # them is passed over; the first frame of a trajectory has neighbours on one side
+    got = off_mesh_frames(_measured([0.0, 0.8, 0.9, None, 0.01, 0.7, 0.9, 0.85]), 0.05)
+    assert sorted(got) == ["0", "4"]
+    # a segment outside the scanned area: its inner frames keep low_coverage (their whole
+    # neighbourhood covers little); a gradual exit never FAILs
+    seg = [0.9, 0.8, 0.9, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.9, 0.8, 0.9]
+    assert not {"5", "6", "7"} & set(off_mesh_frames(_measured(seg), 0.05))
+    fade = [0.6, 0.4, 0.25, 0.12, 0.06, 0.04, 0.02, 0.01, 0.0, 0.0, 0.0]
+    assert off_mesh_frames(_measured(fade), 0.05) == {}
+    # neighbours that barely see the mesh themselves (median < 2 x min_coverage) vouch for
+    # nothing; a frame at the min_coverage level or above is matched, not judged here
+    assert off_mesh_frames(_measured([0.08, 0.09, 0.0, 0.08, 0.09]), 0.05) == {}
+    assert off_mesh_frames(_measured([0.9, 0.9, 0.06, 0.9, 0.9]), 0.05) == {}
+    # a lone frame (no neighbours) stays low_coverage
+    assert off_mesh_frames(_measured([0.0]), 0.05) == {}
