@@ -144,8 +144,23 @@ def cameras_by_image_name(path: str | Path) -> tuple[dict[str, Camera], list[Cam
     if model_dir is None:
         raise FormatError(path, None, "expected a COLMAP model with cameras.txt or cameras.bin")
     reconstruction, cameras = load_model(model_dir)
-    by_name = {im.name: _camera_of(model_dir, cameras, im) for im in reconstruction.images.values()}
+    by_name = {im.name: _camera_of(model_dir, cameras, im) for im in _images(reconstruction, model_dir)}
     return by_name, list(cameras.values())
+
+
+def _images(reconstruction: Any, model_dir: Path) -> list[Any]:
+    """The model's images; FormatError for an image name that is not UTF-8 (pycolmap raises
+    UnicodeDecodeError on reading such a name)."""
+    images = list(reconstruction.images.values())
+    for im in images:
+        try:
+            im.name  # noqa: B018 - decoded on access
+        except UnicodeDecodeError as err:
+            raise FormatError(
+                model_dir, None, f"expected UTF-8 image names; image {im.image_id} has bytes "
+                f"that are not ({err.reason})"
+            ) from None
+    return images
 
 
 def _camera_of(model_dir: Path, cameras: dict[int, Camera], image: Any) -> Camera:
@@ -189,7 +204,7 @@ def read_colmap(path: str | Path, *, images: str | Path | None = None) -> Trajec
         model_dir,
     )
     quats = QuaternionCounter(images_file)
-    for image in reconstruction.images.values():
+    for image in _images(reconstruction, model_dir):
         if not getattr(image, "has_pose", True):
             unposed.append(image.name)
             continue

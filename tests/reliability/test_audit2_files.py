@@ -227,3 +227,12 @@ def test_deep_config_is_an_input_error(tmp_path, cli, base_args):
     c.write_text("[" * 100000 + "]" * 100000)
     rc, _, err = cli(*base_args("--config", str(c)))
     assert rc == 2 and "nested too deeply" in _error_line(rc, err)
+
+
+def test_colmap_image_name_not_utf8(tmp_path):
+    from pgt_check.io import read_trajectory
+
+    d = _colmap(tmp_path, "x")
+    (d / "images.txt").write_bytes(b"1 1 0 0 0 0 0 0 1 \x80a.png\n\n")
+    with pytest.raises(InputError, match="UTF-8"):
+        read_trajectory(d)
