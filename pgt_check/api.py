@@ -12,13 +12,21 @@
 top-level ``RunConfig`` keys; sections as dicts (``verdict={"threshold_px": 5}``), e.g.
 ``limit``, ``out``, ``correct={"frames": "none"}``. Without ``out`` the run writes into a new
 temporary folder (``df.attrs["out"]``: frames.csv, report.html, corrected_trajectory.txt ...).
-Input errors raise ``pgt_check.errors.InputError``.
+
+Errors: every input problem raises ``pgt_check.errors.InputError`` with a one-line message that
+names the argument, file or setting: an argument of the wrong type (``config=5``, a
+``trajectory`` that is neither a path nor a ``Trajectory``), an unknown or mistyped setting
+(``ConfigError``), a malformed file (``FormatError``) and a checker that cannot be built here
+(``SetupError``, also when it fails in a worker process) are all InputErrors, never a raw
+``TypeError`` / ``AttributeError``.
 """
 
 from __future__ import annotations
 
+import os
 import tempfile
 import time
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -32,12 +40,66 @@ if TYPE_CHECKING:  # pragma: no cover
 __all__ = ["check", "frames_dataframe"]
 
 
-def frames_dataframe(rows: list[dict[str, Any]]) -> pd.DataFrame:
-    """The per-frame rows as a DataFrame, columns in frames.csv order (then any others)."""
+def _type_name(value: Any) -> str:
+    return type(value).__name__
+
+
+def _path_arg(name: str, value: Any) -> str:
+    """``value`` as a path string; InputError naming ``name`` for anything but a non-empty
+    ``str`` or ``os.PathLike``."""
+    if isinstance(value, (str, os.PathLike)):
+        text = os.fspath(value)
+        if isinstance(text, str) and text:
+            return text
+    raise InputError(
+        f"{name} must be a file path (str or os.PathLike); got {_type_name(value)} {value!r:.80}"
+    )
+
+
+def _base_settings(config: Any) -> dict[str, Any]:
+    """The settings of ``check``'s ``config`` argument (RunConfig, mapping, config file)."""
+    from pgt_check.config import load_config_file
+
+    if config is None:
+        return {}
+    if isinstance(config, RunConfig):
+        return config.to_dict()
+    if isinstance(config, (str, os.PathLike)):
+        return load_config_file(_path_arg("config", config))
+    if isinstance(config, Mapping):
+        bad = [k for k in config if not isinstance(k, str)]
+        if bad:
+            raise InputError(f"config: setting names must be strings; got {bad[0]!r}")
+        return _plain_paths(config)
+    raise InputError(
+        "config must be a RunConfig, a dict of settings or a config file path; got "
+        f"{_type_name(config)} {config!r:.80}"
+    )
+
+
+def _plain_paths(value: Any) -> Any:
+    """``value`` with every ``os.PathLike`` (in nested dicts too) as its path string: settings
+    such as ``out=Path(...)`` or ``input={"images": Path(...)}`` are accepted like strings."""
+    if isinstance(value, os.PathLike):
+        return os.fspath(value)
+    if isinstance(value, Mapping):
+        return {k: _plain_paths(v) for k, v in value.items()}
+    return value
+
+
+def frames_dataframe(rows: Sequence[Mapping[str, Any]]) -> pd.DataFrame:
+    """The per-frame rows as a DataFrame, columns in frames.csv order (then any others).
+
+    InputError unless ``rows`` is a list (or other sequence) of mappings."""
     import pandas as pd
 
     from pgt_check.report.outputs import FRAME_COLUMNS
 
+    if isinstance(rows, (str, bytes)) or not isinstance(rows, Sequence):
+        raise InputError(f"rows must be a list of per-frame dicts; got {_type_name(rows)}")
+    for i, row in enumerate(rows):
+        if not isinstance(row, Mapping):
+            raise InputError(f"rows[{i}] must be a dict of frame columns; got {_type_name(row)}")
     df = pd.DataFrame(rows)
     cols = [c for c in FRAME_COLUMNS if c in df.columns]
     cols += [c for c in df.columns if c not in cols]
@@ -55,22 +117,22 @@ def check(
 
     ``config``: a base RunConfig, dict or config file (``settings`` win over it). The frames.csv
     columns are the DataFrame's; ``df.attrs["summary"]`` is summary.json, ``df.attrs["out"]``
-    the output folder.
+    the output folder. Raises InputError (see the module docstring) for any input problem.
     """
-    from pgt_check.config import load_config_file
     from pgt_check.runner import load_trajectory, run_trajectory
 
-    if isinstance(config, RunConfig):
-        base = config.to_dict()
-    elif isinstance(config, (str, Path)):
-        base = load_config_file(config)
-    else:
-        base = dict(config or {})
-    inp: dict[str, Any] = {"mesh": str(mesh)}
+    base = _base_settings(config)
+    inp: dict[str, Any] = {"mesh": _path_arg("mesh", mesh)}
     if not isinstance(trajectory, Trajectory):
-        inp["trajectory"] = str(trajectory)
+        if not isinstance(trajectory, (str, os.PathLike)):
+            raise InputError(
+                "trajectory must be a pose file path (str or os.PathLike) or a "
+                f"pgt_check.types.Trajectory; got {_type_name(trajectory)} {trajectory!r:.80}"
+            )
+        inp["trajectory"] = _path_arg("trajectory", trajectory)
     elif trajectory.source:
         inp["trajectory"] = trajectory.source
+    settings = _plain_paths(settings)
     data = merge(merge(base, {"input": inp}), settings)
     if "out" not in settings and "out" not in base:
         data["out"] = tempfile.mkdtemp(prefix="pgt-check-")
@@ -85,6 +147,7 @@ def check(
     else:
         traj = load_trajectory(cfg)
     # the CLI's own path: the same content keys decide what ``out`` may reuse
+    # (a checker that cannot be built, here or in a worker, raises SetupError: an InputError)
     summary = run_trajectory(traj, cfg, t0=t0)
     df = frames_dataframe(_rows(Path(cfg.out), cfg))  # the stored rows, as frames.csv has them
     df.attrs["summary"] = summary

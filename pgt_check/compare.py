@@ -139,6 +139,7 @@ def compare_trajectories(
     """
     from pgt_check.geometry.transforms import pose_difference
 
+    _check_compare_args(a, b, mesh, settings)
     check_compare_options(tie_px, limit)
     all_pairs = pair_frames(a, b)
     if not all_pairs:
@@ -153,6 +154,7 @@ def compare_trajectories(
         rows.append({"frame_id": fa.frame_id, "image_path": fa.image_path, "drot_deg": dr,
                      "dt": dt, "depth": proxy})
     if mesh:
+        mesh = str(Path(mesh))
         if not Path(mesh).is_file():
             raise InputError(f"mesh not found: {mesh}")
         from pgt_check.measure import FrameChecker
@@ -179,6 +181,22 @@ def compare_trajectories(
     res_summary["n_only_a"] = len(a) - len(all_pairs)
     res_summary["n_only_b"] = len(b) - len(all_pairs)
     return CompareResult(rows, res_summary)
+
+
+def _check_compare_args(a: Any, b: Any, mesh: Any, settings: Any) -> None:
+    """InputError (naming the argument) for arguments of ``compare_trajectories`` of the wrong
+    type, before anything is read: never a raw TypeError / AttributeError."""
+    import os
+
+    for name, traj in (("a", a), ("b", b)):
+        if not isinstance(traj, Trajectory):
+            raise InputError(f"compare: {name} must be a pgt_check.types.Trajectory (read one "
+                             f"with pgt_check.io.read_trajectory); got {type(traj).__name__}")
+    if mesh is not None and not isinstance(mesh, (str, os.PathLike)):
+        raise InputError(f"compare: mesh must be a file path or None; got {type(mesh).__name__}")
+    if settings is not None and not isinstance(settings, dict):
+        raise InputError("compare: settings must be a dict of config settings or None; got "
+                         f"{type(settings).__name__}")
 
 
 def check_compare_options(tie_px: float, limit: int | None) -> None:

@@ -125,7 +125,7 @@ def from_dict(cls: type, data: dict[str, Any]):
         raise ConfigError(f"{cls.__name__}: expected a table, got {type(data).__name__}")
     hints = typing.get_type_hints(cls)
     fields = {f.name for f in dataclasses.fields(cls)}
-    unknown = sorted(set(data) - fields)
+    unknown = sorted((k for k in data if k not in fields), key=repr)  # any key type
     if unknown:
         raise ConfigError(
             f"{cls.__name__}: unknown key {unknown[0]!r} (allowed: {', '.join(sorted(fields))})"

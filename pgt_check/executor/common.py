@@ -13,6 +13,7 @@ from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 from typing import Any, Protocol
 
+from pgt_check.errors import SetupError
 from pgt_check.measure.record import FrameMeasurement, MeasureReason, failed_measurement
 from pgt_check.measure.steps import format_exception
 from pgt_check.types import Frame
@@ -30,8 +31,27 @@ class Checker(Protocol):
 CheckerFactory = Callable[[], Checker]
 
 
-class CheckerSetupError(RuntimeError):
-    """Building the checker failed in a worker (bad mesh, missing GL): the run cannot go on."""
+class CheckerSetupError(SetupError, RuntimeError):
+    """Building the checker failed in a worker (bad mesh, missing GL): the run cannot go on.
+
+    A ``SetupError`` (so an ``InputError``): the CLI exits 2 with one line and the Python API
+    raises it as documented; still a RuntimeError for callers that caught it as one. The
+    message is one line (the cause's type and message); ``detail`` holds its traceback."""
+
+    def __init__(self, message: str, detail: str = "") -> None:
+        super().__init__(message)
+        self.detail = detail
+
+
+def checker_setup_error(err: BaseException) -> CheckerSetupError:
+    """The CheckerSetupError of a checker factory that raised ``err``: a one-line message, the
+    traceback in ``detail`` (logged at DEBUG)."""
+    cause = " ".join(str(err).split())[:500]
+    detail = format_exception(err)
+    logger.debug("building the checker failed:\n%s", detail)
+    return CheckerSetupError(
+        f"building the checker failed: {type(err).__name__}: {cause or 'no message'}", detail
+    )
 
 
 @dataclass
@@ -131,7 +151,7 @@ def build_checker(checker_factory: CheckerFactory) -> Checker:
     try:
         return checker_factory()
     except Exception as err:
-        raise CheckerSetupError(f"building the checker failed: {format_exception(err)}") from err
+        raise checker_setup_error(err) from err
 
 
 def close_checker(checker: Any) -> None:

@@ -23,6 +23,7 @@ from pgt_check.executor.common import (
     CheckerSetupError,
     ExecutorStats,
     Task,
+    checker_setup_error,
     close_checker,
     default_workers,
     fill,
@@ -31,13 +32,12 @@ from pgt_check.executor.common import (
     worker_crashed,
 )
 from pgt_check.measure.record import FrameMeasurement
-from pgt_check.measure.steps import format_exception
 from pgt_check.types import Frame
 
 logger = logging.getLogger(__name__)
 
 _WORKER_CHECKER: Any = None
-_WORKER_SETUP_ERROR: str | None = None
+_WORKER_SETUP_ERROR: CheckerSetupError | None = None
 
 
 def _watch_parent() -> None:
@@ -65,14 +65,14 @@ def _init_worker(checker_factory: CheckerFactory) -> None:
     try:
         _WORKER_CHECKER = checker_factory()
     except Exception as err:  # reported by the first task, which ends the run
-        _WORKER_SETUP_ERROR = f"building the checker failed: {format_exception(err)}"
+        _WORKER_SETUP_ERROR = checker_setup_error(err)
         return
     Finalize(None, close_checker, args=(_WORKER_CHECKER,), exitpriority=10)
 
 
 def _measure_in_worker(frame: Frame) -> FrameMeasurement:
     if _WORKER_SETUP_ERROR is not None:
-        raise CheckerSetupError(_WORKER_SETUP_ERROR)
+        raise _WORKER_SETUP_ERROR
     return _WORKER_CHECKER.measure(frame)
 
 
