@@ -108,7 +108,7 @@ def run_model(model, render: torch.Tensor, ref: torch.Tensor, k: int, batch: int
 
 
 def evaluate_set(
-    model,
+    models: dict[str, torch.nn.Module],
     scorer: Scorer,
     prefix: str,
     cache: FrameCache,
@@ -119,11 +119,13 @@ def evaluate_set(
     examples: dict,
 ) -> None:
     """``plan``: (reference offset, max iterations K) pairs; ``gt_k``: K of the Ref = target rows
-    (0: none). One K-iteration run scores every k <= K (the model returns all iterates)."""
+    (0: none). One K-iteration run scores every k <= K (the model returns all iterates); the
+    frozen-matcher models run once whatever K. Baselines are scored once per offset."""
     photos = to_tensor(cache.images["photo"][:n])
     render_u8 = cache.images[variant][:n]
     renders = to_tensor(render_u8)
     scorer.add(f"{prefix} | raw render", renders, photos)
+    main = next(iter(models))
     for off, max_k in plan:
         pairs = fixed_offset_pairs(len(cache), off)[:n]
         ref_idx = [j for _, j in pairs]
@@ -131,18 +133,20 @@ def evaluate_set(
         scorer.add(f"{prefix} | reference copied (offset {off})", refs, photos)
         ct = np.stack([colour_transfer(render_u8[i], cache.images["photo"][j]) for i, j in pairs])
         scorer.add(f"{prefix} | colour transfer (offset {off})", to_tensor(ct), photos)
-        t0 = time.perf_counter()
-        ys = run_model(model, renders, refs, max_k)
-        logger.info(
-            "%s offset %d: %d x K=%d in %.1f s", prefix, off, n, max_k, time.perf_counter() - t0
-        )
-        for k, y in enumerate(ys, start=1):
-            scorer.add(f"{prefix} | MaRINeR K={k} (offset {off})", y, photos)
-        examples.setdefault(prefix, {})[off] = (renders, refs, ys, photos)
+        for name, model in models.items():
+            kk = max_k if getattr(model.cfg, "architecture", "spec") == "spec" else 1
+            t0 = time.perf_counter()
+            ys = run_model(model, renders, refs, kk)
+            logger.info("%s %s offset %d: %d x K=%d in %.1f s", prefix, name, off, n, kk,
+                        time.perf_counter() - t0)
+            for k, y in enumerate(ys, start=1):
+                scorer.add(f"{prefix} | {name} K={k} (offset {off})", y, photos)
+            if name == main:
+                examples.setdefault(prefix, {})[off] = (renders, refs, ys, photos)
     if gt_k:
-        ys = run_model(model, renders, photos, gt_k)
-        for k, y in enumerate(ys, start=1):
-            scorer.add(f"{prefix} | MaRINeR K={k} (Ref = target, upper bound)", y, photos)
+        for name, model in models.items():
+            ys = run_model(model, renders, photos, 1)
+            scorer.add(f"{prefix} | {name} K=1 (Ref = target, upper bound)", ys[0], photos)
 
 
 def save_grid(examples: dict, path: Path, picks: dict[str, list[int]], k_show: int) -> None:
@@ -169,12 +173,23 @@ def save_grid(examples: dict, path: Path, picks: dict[str, list[int]], k_show: i
     header = np.zeros((20, width, 3), np.uint8)
     for x, text in zip(
         (8, width // 4 + 8, width // 2 + 8, 3 * width // 4 + 8),
-        ("render", "reference", f"MaRINeR K={k_show}", "photo (target)"),
+        ("render", "reference", "enhanced", "photo (target)"),
         strict=True,
     ):
         cv2.putText(header, text, (x, 14), cv2.FONT_HERSHEY_SIMPLEX, 0.45, (255, 255, 255), 1)
     grid = np.concatenate([header, *tiles], axis=0)
     cv2.imwrite(str(path), cv2.cvtColor(grid, cv2.COLOR_RGB2BGR))
+
+
+def model_summary(model: torch.nn.Module) -> str:
+    cfg = model.cfg
+    trained = sum(p.numel() for n, p in model.named_parameters() if not n.startswith("vgg."))
+    if getattr(cfg, "architecture", "spec") == "spec":
+        return (f"spec network, C={cfg.channels}, encoder {list(cfg.encoder_blocks)}, decoder "
+                f"{list(cfg.decoder_blocks)}, global skip {cfg.global_skip}, {trained} parameters")
+    return (f"frozen ImageNet VGG16 matching ({cfg.patch_size}x{cfg.patch_size} relu3_3 patches, "
+            f"top {cfg.top_k}) + fusion U-Net (C={cfg.channels}, blocks {list(cfg.blocks)}), "
+            f"{trained} trained parameters")
 
 
 def fmt_table(table: dict[str, dict[str, float]], prefix: str) -> list[str]:
@@ -193,7 +208,11 @@ def fmt_table(table: dict[str, dict[str, float]], prefix: str) -> list[str]:
 
 def main() -> int:
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    parser.add_argument("--checkpoint", default=str(DEFAULT_CHECKPOINT))
+    parser.add_argument(
+        "--checkpoint", action="append", default=None, metavar="NAME=PATH",
+        help="a model to score (repeatable; the first one is shown in the examples); default: "
+        "the shipped weights",
+    )
     parser.add_argument("--cache", default=str(Path.home() / ".cache/pgt_check/mariner_train"))
     parser.add_argument("--frames", type=int, default=100, help="7-Scenes frames (first N)")
     parser.add_argument("--max-k", type=int, default=3)
@@ -209,8 +228,13 @@ def main() -> int:
     data = shared_data()
     root = Path(args.cache)
     t_start = time.perf_counter()
-    model = load_checkpoint(args.checkpoint).eval()
-    meta = torch.load(args.checkpoint, map_location="cpu", weights_only=True)["meta"]
+    specs = args.checkpoint or [f"shipped={DEFAULT_CHECKPOINT}"]
+    models: dict[str, torch.nn.Module] = {}
+    metas: dict[str, tuple[str, dict]] = {}
+    for spec in specs:
+        name, _, path = spec.partition("=")
+        models[name] = load_checkpoint(path).eval()
+        metas[name] = (path, torch.load(path, map_location="cpu", weights_only=True)["meta"])
     kitchen = ensure_cache(root, data, "redkitchen", ["photo", "render", "render_colourless"])
     castle = ensure_cache(root, data, "castle", ["photo", "render"])
     scorer = Scorer()
@@ -219,7 +243,7 @@ def main() -> int:
     k, ko = args.max_k, args.k_other
     nc = min(args.castle_frames or len(castle), len(castle))
     evaluate_set(
-        model,
+        models,
         scorer,
         "7-Scenes coloured",
         kitchen,
@@ -230,7 +254,7 @@ def main() -> int:
         ex,
     )
     evaluate_set(
-        model,
+        models,
         scorer,
         "7-Scenes colourless",
         kitchen,
@@ -240,7 +264,7 @@ def main() -> int:
         n,
         ex,
     )
-    evaluate_set(model, scorer, "castle", castle, "render", [(1, k)], args.gt_k, nc, ex)
+    evaluate_set(models, scorer, "castle", castle, "render", [(1, k)], args.gt_k, nc, ex)
     table = scorer.table()
     elapsed = time.perf_counter() - t_start
     out = Path(args.out)
@@ -252,16 +276,20 @@ def main() -> int:
         {"7-Scenes coloured": [5, 40, 75], "7-Scenes colourless": [20, 60], "castle": [2, 7]},
         k_show=1,
     )
-    cfg = model.cfg
     lines = [
-        "# MaRINeR enhancer quality (shipped weights)",
+        "# MaRINeR enhancer quality",
         "",
         f"Command: `{command_line()}`  ",
         f"Machine: {machine()}  ",
-        f"Checkpoint: `{Path(args.checkpoint).name}` (C={cfg.channels}, encoder "
-        f"{list(cfg.encoder_blocks)}, decoder {list(cfg.decoder_blocks)}, global skip "
-        f"{cfg.global_skip}; meta: step {meta.get('step')}, samples {meta.get('samples')})  ",
         f"Evaluation time: {elapsed / 60:.1f} min",
+        "",
+        "Models (rows are named after them):",
+        "",
+        *[
+            f"* **{name}**: `{path}`: {model_summary(models[name])}; training meta: step "
+            f"{meta.get('step')}, samples {meta.get('samples')}"
+            for name, (path, meta) in metas.items()
+        ],
         "",
         "All images at working size (short side 160 px, 213x160 for both datasets); metrics "
         "against the frame's own photo: PSNR/SSIM on 8-bit BT.601 Y, LPIPS v0.1 AlexNet. "
@@ -286,7 +314,8 @@ def main() -> int:
         "|---|---|---|---|",
         *[f"| {name} | {p:.2f} | {s:.3f} | {lp:.3f} |" for name, p, s, lp in PAPER_ROWS],
         "",
-        f"Examples: `{out.name}_examples.png` (columns: render, reference, MaRINeR, photo).",
+        f"Examples: `{out.name}_examples.png` (columns: render, reference, {next(iter(models))}, "
+        "photo).",
         "",
     ]
     out.with_suffix(".md").write_text("\n".join(lines))

@@ -1,7 +1,7 @@
 """Speed benchmark of the MaRINeR generator (random weights; speed does not depend on them).
 
 Usage: python benchmarks/mariner_speed.py [--sizes 160x160,320x240,640x480] [--iters 1,2,3,4]
-       [--repeats 3] [--out reports/mariner_speed.md]
+       [--repeats 3] [--out reports/mariner_speed_spec.md]
 
 Each size runs in a fresh subprocess (so ru_maxrss is that size's peak RSS); per config: one
 warm-up call, then ``repeats`` timed calls of ``Mariner.forward`` under ``inference_mode``
@@ -74,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--iters", default="1,2,3,4")
     p.add_argument("--repeats", type=int, default=3)
     p.add_argument("--threads", type=int, default=os.cpu_count() or 1)
-    p.add_argument("--out", type=Path, default=Path("reports/mariner_speed.md"))
+    p.add_argument("--out", type=Path, default=Path("reports/mariner_speed_spec.md"))
     p.add_argument("--_child", default=None, help=argparse.SUPPRESS)
     a = p.parse_args(argv)
     iters = [int(v) for v in a.iters.split(",")]

@@ -27,11 +27,20 @@ import torch
 import torch.nn.functional as F
 
 from .config import MarinerConfig
+from .frozen import ARCHITECTURE as FROZEN_ARCHITECTURE
+from .frozen import FrozenMariner, FrozenMarinerConfig
 from .model import Mariner
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["DEFAULT_CHECKPOINT", "EnhanceResult", "Enhancer", "load_checkpoint", "save_checkpoint"]
+__all__ = [
+    "DEFAULT_CHECKPOINT",
+    "EnhanceResult",
+    "Enhancer",
+    "build_model",
+    "load_checkpoint",
+    "save_checkpoint",
+]
 
 DEFAULT_CHECKPOINT = Path(__file__).resolve().parent / "weights" / "mariner.pt"
 CHECKPOINT_KEYS = frozenset({"config", "state_dict", "meta"})
@@ -63,7 +72,17 @@ def save_checkpoint(
     return path
 
 
-def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") -> Mariner:
+def build_model(config: dict[str, Any]) -> Mariner | FrozenMariner:
+    """The network a checkpoint's ``config`` describes: ``architecture: "frozen-vgg"`` builds a
+    :class:`FrozenMariner` (frozen matcher + trained fusion), anything else the spec network."""
+    if config.get("architecture") == FROZEN_ARCHITECTURE:
+        return FrozenMariner(FrozenMarinerConfig.from_dict(config))
+    return Mariner(MarinerConfig.from_dict(config))
+
+
+def load_checkpoint(
+    path: str | Path, map_location: str | torch.device = "cpu"
+) -> Mariner | FrozenMariner:
     """Load a checkpoint strictly (``weights_only=True``, ``strict=True``) into a fresh model."""
     path = Path(path)
     if not path.is_file():
@@ -75,9 +94,9 @@ def load_checkpoint(path: str | Path, map_location: str | torch.device = "cpu") 
             f"{path} is not a MaRINeR checkpoint: expected keys "
             f"{sorted(CHECKPOINT_KEYS)}, got {keys}"
         )
-    cfg = MarinerConfig.from_dict(dict(ckpt["config"]))
-    model = Mariner(cfg)
-    model.load_state_dict(ckpt["state_dict"], strict=True)
+    model = build_model(dict(ckpt["config"]))
+    state = {k: v.float() if v.is_floating_point() else v for k, v in ckpt["state_dict"].items()}
+    model.load_state_dict(state, strict=True)
     logger.info("loaded MaRINeR checkpoint %s (meta %s)", path, ckpt["meta"])
     return model
 

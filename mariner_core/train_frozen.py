@@ -1,0 +1,367 @@
+"""Train the ``cpu-frozen`` MaRINeR (:mod:`mariner_core.frozen`) on two CPU cores.
+
+Two steps, both resumable, both reading a frame cache (``mariner_core.data``):
+
+1. ``cache``: for every training frame and render variant, ``pairs`` references drawn 10-60
+   frames away; the frozen matching (``FrozenMariner.prepare``) of each triple is stored once
+   (uint8 images, float16 similarity maps at 1/4 resolution) in ``OUT/triples.npy`` +
+   ``OUT/scores.npy``. Validation triples (the pool's last 15 %, reference ``val_offset`` frames
+   away, coloured and colourless, and the same frames with Ref = target) go to ``OUT/val_*.npy``.
+2. ``train``: random crops of cached triples; only the fusion U-Net learns (L1 + perceptual
+   loss); validation PSNR-Y on whole images every few minutes; the best checkpoint is kept
+   (``best.pt``, loadable by ``Enhancer.from_pretrained``), ``last.pt`` holds the optimiser for
+   ``--resume``; ``log.csv`` is the learning curve.
+
+    python -m mariner_core.train_frozen cache --data FRAME_CACHE --out RUN [--pairs 2]
+    python -m mariner_core.train_frozen train --out RUN --max-minutes 90 [--resume]
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import logging
+import math
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from .data import RENDER_VARIANTS, FrameCache, load_frame_cache, reference_candidates, split_frames
+from .frozen import FrozenMariner, FrozenMarinerConfig
+from .metrics import psnr_y
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["TrainSettings", "build_triples", "train"]
+
+#: channel layout of one cached triple (uint8): render 3, warped 3k, colour 3, target 3
+def _layout(k: int) -> dict[str, slice]:
+    return {
+        "render": slice(0, 3),
+        "warped": slice(3, 3 + 3 * k),
+        "colour": slice(3 + 3 * k, 6 + 3 * k),
+        "target": slice(6 + 3 * k, 9 + 3 * k),
+    }
+
+
+@dataclass(frozen=True)
+class TrainSettings:
+    crop: int = 96
+    batch_size: int = 12
+    lr: float = 5e-4
+    lr_min: float = 2e-5
+    lambda_per: float = 0.01
+    val_every_minutes: float = 8.0
+    ckpt_every_minutes: float = 3.0
+    threads: int = 2
+    seed: int = 0
+    channels: int = 24
+    blocks: tuple[int, int, int] = (1, 2, 3)
+
+
+def _u8(x: torch.Tensor) -> np.ndarray:
+    return (x.clamp(0, 1) * 255.0).round().to(torch.uint8).numpy()
+
+
+def _prepare_one(
+    model: FrozenMariner, render: np.ndarray, ref: np.ndarray, target: np.ndarray,
+    ref_features: torch.Tensor | None = None,
+):
+    from .data import to_tensor
+
+    prep = model.prepare(to_tensor(render)[None], to_tensor(ref)[None], low_res_scores=True,
+                         reference_features=ref_features)
+    x = prep["render"]
+    tgt = F.pad(to_tensor(target)[None], (0, x.shape[-1] - target.shape[1],
+                                            0, x.shape[-2] - target.shape[0]), mode="replicate")
+    img = torch.cat([prep["render"], prep["warped"], prep["colour"], tgt], 1)[0]
+    return _u8(img), prep["score"][0].half().numpy()
+
+
+def build_triples(
+    data: str | Path, out: str | Path, pairs: int = 2, val_offset: float = 20.0,
+    val_every: int = 4, seed: int = 0, weights: str | Path | None = None,
+) -> None:
+    """Write the cached matching of training and validation triples (see module docstring)."""
+    from .pretrained import backbone_state_dict
+
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    cache = load_frame_cache(data)
+    train_pos, val_pos = split_frames(cache.t)
+    cfg = FrozenMarinerConfig()
+    model = FrozenMariner(cfg).eval()
+    model.load_vgg(backbone_state_dict("vgg16"))
+    rng = np.random.default_rng(seed)
+    variants = [v for v in RENDER_VARIANTS if v in cache.images]
+    jobs: list[tuple[int, int, str]] = []
+    for i in train_pos:
+        cand = reference_candidates(cache.t, int(i), train_pos, 10.0, 60.0)
+        if not len(cand):
+            continue
+        for v in variants:
+            for j in rng.choice(cand, size=min(pairs, len(cand)), replace=False):
+                jobs.append((int(i), int(j), v))
+    jobs = [jobs[n] for n in rng.permutation(len(jobs))]  # any prefix is a random subset
+    val_jobs: list[tuple[int, int, str, str]] = []
+    for i in val_pos[::val_every]:
+        d = np.abs(cache.t[val_pos] - (cache.t[i] + val_offset))
+        d_b = np.abs(cache.t[val_pos] - (cache.t[i] - val_offset))
+        j = val_pos[np.argmin(d)] if d.min() <= d_b.min() else val_pos[np.argmin(d_b)]
+        for v in ("render", "render_colourless"):
+            if v in cache.images:
+                val_jobs.append((int(i), int(j), v, "offset"))
+        if "render_colourless" in cache.images:
+            val_jobs.append((int(i), int(i), "render_colourless", "ref_target"))
+        val_jobs.append((int(i), int(i), "render", "ref_target"))
+    meta = {
+        "data": str(data), "pairs": pairs, "val_offset": val_offset, "seed": seed,
+        "config": cfg.to_dict(), "train_jobs": jobs,
+        "val_jobs": [list(j) for j in val_jobs],
+    }
+    (out / "triples.json").write_text(json.dumps(meta))
+    _write_set(model, cache, [(i, j, v) for i, j, v, _ in val_jobs], out / "val", "val")
+    _write_set(model, cache, jobs, out / "train", "train")
+
+
+def _write_set(model: FrozenMariner, cache: FrameCache, jobs: list, stem: Path, name: str) -> None:
+    img_path = stem.with_name(stem.name + "_images.npy")
+    sc_path = stem.with_name(stem.name + "_scores.npy")
+    done_path = stem.with_name(stem.name + "_done.json")
+    done = json.loads(done_path.read_text())["n"] if done_path.is_file() else 0
+    i0, j0, v0 = jobs[0]
+    im0, sc0 = _prepare_one(model, cache.images[v0][i0], cache.images["photo"][j0],
+                            cache.images["photo"][i0])
+    mode = "r+" if img_path.is_file() and done > 0 else "w+"
+    imgs = np.lib.format.open_memmap(img_path, mode=mode, dtype=np.uint8,
+                                     shape=(len(jobs), *im0.shape))
+    scs = np.lib.format.open_memmap(sc_path, mode=mode, dtype=np.float16,
+                                    shape=(len(jobs), *sc0.shape))
+    t0 = time.perf_counter()
+    from .data import to_tensor
+    from .frozen import _pad_to
+
+    photo_features: dict[int, torch.Tensor] = {}  # each photo's relu3_3 once (~2 MB each)
+    for n in range(done, len(jobs)):
+        i, j, v = jobs[n]
+        if j not in photo_features:
+            with torch.no_grad():
+                padded, _ = _pad_to(to_tensor(cache.images["photo"][j])[None], 4)
+                photo_features[j] = model.vgg(padded)
+        imgs[n], scs[n] = _prepare_one(model, cache.images[v][i], cache.images["photo"][j],
+                                       cache.images["photo"][i], photo_features[j])
+        if (n + 1) % 100 == 0 or n + 1 == len(jobs):
+            imgs.flush()
+            scs.flush()
+            done_path.write_text(json.dumps({"n": n + 1}))
+            el = time.perf_counter() - t0
+            logger.info("%s: %d/%d triples (%.0f s, %.2f s each)", name, n + 1, len(jobs), el,
+                        el / (n + 1 - done))
+    imgs.flush()
+    scs.flush()
+    done_path.write_text(json.dumps({"n": len(jobs)}))
+
+
+def _batch_inputs(
+    imgs: np.ndarray, scores: np.ndarray, k: int, idx: np.ndarray, crop: int | None,
+    rng: np.random.Generator | None,
+) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
+    lay = _layout(k)
+    x = torch.from_numpy(np.ascontiguousarray(imgs[idx])).float().div_(255.0)
+    sc = torch.from_numpy(np.ascontiguousarray(scores[idx])).float()
+    h, w = x.shape[-2:]
+    sc = FrozenMariner.upsample_scores(sc, (h, w))
+    if crop is not None and rng is not None:
+        ys = rng.integers(0, h - crop + 1, size=len(idx))
+        xs = rng.integers(0, w - crop + 1, size=len(idx))
+        flips = rng.random(len(idx)) < 0.5
+        xc, scc = [], []
+        for b in range(len(idx)):
+            a = x[b, :, ys[b] : ys[b] + crop, xs[b] : xs[b] + crop]
+            s = sc[b, :, ys[b] : ys[b] + crop, xs[b] : xs[b] + crop]
+            if flips[b]:
+                a, s = a.flip(-1), s.flip(-1)
+            xc.append(a)
+            scc.append(s)
+        x, sc = torch.stack(xc), torch.stack(scc)
+    prep = {key: x[:, sl] for key, sl in lay.items() if key != "target"}
+    prep["score"] = sc
+    return prep, x[:, lay["target"]]
+
+
+def _cosine(progress: float, lr: float, lr_min: float) -> float:
+    return lr_min + 0.5 * (lr - lr_min) * (1 + math.cos(math.pi * min(1.0, progress)))
+
+
+@torch.no_grad()
+def _validate(model: FrozenMariner, imgs, scores, k: int, jobs: list) -> dict[str, float]:
+    model.eval()
+    groups: dict[str, list[float]] = {}
+    for n in range(0, len(jobs), 8):
+        idx = np.arange(n, min(n + 8, len(jobs)))
+        prep, tgt = _batch_inputs(imgs, scores, k, idx, None, None)
+        y = model.fuse(prep).clamp(0, 1)
+        p = psnr_y(y, tgt).tolist()
+        pr = psnr_y(prep["render"], tgt).tolist()
+        for m, (pv, prv) in enumerate(zip(p, pr, strict=True)):
+            _, _, v, kind = jobs[idx[m]]
+            key = f"{'colourless' if 'colourless' in v else 'coloured'}_{kind}"
+            groups.setdefault(key, []).append(pv)
+            groups.setdefault(key + "_raw", []).append(prv)
+    model.train()
+    return {g: float(np.mean(v)) for g, v in groups.items()}
+
+
+def train(out: str | Path, max_minutes: float, settings: TrainSettings, resume: bool) -> Path:
+    """Train the fusion decoder on the cached triples; returns the path of ``best.pt``."""
+    from .enhancer import save_checkpoint
+    from .losses import PerceptualLoss
+    from .pretrained import backbone_state_dict
+
+    out = Path(out)
+    torch.set_num_threads(settings.threads)
+    torch.manual_seed(settings.seed)
+    meta = json.loads((out / "triples.json").read_text())
+    # the decoder's size does not change the cached matching: it may differ from the cache's
+    cfg = FrozenMarinerConfig.from_dict(
+        {**meta["config"], "channels": settings.channels, "blocks": list(settings.blocks)}
+    )
+    k = cfg.top_k
+    n_done = json.loads((out / "train_done.json").read_text())["n"]
+    imgs = np.load(out / "train_images.npy", mmap_mode="r")
+    scores = np.load(out / "train_scores.npy", mmap_mode="r")
+    imgs = np.ascontiguousarray(imgs[:n_done])  # into memory (~1-3 GB)
+    scores = np.ascontiguousarray(scores[:n_done])
+    v_imgs = np.load(out / "val_images.npy")
+    v_scores = np.load(out / "val_scores.npy")
+    val_jobs = meta["val_jobs"]
+    model = FrozenMariner(cfg)
+    model.load_vgg(backbone_state_dict("vgg16"))
+    model.train()
+    params = [p for n, p in model.named_parameters() if not n.startswith("vgg.")]
+    opt = torch.optim.Adam(params, lr=settings.lr)
+    per = PerceptualLoss.pretrained(("relu1_2", "relu2_2"))
+    rng = np.random.default_rng(settings.seed)
+    state = {"step": 0, "elapsed": 0.0, "best": -1e9, "samples": 0}
+    last = out / "last.pt"
+    if resume and last.is_file():
+        ck = torch.load(last, weights_only=False)
+        model.load_state_dict(ck["model"])
+        opt.load_state_dict(ck["opt"])
+        state = ck["state"]
+        rng = np.random.default_rng(settings.seed + state["step"])
+        logger.info("resumed at step %d (%.1f min)", state["step"], state["elapsed"] / 60)
+    log_path = out / "log.csv"
+    new_log = not (resume and log_path.is_file())
+    log_file = log_path.open("w" if new_log else "a", newline="")
+    fieldnames = ["step", "minutes", "samples", "lr", "loss", "l1", "per",
+                  "val_mean", "coloured_offset", "colourless_offset", "coloured_ref_target",
+                  "colourless_ref_target", "coloured_offset_raw", "colourless_offset_raw"]
+    writer = csv.DictWriter(log_file, fieldnames=fieldnames, extrasaction="ignore")
+    if new_log:
+        writer.writeheader()
+    budget = max_minutes * 60.0
+    t_start = time.perf_counter() - state["elapsed"]
+    t_val = t_ckpt = time.perf_counter()
+    acc: dict[str, list[float]] = {"loss": [], "l1": [], "per": []}
+    logger.info("training %d parameters on %d triples", model.num_trainable(), len(imgs))
+
+    def save_last() -> None:
+        state["elapsed"] = time.perf_counter() - t_start
+        torch.save({"model": model.state_dict(), "opt": opt.state_dict(), "state": state},
+                   last.with_suffix(".tmp"))
+        last.with_suffix(".tmp").replace(last)
+
+    def run_val() -> None:
+        res = _validate(model, v_imgs, v_scores, k, val_jobs)
+        mean = float(np.mean([res.get("coloured_offset", 0), res.get("colourless_offset", 0)]))
+        row = {"step": state["step"], "minutes": round((time.perf_counter() - t_start) / 60, 2),
+               "samples": state["samples"], "val_mean": round(mean, 3),
+               **{kk: round(v, 3) for kk, v in res.items()}}
+        for kk in ("loss", "l1", "per"):
+            if acc[kk]:
+                row[kk] = round(float(np.mean(acc[kk])), 5)
+            acc[kk] = []
+        row["lr"] = opt.param_groups[0]["lr"]
+        writer.writerow(row)
+        log_file.flush()
+        logger.info("val %s", row)
+        if mean > state["best"]:
+            state["best"] = mean
+            save_checkpoint(model, out / "best.pt", fp16=True, extra={
+                "step": state["step"], "samples": state["samples"],
+                "minutes": row["minutes"], "val": {kk: float(v) for kk, v in res.items()},
+                "settings": asdict(settings),
+            })
+
+    if state["step"] == 0:
+        run_val()
+    while time.perf_counter() - t_start < budget:
+        prog = (time.perf_counter() - t_start) / budget
+        lr = _cosine(prog, settings.lr, settings.lr_min)
+        for g in opt.param_groups:
+            g["lr"] = lr
+        idx = rng.integers(0, len(imgs), size=settings.batch_size)
+        prep, tgt = _batch_inputs(imgs, scores, k, idx, settings.crop, rng)
+        y = model.fuse(prep)
+        l1 = (y - tgt).abs().mean()
+        lp = per(y, tgt) if settings.lambda_per > 0 else torch.zeros(())
+        loss = l1 + settings.lambda_per * lp
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        state["step"] += 1
+        state["samples"] += settings.batch_size
+        acc["loss"].append(float(loss.detach()))
+        acc["l1"].append(float(l1.detach()))
+        acc["per"].append(float(lp.detach()))
+        now = time.perf_counter()
+        if now - t_val > settings.val_every_minutes * 60:
+            run_val()
+            t_val = time.perf_counter()
+        if now - t_ckpt > settings.ckpt_every_minutes * 60:
+            save_last()
+            t_ckpt = now
+    run_val()
+    save_last()
+    log_file.close()
+    return out / "best.pt"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    sub = parser.add_subparsers(dest="cmd", required=True)
+    c = sub.add_parser("cache")
+    c.add_argument("--data", required=True)
+    c.add_argument("--out", required=True)
+    c.add_argument("--pairs", type=int, default=2)
+    c.add_argument("--seed", type=int, default=0)
+    t = sub.add_parser("train")
+    t.add_argument("--out", required=True)
+    t.add_argument("--max-minutes", type=float, required=True)
+    t.add_argument("--resume", action="store_true")
+    t.add_argument("--crop", type=int, default=TrainSettings.crop)
+    t.add_argument("--batch-size", type=int, default=TrainSettings.batch_size)
+    t.add_argument("--lr", type=float, default=TrainSettings.lr)
+    t.add_argument("--lambda-per", type=float, default=TrainSettings.lambda_per)
+    t.add_argument("--threads", type=int, default=TrainSettings.threads)
+    t.add_argument("--channels", type=int, default=TrainSettings.channels)
+    args = parser.parse_args(argv)
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
+    if args.cmd == "cache":
+        build_triples(args.data, args.out, pairs=args.pairs, seed=args.seed)
+        return 0
+    settings = TrainSettings(crop=args.crop, batch_size=args.batch_size, lr=args.lr,
+                             lambda_per=args.lambda_per, threads=args.threads,
+                             channels=args.channels)
+    train(args.out, args.max_minutes, settings, args.resume)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
