@@ -6,11 +6,13 @@ measurement_fingerprint``). Lines are appended as frames finish, flushed to the 
 (a SIGKILL loses nothing written) and fsync'd per batch (a power cut loses at most one batch).
 
 Reading is tolerant: a torn last line (the process died mid-write) is ignored and cut off when
-the store is opened for appending; an unreadable line elsewhere is skipped with a warning (its
-frame is then measured again). The record of a frame is the *latest* line with that frame id
+the store is opened for appending; an unreadable line elsewhere (not JSON, not a record, or
+longer than ``MAX_RECORD_LINE_BYTES``: read past in bounded chunks, never held whole) is skipped
+with a warning (its frame is then measured again). The record of a frame is the *latest* line with that frame id
 and the current fingerprint, so a resumed run appends new lines and never edits old ones.
 
-``run.json`` holds the current fingerprint, the measurement settings and the tool version. A
+``run.json`` holds the current fingerprint, the measurement settings and the tool version
+(written atomically by ``files.atomic_write_text``, read with a size bound). A
 rerun with the same fingerprint skips the frames already recorded; with a different fingerprint
 it stops with ``InputError`` unless ``resume`` (recompute the frames without a record for the new
 settings) or ``overwrite`` (start fresh) is given. One run at a time may write a store (an
@@ -29,7 +31,8 @@ from types import TracebackType
 from typing import IO, Any
 
 from pgt_check import __version__
-from pgt_check.errors import InputError
+from pgt_check.errors import FormatError, InputError
+from pgt_check.files import MAX_SMALL_JSON_BYTES, atomic_write_text, load_json_limited
 
 logger = logging.getLogger(__name__)
 
@@ -96,6 +99,8 @@ def mesh_content_hash(path: str | Path, side_files: Iterable[str] = ()) -> str:
 
 
 RECORDS_FILE = "records.jsonl"
+#: longest line of records.jsonl read (a record is ~15 KB; a longer line is a corrupt record)
+MAX_RECORD_LINE_BYTES = 16 * 1024**2
 RUN_FILE = "run.json"
 FINGERPRINT_KEY = "_fingerprint"
 
@@ -118,14 +123,43 @@ def encode_record(record: Mapping[str, Any], fingerprint: str) -> bytes:
     return (json.dumps(rec, default=_json_default) + "\n").encode("utf-8")
 
 
+def _skip_rest_of_line(f: IO[bytes]) -> tuple[int, bool]:
+    """Read past the rest of the current line in bounded chunks; (bytes skipped, whether a
+    newline ended it: False at the end of the file)."""
+    skipped = 0
+    while True:
+        chunk = f.readline(1 << 20)
+        skipped += len(chunk)
+        if not chunk:
+            return skipped, False
+        if chunk.endswith(b"\n"):
+            return skipped, True
+
+
 def iter_records(path: str | Path) -> Iterator[dict[str, Any]]:
-    """Records of a JSONL file in file order; skips a torn last line and unreadable lines."""
+    """Records of a JSONL file in file order; skips a torn last line and unreadable lines.
+
+    A line longer than ``MAX_RECORD_LINE_BYTES`` is never held in memory: it is read past in
+    bounded chunks and counted as an unreadable line (its frame is measured again), like a line
+    that is not JSON."""
     path = Path(path)
     if not path.is_file():
         return
-    bad = 0
+    bad = oversized = 0
     with open(path, "rb") as f:
-        for raw in f:
+        while True:
+            raw = f.readline(MAX_RECORD_LINE_BYTES + 1)
+            if not raw:
+                break
+            if len(raw) > MAX_RECORD_LINE_BYTES and not raw.endswith(b"\n"):
+                skipped, ended = _skip_rest_of_line(f)
+                if not ended:  # a torn last line, however long
+                    logger.info("%s: ignoring an incomplete last line (%d bytes)", path,
+                                len(raw) + skipped)
+                    break
+                bad += 1
+                oversized += 1
+                continue
             if not raw.endswith(b"\n"):
                 logger.info("%s: ignoring an incomplete last line (%d bytes)", path, len(raw))
                 break
@@ -133,7 +167,7 @@ def iter_records(path: str | Path) -> Iterator[dict[str, Any]]:
                 continue
             try:
                 rec = json.loads(raw)
-            except ValueError:
+            except (ValueError, RecursionError):
                 bad += 1
                 continue
             if isinstance(rec, dict) and "frame_id" in rec:
@@ -141,8 +175,11 @@ def iter_records(path: str | Path) -> Iterator[dict[str, Any]]:
             else:
                 bad += 1
     if bad:
+        longer = (f", {oversized} of them longer than the {MAX_RECORD_LINE_BYTES >> 20} MiB a "
+                  "record may have" if oversized else "")
         logger.warning(
-            "%s: skipped %d unreadable lines (those frames are measured again)", path, bad
+            "%s: skipped %d unreadable lines%s (those frames are measured again)", path, bad,
+            longer,
         )
 
 
@@ -258,15 +295,21 @@ class RecordStore:
             ) from err
 
     def read_run_info(self) -> dict[str, Any] | None:
+        """``run.json`` (None when there is none). One that is not a JSON object counts as
+        unknown settings (``{}``, with a warning); one larger than ``MAX_SMALL_JSON_BYTES`` is
+        an InputError, never read whole."""
         if not self.run_path.is_file():
             return None
         try:
-            return json.loads(self.run_path.read_text(encoding="utf-8"))
-        except ValueError:
+            info = load_json_limited(self.run_path, MAX_SMALL_JSON_BYTES, "run.json")
+        except FormatError:
+            info = None
+        if not isinstance(info, dict):
             logger.warning(
-                "%s is not valid JSON; treating the stored settings as unknown", self.run_path
+                "%s is not a JSON object; treating the stored settings as unknown", self.run_path
             )
             return {}
+        return info
 
     def _apply_policy(
         self, *, resume: bool, overwrite: bool, settings: Mapping[str, Any] | None,
@@ -316,9 +359,7 @@ class RecordStore:
             # the run's frames in trajectory order (records are appended as frames finish)
             "frame_ids": frame_ids,
         }
-        tmp = self.run_path.with_name(self.run_path.name + ".tmp")
-        tmp.write_text(json.dumps(info, indent=2, default=str) + "\n", encoding="utf-8")
-        os.replace(tmp, self.run_path)
+        atomic_write_text(self.run_path, json.dumps(info, indent=2, default=str) + "\n")
 
     # -- reading ----------------------------------------------------------------------------
     def iter_current(self) -> Iterator[dict[str, Any]]:
