@@ -18,7 +18,12 @@ from pathlib import Path
 from typing import Any
 
 from pgt_check import __version__
-from pgt_check._cli import configure_logging, install_sigterm_handler, parse_args
+from pgt_check._cli import (
+    OneLineErrorParser,
+    configure_logging,
+    install_sigterm_handler,
+    parse_args,
+)
 from pgt_check.config import RunConfig, load_config_file, merge
 from pgt_check.errors import ConfigError, InputError
 from pgt_check.files import safe_text
@@ -31,7 +36,7 @@ EXIT_PASSED, EXIT_FAILED, EXIT_INPUT = 0, 1, 2
 def build_parser() -> argparse.ArgumentParser:
     from pgt_check.config import PRESETS
 
-    p = argparse.ArgumentParser(
+    p = OneLineErrorParser(
         prog="pgt-check",
         description="Check pseudo-ground-truth camera poses frame by frame against a mesh.",
         epilog="Subcommands: 'pgt-check report OUT_DIR' rebuilds the report of a finished run "

@@ -30,7 +30,12 @@ from typing import Any
 
 import numpy as np
 
-from pgt_check._cli import configure_logging, install_sigterm_handler, parse_args
+from pgt_check._cli import (
+    OneLineErrorParser,
+    configure_logging,
+    install_sigterm_handler,
+    parse_args,
+)
 from pgt_check.errors import InputError
 from pgt_check.files import atomic_write_text, check_inputs_not_outputs, safe_text
 from pgt_check.types import Camera, Frame, Trajectory
@@ -333,7 +338,7 @@ def summary_lines(s: dict[str, Any]) -> list[str]:
 def build_parser() -> argparse.ArgumentParser:
     from pgt_check.registry import FORMATS, MATCHERS
 
-    p = argparse.ArgumentParser(
+    p = OneLineErrorParser(
         prog="pgt-check compare",
         description="Compare two pose sources for the same images: per-frame difference "
         "(deg, scene units, px) and, with --mesh, which source the images support.",

@@ -46,7 +46,12 @@ from typing import Any
 
 import numpy as np
 
-from pgt_check._cli import configure_logging, install_sigterm_handler, parse_args
+from pgt_check._cli import (
+    OneLineErrorParser,
+    configure_logging,
+    install_sigterm_handler,
+    parse_args,
+)
 from pgt_check.enhance_refs import (  # re-exported: the subcommand's public helpers
     IMAGE_SUFFIXES,
     RenderItem,
@@ -383,7 +388,7 @@ def enhance_folder(args: argparse.Namespace) -> dict[str, Any]:
 def build_parser() -> argparse.ArgumentParser:
     from pgt_check.io import FORMATS
 
-    p = argparse.ArgumentParser(
+    p = OneLineErrorParser(
         prog="pgt-check enhance",
         description="Enhance a folder of renders with the nearest training photos (MaRINeR or "
         "reprojection); with --gt, PSNR-Y/SSIM-Y/LPIPS of raw vs enhanced. Renders are named "

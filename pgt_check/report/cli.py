@@ -10,9 +10,9 @@ import argparse
 import sys
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any
 
-from pgt_check._cli import install_sigterm_handler, parse_args
+from pgt_check._cli import OneLineErrorParser, install_sigterm_handler, parse_args
 from pgt_check.config import RunConfig, merge
 from pgt_check.errors import InputError
 from pgt_check.files import MAX_SMALL_JSON_BYTES, load_json_limited, regular_file_size, safe_text
@@ -143,14 +143,6 @@ def _verdict_fields() -> list[tuple[str, type]]:
     return out
 
 
-class _OneLineErrors(argparse.ArgumentParser):
-    """A parser whose usage errors are one line (``pgt-check report: error: ...``, exit 2),
-    without the long usage block (``--help`` shows it)."""
-
-    def error(self, message: str) -> NoReturn:
-        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
-
-
 def _bool_arg(text: str) -> bool:
     """argparse type of the boolean flags: ``parse_bool``; any other word is a usage error
     (exit 2), never read as false."""
@@ -182,7 +174,7 @@ def verdict_overrides(args: argparse.Namespace) -> dict:
 
 
 def report_main(argv: Sequence[str]) -> int:
-    p = _OneLineErrors(
+    p = OneLineErrorParser(
         prog="pgt-check report", description="Rebuild outputs of a run from its stored records."
     )
     p.add_argument("out_dir")
