@@ -267,7 +267,9 @@ class VerdictConfig:
     #: PASS threshold on the corner error in original photo pixels; None = rel_diag * diagonal
     threshold_px: float | None = None
     threshold_rel_diag: float = 0.02
-    #: render coverage below this fraction -> UNVERIFIABLE(low_coverage)
+    #: render coverage below this fraction -> UNVERIFIABLE(low_coverage), or FAIL(off_mesh) when
+    #: it is also at most a quarter of what its neighbouring frames' renders cover and they see
+    #: the mesh well (``verdict/off_mesh.py``: a gross pose error, not missing evidence)
     min_coverage: float = 0.05
     min_inliers: int = 15
     min_inlier_ratio: float = 0.0
