@@ -278,10 +278,11 @@ def _save_png(path: Path, image: np.ndarray) -> None:
 def check_enhance_options(args: argparse.Namespace) -> None:
     """Every numeric option in range, and ``--out`` a folder that holds none of the inputs
     (InputError naming the option)."""
+    from pgt_check.config import MAX_IMAGE_SIDE
     from pgt_check.config_load import check_range
 
-    checks = [("--limit", args.limit, 1, None, False), ("--short-side", args.short_side, 1, None,
-              False), ("--iterations", args.iterations, 1, 1000, False),
+    checks = [("--limit", args.limit, 1, None, False), ("--short-side", args.short_side, 1,
+              MAX_IMAGE_SIDE, False), ("--iterations", args.iterations, 1, 1000, False),
               ("--max-rotation-deg", args.max_rotation_deg, 0, 180, True),
               ("--translation-scale", args.translation_scale, 0, None, True)]
     try:

@@ -177,7 +177,8 @@ def test_compare_api_checks_options():
 
 @pytest.mark.parametrize("argv", [["--limit", "0"], ["--short-side", "0"],
                                   ["--max-rotation-deg", "nan"], ["--translation-scale", "-1"],
-                                  ["--iterations", "0"]])
+                                  ["--iterations", "0"], ["--short-side", "1000000"],
+                                  ["--iterations", "1001"]])
 def test_enhance_numeric_options(argv, sample_scene, tmp_path, cli):
     rc, _, err = cli("enhance", sample_scene / "images", sample_scene / "trajectories.txt",
                      "--out", tmp_path / "o", *argv)
