@@ -162,9 +162,35 @@ def _add_verdict_args(p: argparse.ArgumentParser) -> None:
                    help="the calibration error may include a camera-to-rig translation (photos "
                    "from a camera beside the posed sensor, e.g. RGB beside depth); estimated "
                    "where depths differ enough, reported and removed with --remove-calibration")
+    g.add_argument("--require-accuracy", default=None, type=_accuracy_pair,
+                   metavar="DEG,UNITS",
+                   help="gate also on the pose accuracy: fail when the 95 %% bound of more than "
+                   "--max-fail-fraction of the frames, or of a shared error, exceeds DEG "
+                   "degrees or UNITS scene units (summary.json accuracy; the px threshold "
+                   "still decides PASS / FAIL)")
     g.add_argument("--calibration-from", default=None, metavar="SUMMARY_JSON",
                    help="remove the calibration estimated by a trusted run (its summary.json) "
                    "instead of one estimated on this run")
+
+
+def _accuracy_pair(text: str) -> tuple[float, float]:
+    """``DEG,UNITS`` of ``--require-accuracy``: two positive finite numbers."""
+    import math
+
+    parts = text.split(",")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        deg, units = (float(x) for x in parts)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"expected DEG,UNITS (two numbers, e.g. 0.5,0.02), got {text!r}"
+        ) from None
+    if not (math.isfinite(deg) and math.isfinite(units) and 0 < deg <= 180 and units > 0):
+        raise argparse.ArgumentTypeError(
+            f"DEG must be in (0, 180] and UNITS > 0, got {text!r}"
+        )
+    return deg, units
 
 
 def _add_run_args(p: argparse.ArgumentParser) -> None:
@@ -225,6 +251,12 @@ def _cli_overrides(args: argparse.Namespace) -> dict[str, Any]:
         ("verdict", "remove_calibration"): True if args.remove_calibration else None,
         ("verdict", "calibration_translation"): True if args.calibration_translation else None,
         ("verdict", "calibration_from"): args.calibration_from,
+        ("verdict", "require_accuracy_deg"): (
+            None if args.require_accuracy is None else args.require_accuracy[0]
+        ),
+        ("verdict", "require_accuracy_units"): (
+            None if args.require_accuracy is None else args.require_accuracy[1]
+        ),
         ("correct", "frames"): args.correct,
         ("correct", "rounds"): args.correct_rounds,
         ("correct", "registration_rounds"): args.registration_rounds,
@@ -290,6 +322,8 @@ _OPTION_OF = {
     "correct.rounds": "--correct-rounds",
     "correct.registration_rounds": "--registration-rounds",
     "verdict.shared_threshold_px": "--shared-threshold-px",
+    "verdict.require_accuracy_deg": "--require-accuracy",
+    "verdict.require_accuracy_units": "--require-accuracy",
     "scheduler": "--scheduler",
 }
 
@@ -337,6 +371,8 @@ def _print_summary(summary: dict[str, Any], out: str) -> None:
         print(f"pgt-check: {sysoff['message']}")
     for line in shared_error_lines(summary.get("shared_errors") or {}):
         print(f"pgt-check: {line}")
+    for line in (summary.get("accuracy") or {}).get("sentences") or ():
+        print(f"pgt-check: accuracy: {line}")
     gate = summary["gate"]
     print(f"pgt-check: gate {'PASSED' if gate['passed'] else 'FAILED'}: {gate['explanation']}")
     print(f"pgt-check: report: {safe_text(Path(out) / 'report.html')} (all outputs in "

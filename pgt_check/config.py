@@ -301,8 +301,18 @@ class VerdictConfig:
     #: one estimated on this run (which views that cannot separate calibration from
     #: registration would let absorb a misregistration)
     calibration_from: str | None = None
+    #: ``--require-accuracy DEG,UNITS``: the gate also fails when more than
+    #: ``max_fail_fraction`` of the frames, or a shared error, are not verified to within this
+    #: rotation (deg) / camera-centre distance (scene units) at 95 % (``verdict.accuracy``);
+    #: None = not required
+    require_accuracy_deg: float | None = None
+    require_accuracy_units: float | None = None
 
     def __post_init__(self) -> None:
+        _check_range("verdict.require_accuracy_deg", self.require_accuracy_deg, 0, 180,
+                     lo_open=True)
+        _check_range("verdict.require_accuracy_units", self.require_accuracy_units, 0,
+                     lo_open=True)
         _check_range("verdict.threshold_px", self.threshold_px, 0, lo_open=True)
         _check_range("verdict.threshold_rel_diag", self.threshold_rel_diag, 0, lo_open=True)
         _check_range("verdict.min_coverage", self.min_coverage, 0, 1)

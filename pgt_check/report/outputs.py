@@ -21,6 +21,7 @@ from pgt_check.files import safe_text
 from pgt_check.measure.columns import MEASUREMENT_COLUMNS, TIMING_COLUMNS
 from pgt_check.measure.correct import CORRECTION_COLUMNS
 from pgt_check.report.files import atomic_write_text
+from pgt_check.verdict.accuracy import ACCURACY_COLUMNS
 from pgt_check.verdict.apply import VERDICT_COLUMNS
 
 logger = logging.getLogger(__name__)
@@ -38,7 +39,7 @@ def _frame_columns() -> tuple[str, ...]:
 #: frames.csv columns, in order. ``corner_error_px`` is the one the verdict used. The
 #: correction columns (``pgt_check.measure.correct``) are an optional tail: empty for frames
 #: that were not corrected.
-FRAME_COLUMNS = (*_frame_columns(), *CORRECTION_COLUMNS)
+FRAME_COLUMNS = (*_frame_columns(), *ACCURACY_COLUMNS, *CORRECTION_COLUMNS)
 
 #: timing columns (left out when comparing runs)
 STAGES = TIMING_COLUMNS
@@ -134,6 +135,7 @@ def build_summary(
 ) -> dict[str, Any]:
     from pgt_check.report.paths import path_comparison
     from pgt_check.verdict import gate, run_statistics
+    from pgt_check.verdict.accuracy import run_accuracy
     from pgt_check.verdict.decide import resolve_threshold_px
 
     if records:
@@ -143,6 +145,13 @@ def build_summary(
     threshold = resolve_threshold_px(config.verdict, w, h)
     stats = run_statistics(records, threshold)
     passed, why = gate(stats["counts"], config.verdict, stats["unverifiable_reasons"])
+    accuracy = run_accuracy(
+        records, (extra or {}).get("shared_errors"), config.verdict, threshold
+    )
+    if passed and accuracy.gate_passed is False:  # --require-accuracy
+        passed, why = False, accuracy.gate_explanation
+    elif passed and accuracy.gate_passed:
+        why = f"{why}; {accuracy.gate_explanation}"
     summary = {
         "tool": "pgt-check",
         "version": __version__,
@@ -151,6 +160,7 @@ def build_summary(
         "n_frames": stats["n_frames"],
         "threshold_px": threshold,
         "statistics": stats,
+        "accuracy": accuracy.to_json(),
         "timing": timing_summary(records),
         "raw_vs_enhanced": path_comparison(records),
         "settings": config.to_dict(),

@@ -9,6 +9,7 @@ from typing import Any
 from pgt_check.config import RunConfig
 from pgt_check.enhance.base import Evidence
 from pgt_check.measure.record import FrameMeasurement
+from pgt_check.verdict.accuracy import calibrations_to_remove, frame_accuracy_columns
 from pgt_check.verdict.decide import (
     Judgement,
     Verdict,
@@ -68,6 +69,12 @@ def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> Ru
     # second pass: a frame judged through a reference the run does not pass is judged
     # through another tried reference that it passes, where one aligned (``vouched_reference``)
     first = {m.frame_id: j.verdict for m, j in zip(ms, judged, strict=True)}
+    # the pose accuracy each frame's absolute evidence supports (``verdict.accuracy``), after
+    # taking out the calibration error the verdicts take out
+    cals = calibrations_to_remove(
+        v, None if shared is None else shared.summary(), [m.camera_id for m in ms]
+    )
+    accuracy = frame_accuracy_columns(ms, cals)
     rows = []
     for m, j in zip(ms, judged, strict=True):
         m2 = vouched_reference(m, j, first, v)
@@ -85,6 +92,7 @@ def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> Ru
             drift_px=None if shared is None else shared.drift_px.get(m.frame_id),
             decided_by=j.decided_by,
         )
+        row.update(accuracy[m.frame_id])
         rows.append(row)
     return RunJudgement(rows, shared)
 

@@ -1,0 +1,497 @@
+"""How accurate are the poses: per-frame 95 % bounds, the run's statement, its detection limits,
+and the accuracy gate (``--require-accuracy DEG,UNITS``).
+
+Per frame (``frame_accuracy_columns``): the pose error its **absolute** evidence supports
+(``geometry.frame_accuracy``: robust fit of the camera-frame correction to the frame's 2D-3D
+points, image-block bootstrap), in degrees, scene units and px, with one-sided 95 % bounds. A
+frame whose verdict rests on relative evidence alone (reprojected references) has no bound of
+its own: relative evidence cannot see an error it shares with its references.
+
+Per run (``run_accuracy``): how many frames are verified to within X deg / Y units, percentiles
+of the bounds, the shared errors as sizes with their 95 % intervals, and the detection limits of
+this run. The limits come from this run's own noise, not from constants: the single-frame limit
+is the per-frame threshold plus the median of the frames' bootstrap noise (an error that large
+is measured above the threshold in about 95 % of frames), turned into degrees / units with the
+run's median sensitivities (px per degree, px per scene unit); the shared limit is the shared
+threshold plus the half-width of the registration fit's own 95 % interval.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import asdict, dataclass, field
+from typing import Any
+
+import numpy as np
+
+from pgt_check.config import VerdictConfig
+from pgt_check.geometry.frame_accuracy import FrameAccuracy, frame_accuracy
+from pgt_check.measure.record import FrameMeasurement
+from pgt_check.verdict.calibration import CameraCalibration, camera_matrix
+
+logger = logging.getLogger(__name__)
+
+#: frames.csv columns of the per-frame accuracy, with their meaning (docs/outputs.md)
+ACCURACY_COLUMNS: dict[str, str] = {
+    "acc_rot_deg": "estimated rotation error of the pose, deg (from its absolute evidence)",
+    "acc_rot_bound_deg": "95 % upper bound of the rotation error, deg",
+    "acc_t": "estimated camera-centre error, scene units",
+    "acc_t_bound": "95 % upper bound of the camera-centre error, scene units",
+    "acc_px": "mean image displacement of the estimated error at the frame's points, px",
+    "acc_px_bound": "95 % upper bound of that displacement, px",
+    "acc_noise_deg": "rotation the frame cannot tell from zero (bootstrap noise, 95 %), deg",
+    "acc_noise_t": "camera-centre shift it cannot tell from zero, scene units",
+    "acc_noise_px": "image displacement it cannot tell from zero, px",
+    "acc_px_per_deg": "sensitivity: image corners moved per degree of rotation, px (mean "
+    "over the camera axes)",
+    "acc_px_per_unit": "sensitivity: image corners moved per scene unit of camera translation "
+    "at the evidence's median depth, px (mean over the camera axes)",
+    "acc_pts_px_per_deg": "the same at the frame's evidence points, px per degree",
+    "acc_pts_px_per_unit": "the same at the frame's evidence points, px per scene unit",
+    "acc_points": "2D-3D points of the fit (inliers / all)",
+    "acc_evidence": "what the bound rests on: absolute sources (raw, enhanced, edges), "
+    "'+calibration removed' when a calibration error was taken out first; '' = no bound",
+    "acc_reason": "why the frame has no bound ('' when it has one)",
+}
+
+_MAX_POINTS = 400  # per frame (evenly spaced): the fit's cost stays a few ms
+
+
+def frame_accuracy_columns(
+    measurements: Sequence[FrameMeasurement],
+    calibrations: Mapping[str, CameraCalibration] | None = None,
+) -> dict[str, dict[str, Any]]:
+    """frame id -> the ``ACCURACY_COLUMNS`` of every measurement. ``calibrations``: camera id ->
+    a calibration error to take out of the evidence first (``--remove-calibration``,
+    ``--calibration-from``)."""
+    from pgt_check.geometry.shared_errors import FrameEvidence
+
+    out: dict[str, dict[str, Any]] = {}
+    for i, m in enumerate(measurements):
+        row: dict[str, Any] = dict.fromkeys(ACCURACY_COLUMNS)
+        row.update(acc_evidence="", acc_reason="no_absolute_evidence")
+        out[m.frame_id] = row
+        if m.evidence is None or not len(m.evidence) or m.world_from_cam is None or not m.intrinsics:
+            continue
+        p2 = np.asarray(m.evidence.pts2d, np.float64).reshape(-1, 2)
+        pc = np.asarray(m.evidence.pts_cam, np.float64).reshape(-1, 3)
+        if len(p2) > _MAX_POINTS:
+            keep = np.linspace(0, len(p2) - 1, _MAX_POINTS).round().astype(int)
+            p2, pc = p2[keep], pc[keep]
+        k = camera_matrix(m.intrinsics)
+        cal = (calibrations or {}).get(m.camera_id)
+        if cal is not None:
+            wfc = np.asarray(m.world_from_cam, np.float64)
+            ev = FrameEvidence(
+                m.frame_id, i, m.camera_id, wfc, k, m.width, m.height, p2,
+                pc @ wfc[:3, :3].T + wfc[:3, 3],
+            )  # fmt: skip
+            p2 = cal.remove(ev).pts2d
+        fa = frame_accuracy(p2, pc, k, m.width, m.height)
+        row.update(_columns(fa))
+        if fa.success:
+            row["acc_evidence"] = "+".join(m.evidence.sources) + (
+                "+calibration removed" if cal is not None else ""
+            )
+    return out
+
+
+def _columns(fa: FrameAccuracy) -> dict[str, Any]:
+    if not fa.success:
+        return {"acc_reason": fa.reason, "acc_points": f"{fa.n_inliers}/{fa.n_points}"}
+    return {
+        "acc_rot_deg": fa.rotation_deg,
+        "acc_rot_bound_deg": fa.rotation_bound_deg,
+        "acc_t": fa.translation,
+        "acc_t_bound": fa.translation_bound,
+        "acc_px": fa.effect_px,
+        "acc_px_bound": fa.effect_bound_px,
+        "acc_noise_deg": fa.rotation_noise_deg,
+        "acc_noise_t": fa.translation_noise,
+        "acc_noise_px": fa.effect_noise_px,
+        "acc_px_per_deg": fa.px_per_deg,
+        "acc_px_per_unit": fa.px_per_unit,
+        "acc_pts_px_per_deg": fa.points_px_per_deg,
+        "acc_pts_px_per_unit": fa.points_px_per_unit,
+        "acc_points": f"{fa.n_inliers}/{fa.n_points}",
+        "acc_reason": "",
+    }
+
+
+def calibrations_to_remove(
+    config: VerdictConfig, shared: Mapping[str, Any] | None, camera_ids: Sequence[str]
+) -> dict[str, CameraCalibration]:
+    """The calibration errors the verdicts take out (the same the run-level checks used)."""
+    if config.calibration_from:
+        from pgt_check.verdict.calibration import trusted_calibration
+
+        return trusted_calibration(config.calibration_from, sorted(set(camera_ids)))
+    if config.remove_calibration and shared:
+        cals = {}
+        for cam_id, entry in (shared.get("calibration") or {}).items():
+            cal = CameraCalibration.from_summary(entry) if isinstance(entry, Mapping) else None
+            if cal is not None:
+                cals[cam_id] = cal
+        return cals
+    return {}
+
+
+# --- the run ---------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Percentiles:
+    p50: float | None
+    p90: float | None
+    max: float | None
+
+    @staticmethod
+    def of(values: Sequence[float]) -> Percentiles:
+        a = np.asarray([v for v in values if v is not None and math.isfinite(v)], np.float64)
+        if not len(a):
+            return Percentiles(None, None, None)
+        return Percentiles(
+            float(np.percentile(a, 50)), float(np.percentile(a, 90)), float(np.max(a))
+        )
+
+
+@dataclass(frozen=True)
+class SharedSize:
+    """One run-level shared error as a size with its 95 % interval (None where not measured)."""
+
+    check: str  # registration, similarity, calibration:<camera>, drift
+    status: str
+    rotation_deg: float | None = None
+    rotation_deg_ci: tuple[float, float] | None = None
+    translation: float | None = None
+    translation_ci: tuple[float, float] | None = None
+    effect_px: float | None = None
+    effect_px_ci: tuple[float, float] | None = None
+    #: rotation / translation converted from px with the run's sensitivities (drift, which
+    #: is measured in px only)
+    from_px: bool = False
+
+    def upper(self) -> tuple[float | None, float | None]:
+        """Upper 95 % bounds (rotation deg, translation units), None where unknown."""
+        r = self.rotation_deg_ci[1] if self.rotation_deg_ci else self.rotation_deg
+        t = self.translation_ci[1] if self.translation_ci else self.translation
+        return r, t
+
+
+@dataclass(frozen=True)
+class DetectionLimits:
+    """The smallest errors this run would flag (rotation alone, translation alone)."""
+
+    frame_px: float | None
+    frame_deg: float | None
+    frame_units: float | None
+    shared_px: float | None
+    shared_deg: float | None
+    shared_units: float | None
+    #: median per-frame noise (what one frame cannot tell from zero)
+    noise_px: float | None
+    noise_deg: float | None
+    noise_units: float | None
+    px_per_deg: float | None
+    px_per_unit: float | None
+    points_px_per_deg: float | None
+    points_px_per_unit: float | None
+    how: str
+
+
+@dataclass(frozen=True)
+class RunAccuracy:
+    """summary.json -> ``accuracy`` (``to_json``) and the sentences the CLI prints."""
+
+    n_frames: int
+    n_bounded: int
+    within_deg: float | None
+    within_units: float | None
+    #: where X / Y come from: "required" (--require-accuracy) or "p90": the 90th percentile of
+    #: the bounds of the PASS frames (of all bounded frames when none PASS)
+    within_from: str
+    n_within: int
+    rotation_bound_deg: Percentiles
+    translation_bound: Percentiles
+    effect_bound_px: Percentiles
+    shared: tuple[SharedSize, ...]
+    limits: DetectionLimits
+    gate_passed: bool | None = None
+    gate_explanation: str = ""
+    sentences: tuple[str, ...] = field(default=())
+
+    def to_json(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["shared"] = [asdict(s) for s in self.shared]
+        d["sentences"] = list(self.sentences)
+        return d
+
+
+def _num(x: Any) -> float | None:
+    try:
+        v = float(x)
+    except (TypeError, ValueError):
+        return None
+    return v if math.isfinite(v) else None
+
+
+def _ci(x: Any) -> tuple[float, float] | None:
+    if not isinstance(x, (list, tuple)) or len(x) != 2:
+        return None
+    a, b = _num(x[0]), _num(x[1])
+    return None if a is None or b is None else (a, b)
+
+
+def _median(values: Sequence[Any]) -> float | None:
+    a = [v for v in (_num(x) for x in values) if v is not None]
+    return float(np.median(a)) if a else None
+
+
+def shared_sizes(
+    shared: Mapping[str, Any] | None, px_per_deg: float | None, px_per_unit: float | None
+) -> tuple[SharedSize, ...]:
+    """The run-level checks that were measured, as sizes with intervals."""
+    if not shared:
+        return ()
+    out = []
+    for key in ("registration", "similarity"):
+        e = shared.get(key) or {}
+        if e.get("status") in (None, "not_checked"):
+            continue
+        out.append(
+            SharedSize(
+                key, str(e["status"]), _num(e.get("angle_deg")), _ci(e.get("angle_deg_ci")),
+                _num(e.get("translation")), _ci(e.get("translation_ci")),
+                _num(e.get("effect_px")), _ci(e.get("effect_px_ci")),
+            )  # fmt: skip
+        )
+    cams = shared.get("calibration") or {}
+    for cam, e in sorted(cams.items()):
+        if not isinstance(e, Mapping) or e.get("status") in (None, "not_checked"):
+            continue
+        t = e.get("translation")
+        tn = _num(np.linalg.norm(np.asarray(t, float))) if isinstance(t, list) else None
+        out.append(
+            SharedSize(
+                "calibration" if len(cams) == 1 else f"calibration ({cam})", str(e["status"]),
+                _num(e.get("rotation_deg")),
+                _ci(e.get("rotation_deg_ci")), tn, None, _num(e.get("effect_px")),
+                _ci(e.get("effect_px_ci")),
+            )  # fmt: skip
+        )
+    d = shared.get("drift") or {}
+    if d.get("status") not in (None, "not_checked"):
+        per = d.get("per_frame") or []
+        worst = max((p for p in per if _num(p.get("effect_px")) is not None),
+                    key=lambda p: p["effect_px"], default=None)
+        if worst is not None:
+            px, lo = _num(worst["effect_px"]), _num(worst.get("lo_px"))
+            ci = None if lo is None else (lo, px + (px - lo))
+            out.append(
+                SharedSize(
+                    "drift", str(d["status"]),
+                    None if not px_per_deg else px / px_per_deg,
+                    None if not (ci and px_per_deg) else (ci[0] / px_per_deg, ci[1] / px_per_deg),
+                    None if not px_per_unit else px / px_per_unit,
+                    None if not (ci and px_per_unit) else (ci[0] / px_per_unit,
+                                                           ci[1] / px_per_unit),
+                    px, ci, from_px=True,
+                )  # fmt: skip
+            )
+    return tuple(out)
+
+
+def detection_limits(
+    rows: Sequence[Mapping[str, Any]],
+    threshold_px: float,
+    shared: Mapping[str, Any] | None,
+) -> DetectionLimits:
+    """This run's detection limits from its own noise (module docstring)."""
+    noise_px = _median([r.get("acc_noise_px") for r in rows])
+    ppd = _median([r.get("acc_px_per_deg") for r in rows])
+    ppu = _median([r.get("acc_px_per_unit") for r in rows])
+    pts_ppd = _median([r.get("acc_pts_px_per_deg") for r in rows])
+    pts_ppu = _median([r.get("acc_pts_px_per_unit") for r in rows])
+    frame_px = None if noise_px is None else threshold_px + noise_px
+    shared_px = None
+    reg = (shared or {}).get("registration") or {}
+    thr_shared = _num((shared or {}).get("threshold_px"))
+    ci = _ci(reg.get("effect_px_ci"))
+    if thr_shared is not None and ci is not None:
+        shared_px = thr_shared + 0.5 * (ci[1] - ci[0])
+
+    def conv(px: float | None, per: float | None) -> float | None:
+        return None if px is None or not per else px / per
+
+    return DetectionLimits(
+        frame_px, conv(frame_px, ppd), conv(frame_px, ppu),
+        shared_px, conv(shared_px, pts_ppd), conv(shared_px, pts_ppu),
+        noise_px, _median([r.get("acc_noise_deg") for r in rows]),
+        _median([r.get("acc_noise_t") for r in rows]), ppd, ppu, pts_ppd, pts_ppu,
+        "single frame: per-frame threshold + median per-frame bootstrap noise (px), turned "
+        "into a rotation alone or a translation alone with the run's median sensitivities at "
+        "the image corners (where the corner error is measured); shared: shared threshold + "
+        "half-width of the registration fit's 95 % interval (px), with the sensitivities at "
+        "the evidence points (where the shared fits measure their effect)",
+    )  # fmt: skip
+
+
+def run_accuracy(
+    rows: Sequence[Mapping[str, Any]],
+    shared: Mapping[str, Any] | None,
+    config: VerdictConfig,
+    threshold_px: float,
+) -> RunAccuracy:
+    """The run's accuracy statement from judged rows (with ``ACCURACY_COLUMNS``)."""
+    bounded = [
+        r for r in rows
+        if _num(r.get("acc_rot_bound_deg")) is not None and _num(r.get("acc_t_bound")) is not None
+    ]  # fmt: skip
+    rot = [float(r["acc_rot_bound_deg"]) for r in bounded]
+    tra = [float(r["acc_t_bound"]) for r in bounded]
+    req = config.require_accuracy_deg, config.require_accuracy_units
+    if req != (None, None):
+        x, y, src = req[0], req[1], "required"
+    else:
+        # the level most PASS frames reach (FAIL frames' errors are their own finding)
+        ok = [r for r in bounded if r.get("verdict") == "PASS"] or bounded
+        x = float(np.percentile([float(r["acc_rot_bound_deg"]) for r in ok], 90)) if ok else None
+        y = float(np.percentile([float(r["acc_t_bound"]) for r in ok], 90)) if ok else None
+        src = "p90"
+    n_within = sum(
+        1 for a, b in zip(rot, tra, strict=True)
+        if (x is None or a <= x) and (y is None or b <= y)
+    )  # fmt: skip
+    limits = detection_limits(rows, threshold_px, shared)
+    sizes = shared_sizes(shared, limits.points_px_per_deg, limits.points_px_per_unit)
+    acc = RunAccuracy(
+        len(rows), len(bounded), x, y, src, n_within if bounded else 0,
+        Percentiles.of(rot), Percentiles.of(tra),
+        Percentiles.of([float(r["acc_px_bound"]) for r in bounded if _num(r.get("acc_px_bound"))]),
+        sizes, limits,
+    )  # fmt: skip
+    passed, why = (None, "")
+    if req != (None, None):
+        passed, why = accuracy_gate(rows, acc, config)
+    acc = RunAccuracy(**{**acc.__dict__, "gate_passed": passed, "gate_explanation": why})
+    return RunAccuracy(**{**acc.__dict__, "sentences": tuple(accuracy_sentences(acc))})
+
+
+def accuracy_gate(
+    rows: Sequence[Mapping[str, Any]], acc: RunAccuracy, config: VerdictConfig
+) -> tuple[bool, str]:
+    """``--require-accuracy``: fails when more than ``max_fail_fraction`` of the frames have a
+    95 % bound above the required accuracy, or none at all (UNVERIFIABLE frames are left to
+    ``max_unverifiable_fraction``), or when a shared error's upper 95 % bound exceeds it.
+    Fails closed: a frame without a bound is not verified to the required accuracy."""
+    x, y = config.require_accuracy_deg, config.require_accuracy_units
+    judged = [r for r in rows if r.get("verdict") != "UNVERIFIABLE"]
+    over = 0
+    unbounded = 0
+    for r in judged:
+        a, b = _num(r.get("acc_rot_bound_deg")), _num(r.get("acc_t_bound"))
+        if a is None or b is None:
+            unbounded += 1
+        elif (x is not None and a > x) or (y is not None and b > y):
+            over += 1
+    total = max(len(rows), 1)
+    frac = (over + unbounded) / total
+    need = _need(x, y)
+    for s in acc.shared:
+        if s.from_px or s.status == "not_checked":
+            continue
+        ru, tu = s.upper()
+        if (x is not None and ru is not None and ru > x) or (
+            y is not None and tu is not None and tu > y
+        ):
+            return False, (
+                f"accuracy: the shared {s.check} error may be as large as "
+                f"{_fmt(ru)} deg / {_fmt(tu)} units (95 %), above the required {need}"
+            )
+    if not frac <= config.max_fail_fraction:
+        return False, (
+            f"accuracy: {over + unbounded} of {len(rows)} frames ({frac:.3f} > max "
+            f"{config.max_fail_fraction:.3f}) are not verified to {need} at 95 % "
+            f"({over} with a larger bound, {unbounded} without absolute evidence for a bound)"
+        )
+    return True, (
+        f"accuracy: {len(judged) - over - unbounded} of {len(rows)} frames verified to {need} "
+        f"at 95 % (fraction not verified {frac:.3f} <= max {config.max_fail_fraction:.3f})"
+    )
+
+
+def _fmt(v: float | None, digits: int = 3) -> str:
+    return "?" if v is None else f"{v:.{digits}g}"
+
+
+def _need(x: float | None, y: float | None) -> str:
+    parts = ([f"{x:g} deg"] if x is not None else []) + (
+        [f"{y:g} scene units"] if y is not None else []
+    )
+    return " / ".join(parts)
+
+
+def accuracy_sentences(acc: RunAccuracy) -> list[str]:
+    """Plain sentences with the numbers (for a dataset paper, the CLI and the report)."""
+    out = []
+    if acc.n_bounded == 0:
+        out.append(
+            f"None of the {acc.n_frames} frames has absolute evidence for a per-frame accuracy "
+            "bound (their verdicts rest on reprojected references or nothing)."
+        )
+    else:
+        how = "the required accuracy" if acc.within_from == "required" else (
+            "the 90th percentile of the PASS frames' bounds"
+        )
+        out.append(
+            f"{acc.n_within} of {acc.n_frames} frames are verified to within "
+            f"{_fmt(acc.within_deg)} deg and {_fmt(acc.within_units)} scene units at 95 % "
+            f"confidence ({how}; {acc.n_bounded} frames have absolute evidence for a bound)."
+        )
+        r, t, p = acc.rotation_bound_deg, acc.translation_bound, acc.effect_bound_px
+        out.append(
+            f"Per-frame 95 % bounds: median {_fmt(r.p50)} deg / {_fmt(t.p50)} units "
+            f"({_fmt(p.p50)} px), 90th percentile {_fmt(r.p90)} deg / {_fmt(t.p90)} units "
+            f"({_fmt(p.p90)} px)."
+        )
+    for s in acc.shared:
+        if s.check == "similarity":
+            continue
+        ci_r = f" (95 % {_fmt(s.rotation_deg_ci[0])}-{_fmt(s.rotation_deg_ci[1])})" if (
+            s.rotation_deg_ci) else ""
+        ci_t = f" (95 % {_fmt(s.translation_ci[0])}-{_fmt(s.translation_ci[1])})" if (
+            s.translation_ci) else ""
+        ci_p = f" (95 % {_fmt(s.effect_px_ci[0])}-{_fmt(s.effect_px_ci[1])})" if (
+            s.effect_px_ci) else ""
+        parts = ([f"{_fmt(s.rotation_deg)} deg{ci_r}"] if s.rotation_deg is not None else [])
+        parts += [f"{_fmt(s.translation)} scene units{ci_t}"] if s.translation is not None else []
+        parts += [f"{_fmt(s.effect_px)} px{ci_p}"] if s.effect_px is not None else []
+        if s.from_px:
+            out.append(
+                f"Largest drift along the trajectory ({s.status}): {_fmt(s.effect_px)} px"
+                f"{ci_p}, as large as {_fmt(s.rotation_deg)} deg of rotation alone or "
+                f"{_fmt(s.translation)} scene units of translation alone."
+            )
+        else:
+            out.append(f"Shared {s.check} error ({s.status}): " + ", ".join(parts) + ".")
+    lim = acc.limits
+    if lim.frame_px is not None:
+        out.append(
+            f"Detection limits of this run: a single frame's error is flagged above about "
+            f"{_fmt(lim.frame_deg, 2)} deg or {_fmt(lim.frame_units, 2)} scene units "
+            f"({_fmt(lim.frame_px, 3)} px)"
+            + (
+                f"; an error shared by all frames above about {_fmt(lim.shared_deg, 2)} deg or "
+                f"{_fmt(lim.shared_units, 2)} scene units ({_fmt(lim.shared_px, 3)} px)"
+                if lim.shared_px is not None
+                else ""
+            )
+            + f"; one frame cannot tell {_fmt(lim.noise_deg, 2)} deg / "
+            f"{_fmt(lim.noise_units, 2)} units from zero (median bootstrap noise)."
+        )
+    if acc.gate_passed is not None:
+        out.append(("Accuracy gate passed: " if acc.gate_passed else "Accuracy gate FAILED: ")
+                   + acc.gate_explanation.removeprefix("accuracy: ") + ".")
+    return out
