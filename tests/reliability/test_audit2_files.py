@@ -126,9 +126,14 @@ def test_malformed_trusted_summary_exits_2_before_measuring(name, summary, tmp_p
     assert not (tmp_path / "out" / "records.jsonl").exists()
 
 
-def test_calibration_from_missing_file_exits_2_before_measuring(tmp_path, cli, base_args):
+def test_calibration_from_missing_file_exits_2_before_measuring(tmp_path, cli, base_args,
+                                                                case):
     rc, _, err = cli(*base_args("--calibration-from", str(tmp_path / "typo.json")))
-    assert rc == 2 and "not found" in _error_line(rc, err)
+    line = _error_line(rc, err)
+    case("--calibration-from typo.json (missing)", "2 before any frame is measured",
+         f"{rc}: {line[-90:]}; records.jsonl "
+         f"{'written' if (tmp_path / 'out' / 'records.jsonl').exists() else 'not written'}")
+    assert rc == 2 and "not found" in line
     assert not (tmp_path / "out" / "records.jsonl").exists()
 
 
@@ -185,25 +190,29 @@ _FRAME = {"file_path": "a.png", "transform_matrix": np.eye(4).tolist()}
 
 
 @pytest.mark.parametrize("angle", [0, -0.1, 3.2, 1e-320])
-def test_nerfstudio_bad_camera_angle(angle, tmp_path):
+def test_nerfstudio_bad_camera_angle(angle, tmp_path, case):
     from pgt_check.io import read_trajectory
 
     p = _transforms(tmp_path, {"w": 64, "h": 48, "camera_angle_x": angle, "frames": [_FRAME]})
-    with pytest.raises(InputError, match="camera"):
+    with pytest.raises(InputError, match="camera") as info:
         read_trajectory(p)
+    case(f"nerfstudio camera_angle_x: {angle}", "InputError (CLI: 2)",
+         f"{type(info.value).__name__}: {str(info.value)[-110:]}")
 
 
-def test_nerfstudio_deep_json(tmp_path):
+def test_nerfstudio_deep_json(tmp_path, case):
     from pgt_check.io import read_trajectory
 
     p = _transforms(tmp_path, "[" * 100000 + "]" * 100000)
-    with pytest.raises(InputError, match="nested too deeply"):
+    with pytest.raises(InputError, match="nested too deeply") as info:
         read_trajectory(p, "nerfstudio")
+    case("nerfstudio transforms.json nested 100,000 deep", "InputError (CLI: 2)",
+         f"{type(info.value).__name__}: {str(info.value)[-90:]}")
     with pytest.raises(InputError):
         read_trajectory(p)  # format detection reads it too
 
 
-def test_json_with_bom_is_accepted(tmp_path):
+def test_json_with_bom_is_accepted(tmp_path, case):
     """Text formats accept a UTF-8 BOM; JSON (transforms, configs, summaries) does too."""
     from pgt_check.config import load_config_file
     from pgt_check.io import read_trajectory
@@ -220,6 +229,8 @@ def test_json_with_bom_is_accepted(tmp_path):
     s.write_bytes(b"\xef\xbb\xbf" + json.dumps(
         {"shared_errors": {"calibration": {"cam": _GOOD}}}).encode())
     assert set(load_trusted_calibrations(str(s))) == {"cam"}
+    case("UTF-8 BOM in transforms.json, a config file, a trusted summary", "accepted",
+         "all three read (1 frame, {'limit': 1}, camera 'cam')")
 
 
 def test_deep_config_is_an_input_error(tmp_path, cli, base_args):

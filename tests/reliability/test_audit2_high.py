@@ -109,7 +109,7 @@ def test_obj_texture_replaced_is_a_changed_mesh(scene, tmp_path, cli, base_args,
     assert rc == 2 and "inputs.mesh" in last
 
 
-def test_gltf_buffers_and_mtl_are_hashed(scene, tmp_path):
+def test_gltf_buffers_and_mtl_are_hashed(scene, tmp_path, case):
     from pgt_check.render import load_mesh
     from pgt_check.store import content_hash, mesh_content_hash
 
@@ -131,6 +131,8 @@ def test_gltf_buffers_and_mtl_are_hashed(scene, tmp_path):
     side = load_mesh(obj).side_files
     assert "missing:material_0.png" in side
     assert mesh_content_hash(obj, side) != with_png
+    case("glTF: one byte of an external .bin buffer changed; OBJ texture removed",
+         "a different mesh hash", f"hash changed ({len(mesh.side_files)} side files hashed)")
 
 
 # -- 3. booleans: the usual spellings, anything else is a usage error --------------------------

@@ -115,7 +115,7 @@ def test_compare_refuses_to_overwrite_its_input(tmp_path, cli):
     assert a.read_bytes() == before
 
 
-def test_run_refuses_to_overwrite_its_input(scene, tmp_path, cli, base_args):
+def test_run_refuses_to_overwrite_its_input(scene, tmp_path, cli, base_args, case):
     out = tmp_path / "out"
     out.mkdir()
     traj = out / "corrected_trajectory.txt"
@@ -124,11 +124,13 @@ def test_run_refuses_to_overwrite_its_input(scene, tmp_path, cli, base_args):
     args[0] = str(traj)
     args += ["--sensors", str(scene / "sensors.txt"), "--images", str(scene / "images.txt")]
     rc, _, err = cli(*args)
+    case("--out holds the run's own input (OUT/corrected_trajectory.txt)", "2, input untouched",
+         f"{rc}: {err.strip()[-100:]}")
     assert rc == 2 and "would overwrite" in _one_error_line(err, "pgt-check: error:")
     assert not (out / "records.jsonl").exists()
 
 
-def test_outputs_replace_symlinks_not_follow(scene, tmp_path, cli, base_args):
+def test_outputs_replace_symlinks_not_follow(scene, tmp_path, cli, base_args, case):
     out = tmp_path / "out"
     out.mkdir()
     victim = tmp_path / "victim.txt"
@@ -136,6 +138,9 @@ def test_outputs_replace_symlinks_not_follow(scene, tmp_path, cli, base_args):
     for name in ("frames.csv", "summary.json", "report.html", "frames.csv.tmp"):
         (out / name).symlink_to(victim)
     rc, _, _ = cli(*base_args(out=out))
+    case("symlinks at OUT/frames.csv, summary.json, report.html, frames.csv.tmp",
+         "replaced, target untouched", f"{rc}: target {victim.read_text()!r}, frames.csv "
+         f"{'a link' if (out / 'frames.csv').is_symlink() else 'a regular file'}")
     assert rc == 0 and victim.read_text() == "keep me"
     assert not (out / "frames.csv").is_symlink() and "frame_id" in (out / "frames.csv").read_text()
 
@@ -179,25 +184,29 @@ def test_compare_api_checks_options():
                                   ["--max-rotation-deg", "nan"], ["--translation-scale", "-1"],
                                   ["--iterations", "0"], ["--short-side", "1000000"],
                                   ["--iterations", "1001"]])
-def test_enhance_numeric_options(argv, sample_scene, tmp_path, cli):
+def test_enhance_numeric_options(argv, sample_scene, tmp_path, cli, case):
     rc, _, err = cli("enhance", sample_scene / "images", sample_scene / "trajectories.txt",
                      "--out", tmp_path / "o", *argv)
-    assert rc == 2 and argv[0] in _one_error_line(err, "pgt-check enhance: error:")
+    line = _one_error_line(err, "pgt-check enhance: error:")
+    case(f"enhance {' '.join(argv)}", "2, one line", f"{rc}: {line[:120]}")
+    assert rc == 2 and argv[0] in line
 
 
 # -- one-line errors of compare / enhance / report ---------------------------------------------
 
 
-def test_compare_out_is_a_file(tmp_path, cli):
+def test_compare_out_is_a_file(tmp_path, cli, case):
     a = _transforms(tmp_path / "a.json", ["x.png"])
     f = tmp_path / "file"
     f.write_text("x")
     rc, _, err = cli("compare", a, a, "--out", f)
-    assert rc == 2 and "not a folder" in _one_error_line(err, "pgt-check compare: error:")
+    line = _one_error_line(err, "pgt-check compare: error:")
+    case("compare --out FILE", "2, one line", f"{rc}: {line[-100:]}")
+    assert rc == 2 and "not a folder" in line
 
 
 @pytest.mark.parametrize("what", ["out_file", "mesh_txt", "renders_are_out"])
-def test_enhance_errors(what, sample_scene, scene, tmp_path, cli):
+def test_enhance_errors(what, sample_scene, scene, tmp_path, cli, case):
     out = tmp_path / "o"
     extra: list[str] = []
     renders = sample_scene / "images"
@@ -214,8 +223,9 @@ def test_enhance_errors(what, sample_scene, scene, tmp_path, cli):
         (scene / "renders").rename(scene / "images")  # the renders are out/images
     rc, _, err = cli("enhance", renders, sample_scene / "trajectories.txt", "--out", out, "-q",
                      *extra)
+    line = _one_error_line(err, "pgt-check enhance: error:")
+    case(f"enhance: {what}", "2, one line", f"{rc}: {line[-110:]}")
     assert rc == 2
-    _one_error_line(err, "pgt-check enhance: error:")
 
 
 @pytest.fixture(scope="module")
@@ -256,7 +266,7 @@ def test_report_on_malformed_run(what, content, finished_run, tmp_path, cli, cas
 # -- signals ---------------------------------------------------------------------------------
 
 
-def test_report_sigterm_exits_130(finished_run, tmp_path, cli, monkeypatch):
+def test_report_sigterm_exits_130(finished_run, tmp_path, cli, monkeypatch, case):
     import shutil
 
     from pgt_check.verdict import apply as _unused  # noqa: F401 - loaded before the patch
@@ -279,10 +289,11 @@ def test_report_sigterm_exits_130(finished_run, tmp_path, cli, monkeypatch):
         rc, _, err = cli("report", out)
     finally:
         signal.signal(signal.SIGTERM, previous)
+    case("SIGTERM during pgt-check report", "130", f"{rc}: {err.strip()[:110]}")
     assert rc == 130 and "interrupted" in err
 
 
-def test_stuck_frame_ends_after_sigterm_grace(monkeypatch):
+def test_stuck_frame_ends_after_sigterm_grace(monkeypatch, case):
     from pgt_check.executor import common
 
     monkeypatch.setattr(common, "TERM_GRACE_S", 0.2)
@@ -291,6 +302,8 @@ def test_stuck_frame_ends_after_sigterm_grace(monkeypatch):
         os.kill(os.getpid(), signal.SIGTERM)
         while time.monotonic() - t0 < 10:  # a frame that never returns
             time.sleep(0.05)
+    case("SIGTERM while a frame never returns (grace 0.2 s)", "stops after the grace",
+         f"KeyboardInterrupt (-> 130) after {time.monotonic() - t0:.1f} s")
     assert stop.is_set() and time.monotonic() - t0 < 5
 
 
