@@ -358,6 +358,11 @@ def shared_error_lines(shared: dict[str, Any]) -> list[str]:
 
 
 def _print_summary(summary: dict[str, Any], out: str) -> None:
+    from pgt_check.report.headline import failure_headline
+
+    # a run that failed on an error all frames share: what, how big, likely cause, the fix
+    for line in failure_headline(summary, out):
+        print(f"pgt-check: {safe_text(line)}")
     c = summary["counts"]
     err = summary["statistics"]["corner_error_px"]
     med = "-" if err["median"] is None else f"{err['median']:.2f}"

@@ -112,6 +112,12 @@ def _residuals_jac(
     return res, jac
 
 
+def _mean_finite(x: np.ndarray) -> float:
+    """Mean of the finite values (NaN when none: every point behind the camera)."""
+    x = x[np.isfinite(x)]
+    return float(x.mean()) if len(x) else float("nan")
+
+
 def _weights(res: np.ndarray, scale: float) -> np.ndarray:
     return 1.0 / (1.0 + np.sum(res * res, axis=1) / scale**2)
 
@@ -224,8 +230,8 @@ def frame_accuracy(
     def sizes(rr: np.ndarray, tt: np.ndarray) -> tuple[float, float, float]:
         """Rotation (deg), camera-centre distance, mean displacement (px) of (R, t)."""
         disp = _project(K, p[inl] @ rr.T + tt) - obs_model[inl]
-        return _angle_deg(rr), float(np.linalg.norm(rr.T @ tt)), float(np.nanmean(
-            np.linalg.norm(disp, axis=1)))
+        return _angle_deg(rr), float(np.linalg.norm(rr.T @ tt)), _mean_finite(
+            np.linalg.norm(disp, axis=1))
 
     # the image displacement of a correction is measured against the unmoved projection
     obs_model = _project(K, p)
@@ -243,7 +249,7 @@ def frame_accuracy(
         devs[b] = (
             _angle_deg(rel_r),
             float(np.linalg.norm(rb.T @ tb - r.T @ t)),
-            float(np.nanmean(np.linalg.norm(disp, axis=1))),
+            _mean_finite(np.linalg.norm(disp, axis=1)),
         )
     bound = np.nanpercentile(reps, 95, axis=0)
     noise = np.nanpercentile(devs, 95, axis=0)

@@ -234,6 +234,10 @@ def _report(args: argparse.Namespace) -> int:
     except (InputError, OSError) as err:
         print(f"pgt-check report: error: {safe_text(err)}", file=sys.stderr)
         return 2
+    from pgt_check.report.headline import failure_headline
+
+    for line in failure_headline(summary, out):
+        print(f"pgt-check report: {safe_text(line)}")
     c = summary["counts"]
     print(
         f"pgt-check report: {c['PASS']} PASS, {c['FAIL']} FAIL, {c['UNVERIFIABLE']} UNVERIFIABLE; "

@@ -175,6 +175,7 @@ def page_context(
         "comparison": comparison_rows(comparison) if show_comparison else [],
         "n_disagree": int(comparison.get("frames_disagree") or 0) if show_comparison else 0,
         "shared_errors": shared_error_rows(summary),
+        **_accuracy_context(summary),
         "title": _title(summary, absolute_paths),
         "gate_passed": bool(gate.get("passed")),
         "gate_explanation": str(gate.get("explanation", "")),
@@ -210,6 +211,43 @@ def page_context(
         "versions": sorted((str(k), str(v)) for k, v in (summary.get("versions") or {}).items()),
         "data_json": script_json(data),
     }
+
+
+def _accuracy_context(summary: Mapping[str, Any]) -> dict[str, Any]:
+    """The accuracy section: its sentences and a table of bounds, shared sizes and limits
+    (``summary["accuracy"]``, ``pgt_check.verdict.accuracy``)."""
+    acc = summary.get("accuracy")
+    if not isinstance(acc, Mapping):
+        return {"accuracy_sentences": [], "accuracy_rows": []}
+
+    def g(v: Any) -> str:
+        return fmt(v, ".3g") if isinstance(v, (int, float)) else "-"
+
+    def ci(v: Any, c: Any) -> str:
+        if isinstance(c, (list, tuple)) and len(c) == 2:
+            return f"{g(v)} ({g(c[0])}-{g(c[1])})"
+        return g(v)
+
+    rows = []
+    r, t, p = (acc.get(k) or {} for k in ("rotation_bound_deg", "translation_bound",
+                                          "effect_bound_px"))
+    for label, key in (("per-frame bound, median", "p50"), ("per-frame bound, p90", "p90"),
+                       ("per-frame bound, max", "max")):
+        rows.append((label, g(r.get(key)), g(t.get(key)), g(p.get(key))))
+    for e in acc.get("shared") or []:
+        label = f"shared: {e.get('check')} ({e.get('status')})"
+        rows.append((label, ci(e.get("rotation_deg"), e.get("rotation_deg_ci")),
+                     ci(e.get("translation"), e.get("translation_ci")),
+                     ci(e.get("effect_px"), e.get("effect_px_ci"))))
+    lim = acc.get("limits") or {}
+    rows.append(("detection limit: single frame", g(lim.get("frame_deg")),
+                 g(lim.get("frame_units")), g(lim.get("frame_px"))))
+    rows.append(("detection limit: shared by all frames", g(lim.get("shared_deg")),
+                 g(lim.get("shared_units")), g(lim.get("shared_px"))))
+    rows.append(("one frame's noise (median)", g(lim.get("noise_deg")),
+                 g(lim.get("noise_units")), g(lim.get("noise_px"))))
+    return {"accuracy_sentences": [str(x) for x in acc.get("sentences") or []],
+            "accuracy_rows": rows}
 
 
 def _environment():
