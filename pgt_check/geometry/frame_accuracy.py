@@ -60,6 +60,8 @@ class FrameAccuracy:
     #: at the frame's evidence points (what ``effect_px`` and the run-level fits measure)
     points_px_per_deg: float = float("nan")
     points_px_per_unit: float = float("nan")
+    #: median depth of the inlier points, scene units
+    depth: float = float("nan")
     n_points: int = 0
     n_inliers: int = 0
     n_blocks: int = 0
@@ -279,6 +281,7 @@ def frame_accuracy(
         px_per_unit=float(per_axis_c[3:].mean()),
         points_px_per_deg=float(per_axis[:3].mean() * math.pi / 180),
         points_px_per_unit=float(per_axis[3:].mean()),
+        depth=zc,
         n_points=n,
         n_inliers=n_inl,
         n_blocks=nb,

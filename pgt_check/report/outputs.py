@@ -177,7 +177,7 @@ def build_summary(
 COMPLETION_MARKER = "outputs.complete.json"
 #: the files the marker lists (when present)
 OUTPUT_FILES = ("frames.csv", "config.json", "summary.json", "report.html", "junit.xml",
-                "assets/index.json")
+                "assets/index.json", "calibrated_sensors.txt")
 
 
 def remove_completion_marker(out: Path) -> None:
@@ -242,6 +242,12 @@ def write_outputs(
     atomic_write_text(out / "frames.csv", frames_csv_text(records))
     atomic_write_text(out / "config.json", json.dumps(config.settings_dict(), indent=2) + "\n")
     summary = build_summary(records, config, extra)
+    # a significant calibration estimate as intrinsics a re-run loads (``--sensors``)
+    from pgt_check.report.calibrated_sensors import write_calibrated_sensors
+
+    calibrated = write_calibrated_sensors(out, records, summary.get("shared_errors"))
+    if calibrated is not None:
+        summary["calibrated_sensors"] = _clean(calibrated)
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
     if report:
         from pgt_check.report.html import build_report

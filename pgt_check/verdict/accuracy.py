@@ -50,6 +50,7 @@ ACCURACY_COLUMNS: dict[str, str] = {
     "at the evidence's median depth, px (mean over the camera axes)",
     "acc_pts_px_per_deg": "the same at the frame's evidence points, px per degree",
     "acc_pts_px_per_unit": "the same at the frame's evidence points, px per scene unit",
+    "acc_depth": "median depth of the fit's points, scene units",
     "acc_points": "2D-3D points of the fit (inliers / all)",
     "acc_evidence": "what the bound rests on: absolute sources (raw, enhanced, edges), "
     "'+calibration removed' when a calibration error was taken out first; '' = no bound",
@@ -115,6 +116,7 @@ def _columns(fa: FrameAccuracy) -> dict[str, Any]:
         "acc_px_per_unit": fa.px_per_unit,
         "acc_pts_px_per_deg": fa.points_px_per_deg,
         "acc_pts_px_per_unit": fa.points_px_per_unit,
+        "acc_depth": fa.depth,
         "acc_points": f"{fa.n_inliers}/{fa.n_points}",
         "acc_reason": "",
     }

@@ -93,6 +93,7 @@ def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> Ru
             decided_by=j.decided_by,
         )
         row.update(accuracy[m.frame_id])
+        row["camera_id"] = m.camera_id  # not a frames.csv column (calibrated_sensors.txt)
         rows.append(row)
     return RunJudgement(rows, shared)
 

@@ -1,0 +1,101 @@
+"""The run's accuracy statement, its detection limits and the accuracy gate
+(``verdict.accuracy``), on rows whose per-frame bounds are known."""
+
+from __future__ import annotations
+
+import pytest
+
+from pgt_check.config import RunConfig, VerdictConfig
+from pgt_check.errors import ConfigError
+from pgt_check.verdict.accuracy import ACCURACY_COLUMNS, run_accuracy
+
+
+def _row(fid: str, verdict: str, rot: float | None, t: float | None, noise_px: float = 0.5):
+    r = dict.fromkeys(ACCURACY_COLUMNS)
+    r.update(frame_id=fid, verdict=verdict)
+    if rot is not None:
+        r.update(
+            acc_rot_deg=rot / 2, acc_rot_bound_deg=rot, acc_t=t / 2, acc_t_bound=t,
+            acc_px=1.0, acc_px_bound=2.0, acc_noise_px=noise_px, acc_noise_deg=0.05,
+            acc_noise_t=0.002, acc_px_per_deg=10.0, acc_px_per_unit=200.0,
+            acc_pts_px_per_deg=8.0, acc_pts_px_per_unit=160.0,
+        )
+    return r
+
+
+SHARED = {
+    "threshold_px": 1.5,
+    "registration": {
+        "status": "passed", "angle_deg": 0.05, "angle_deg_ci": [0.01, 0.09],
+        "translation": 0.001, "translation_ci": [0.0, 0.003], "effect_px": 0.5,
+        "effect_px_ci": [0.3, 0.9],
+    },
+    "similarity": {"status": "not_checked"},
+    "drift": {"status": "not_checked"},
+    "calibration": {},
+}
+
+
+def rows():
+    out = [_row(f"{i}", "PASS", 0.1 + 0.01 * i, 0.004 + 0.0001 * i) for i in range(9)]
+    out.append(_row("bad", "FAIL", 3.0, 0.2))
+    out.append(_row("rel", "PASS", None, None))  # relative evidence: no bound
+    return out
+
+
+def test_statement_counts_percentiles_and_limits():
+    acc = run_accuracy(rows(), SHARED, VerdictConfig(), threshold_px=8.0)
+    assert acc.n_frames == 11 and acc.n_bounded == 10
+    assert acc.within_from == "p90_pass"
+    assert acc.within_deg == pytest.approx(0.172, abs=1e-3)
+    assert acc.n_within == 8  # the PASS frames at or below their own 90th percentile
+    assert acc.rotation_bound_deg.max == 3.0
+    # single frame: threshold + median noise, over the corner sensitivities
+    assert acc.limits.frame_px == pytest.approx(8.5)
+    assert acc.limits.frame_deg == pytest.approx(0.85)
+    assert acc.limits.frame_units == pytest.approx(8.5 / 200)
+    # shared: shared threshold + half the registration interval, over the point sensitivities
+    assert acc.limits.shared_px == pytest.approx(1.5 + 0.3)
+    assert acc.limits.shared_deg == pytest.approx(1.8 / 8)
+    reg = next(s for s in acc.shared if s.check == "registration")
+    assert reg.rotation_deg_ci == (0.01, 0.09)
+    assert any(s.startswith("8 of 11 frames are verified") for s in acc.sentences)
+    assert acc.gate_passed is None  # nothing required
+    d = acc.to_json()
+    assert d["limits"]["frame_px"] == pytest.approx(8.5) and isinstance(d["sentences"], list)
+
+
+def test_gate_on_required_accuracy():
+    lax = VerdictConfig(require_accuracy_deg=1.0, require_accuracy_units=0.05,
+                        max_fail_fraction=0.2)
+    acc = run_accuracy(rows(), SHARED, lax, 8.0)
+    # 'bad' is above and 'rel' has no bound: 2 of 11 <= 0.2
+    assert acc.gate_passed, acc.gate_explanation
+    strict = VerdictConfig(require_accuracy_deg=1.0, require_accuracy_units=0.05,
+                           max_fail_fraction=0.1)
+    acc = run_accuracy(rows(), SHARED, strict, 8.0)
+    assert acc.gate_passed is False and "1 without absolute evidence" in acc.gate_explanation
+    # a shared error whose upper bound exceeds the requirement fails the gate
+    tight = VerdictConfig(require_accuracy_deg=0.08, require_accuracy_units=1.0,
+                          max_fail_fraction=1.0)
+    acc = run_accuracy(rows(), SHARED, tight, 8.0)
+    assert acc.gate_passed is False and "registration" in acc.gate_explanation
+
+
+def test_require_accuracy_config_is_typed_and_range_checked():
+    with pytest.raises(ConfigError):
+        RunConfig.from_dict({"verdict": {"require_accuracy_deg": -1.0}})
+    with pytest.raises(ConfigError):
+        RunConfig.from_dict({"verdict": {"require_accuracy_deg": 200.0}})
+    with pytest.raises(ConfigError):
+        RunConfig.from_dict({"verdict": {"require_accuracy_units": "1cm"}})
+    with pytest.raises(ConfigError):
+        RunConfig.from_dict({"verdict": {"require_accuracy": [1, 2]}})  # unknown key
+    cfg = RunConfig.from_dict({"verdict": {"require_accuracy_deg": 0.5,
+                                           "require_accuracy_units": 0.02}})
+    assert cfg.verdict.require_accuracy_deg == 0.5
+
+
+def test_no_bounds_is_said_plainly():
+    acc = run_accuracy([_row("a", "PASS", None, None)], None, VerdictConfig(), 8.0)
+    assert acc.n_bounded == 0 and acc.sentences[0].startswith("None of the 1 frames")
