@@ -13,10 +13,10 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from pgt_check.report.calibrated_sensors import CALIBRATED_SENSORS
+
 logger = logging.getLogger(__name__)
 
-#: written next to summary.json when the calibration fit is significant (``report.calibration``)
-CALIBRATED_SENSORS = "calibrated_sensors.txt"
 REGISTERED_TRAJECTORY = "registered_trajectory.txt"
 
 
