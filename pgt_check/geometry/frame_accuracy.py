@@ -57,6 +57,9 @@ class FrameAccuracy:
     #: at the image corners (the corner error's points), at the evidence's median depth
     px_per_deg: float = float("nan")
     px_per_unit: float = float("nan")
+    #: the same about / along the camera axis that moves the corners least (roll; forward)
+    min_px_per_deg: float = float("nan")
+    min_px_per_unit: float = float("nan")
     #: at the frame's evidence points (what ``effect_px`` and the run-level fits measure)
     points_px_per_deg: float = float("nan")
     points_px_per_unit: float = float("nan")
@@ -279,6 +282,8 @@ def frame_accuracy(
         effect_noise_px=float(noise[2]),
         px_per_deg=float(per_axis_c[:3].mean() * math.pi / 180),
         px_per_unit=float(per_axis_c[3:].mean()),
+        min_px_per_deg=float(per_axis_c[:3].min() * math.pi / 180),
+        min_px_per_unit=float(per_axis_c[3:].min()),
         points_px_per_deg=float(per_axis[:3].mean() * math.pi / 180),
         points_px_per_unit=float(per_axis[3:].mean()),
         depth=zc,

@@ -222,7 +222,9 @@ def test_5000_frames_stay_small(tmp_path, config):
     make_run(tmp_path, config, recs, with_assets=False)
     html = (tmp_path / "report.html").read_bytes()
     assert len(html) < 3_000_000  # table as compact JSON, no per-frame markup
-    assert html.count(b"<tr") < 100  # rows are built by the script, one page at a time
+    # rows are built by the script, one page at a time (the fixed tables: summary, run-level
+    # checks, accuracy, settings, timing)
+    assert html.count(b"<tr") < 130
     check_report(tmp_path, recs)
 
 

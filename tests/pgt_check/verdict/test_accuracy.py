@@ -17,7 +17,8 @@ def _row(fid: str, verdict: str, rot: float | None, t: float | None, noise_px: f
         r.update(
             acc_rot_deg=rot / 2, acc_rot_bound_deg=rot, acc_t=t / 2, acc_t_bound=t,
             acc_px=1.0, acc_px_bound=2.0, acc_noise_px=noise_px, acc_noise_deg=0.05,
-            acc_noise_t=0.002, acc_px_per_deg=10.0, acc_px_per_unit=200.0,
+            acc_noise_t=0.002, acc_px_per_deg=12.0, acc_px_per_unit=250.0,
+            acc_min_px_per_deg=10.0, acc_min_px_per_unit=200.0,
             acc_pts_px_per_deg=8.0, acc_pts_px_per_unit=160.0,
         )
     return r
@@ -50,7 +51,7 @@ def test_statement_counts_percentiles_and_limits():
     assert acc.within_deg == pytest.approx(0.172, abs=1e-3)
     assert acc.n_within == 8  # the PASS frames at or below their own 90th percentile
     assert acc.rotation_bound_deg.max == 3.0
-    # single frame: threshold + median noise, over the corner sensitivities
+    # single frame: threshold + median noise, over the weakest axis' corner sensitivity
     assert acc.limits.frame_px == pytest.approx(8.5)
     assert acc.limits.frame_deg == pytest.approx(0.85)
     assert acc.limits.frame_units == pytest.approx(8.5 / 200)
