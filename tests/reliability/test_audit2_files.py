@@ -131,7 +131,7 @@ def test_calibration_from_missing_file_exits_2_before_measuring(tmp_path, cli, b
     rc, _, err = cli(*base_args("--calibration-from", str(tmp_path / "typo.json")))
     line = _error_line(rc, err)
     case("--calibration-from typo.json (missing)", "2 before any frame is measured",
-         f"{rc}: {line[-90:]}; records.jsonl "
+         f"{rc}: {line.replace(str(tmp_path), '<tmp>')[-90:]}; records.jsonl "
          f"{'written' if (tmp_path / 'out' / 'records.jsonl').exists() else 'not written'}")
     assert rc == 2 and "not found" in line
     assert not (tmp_path / "out" / "records.jsonl").exists()
@@ -197,7 +197,8 @@ def test_nerfstudio_bad_camera_angle(angle, tmp_path, case):
     with pytest.raises(InputError, match="camera") as info:
         read_trajectory(p)
     case(f"nerfstudio camera_angle_x: {angle}", "InputError (CLI: 2)",
-         f"{type(info.value).__name__}: {str(info.value)[-110:]}")
+         f"{type(info.value).__name__}: "
+         f"{str(info.value).replace(str(tmp_path), '<tmp>')[-110:]}")
 
 
 def test_nerfstudio_deep_json(tmp_path, case):
@@ -207,7 +208,8 @@ def test_nerfstudio_deep_json(tmp_path, case):
     with pytest.raises(InputError, match="nested too deeply") as info:
         read_trajectory(p, "nerfstudio")
     case("nerfstudio transforms.json nested 100,000 deep", "InputError (CLI: 2)",
-         f"{type(info.value).__name__}: {str(info.value)[-90:]}")
+         f"{type(info.value).__name__}: "
+         f"{str(info.value).replace(str(tmp_path), '<tmp>')[-90:]}")
     with pytest.raises(InputError):
         read_trajectory(p)  # format detection reads it too
 

@@ -125,7 +125,7 @@ def test_run_refuses_to_overwrite_its_input(scene, tmp_path, cli, base_args, cas
     args += ["--sensors", str(scene / "sensors.txt"), "--images", str(scene / "images.txt")]
     rc, _, err = cli(*args)
     case("--out holds the run's own input (OUT/corrected_trajectory.txt)", "2, input untouched",
-         f"{rc}: {err.strip()[-100:]}")
+         f"{rc}: {err.strip().replace(str(tmp_path), '<tmp>')[-100:]}")
     assert rc == 2 and "would overwrite" in _one_error_line(err, "pgt-check: error:")
     assert not (out / "records.jsonl").exists()
 
@@ -224,7 +224,8 @@ def test_enhance_errors(what, sample_scene, scene, tmp_path, cli, case):
     rc, _, err = cli("enhance", renders, sample_scene / "trajectories.txt", "--out", out, "-q",
                      *extra)
     line = _one_error_line(err, "pgt-check enhance: error:")
-    case(f"enhance: {what}", "2, one line", f"{rc}: {line[-110:]}")
+    shown = line.replace(str(tmp_path), "<tmp>")
+    case(f"enhance: {what}", "2, one line", f"{rc}: {shown[-110:]}")
     assert rc == 2
 
 
