@@ -86,6 +86,10 @@ class EdgeAlignConfig:
     #: Tukey scale of the last refinement stage: max(min_scale_px, final_scale x tau)
     final_scale: float = 0.35
     min_scale_px: float = 1.5
+    #: observability of the refined motion: a parameter direction along which a coherent misfit
+    #: of 1 px of the edges would move the image corners by more than this (px) is held at its
+    #: start (lines through one point leave a zoom about it free; issue #29)
+    max_corner_gain: float = 20.0
     #: before refining, re-search the shift within +- this (px) at the narrow final scale
     polish_radius_px: int = 3
     #: a third start (``tiles.tile_start``): the affine map fitting the best shifts of a

@@ -114,6 +114,43 @@ def _update_matrix(delta: np.ndarray, model: str) -> np.ndarray:
     return np.eye(3) + a
 
 
+def _observable_solve(
+    a: np.ndarray,
+    g: np.ndarray,
+    lam: float,
+    hn: np.ndarray,
+    corners: np.ndarray,
+    scale: float,
+    n_weight: float,
+    max_gain: float,
+    model: str,
+) -> np.ndarray:
+    """The damped Gauss-Newton step ``(a + lam I)^-1 g`` restricted to the parameter directions
+    the edges determine.
+
+    ``a`` = J^T W J over points of total weight ``n_weight`` (residuals in px); along its
+    eigen-direction v (eigenvalue e), a coherent misfit of 1 px rms of the edges moves the
+    parameters by sqrt(n_weight / e) and the image corners (``corners``, normalised
+    coordinates, ``scale`` per px) by that times their motion per unit of v. Directions whose
+    corners would move by more than ``max_gain`` px are left where they are: edges constrain a
+    motion only across themselves, and lines through one point (a room corner) leave a zoom
+    about that point and perspective terms free; the refinement would drift along them with
+    the matches' noise and the corner error of a correct pose would not be small (issue #29).
+    """
+    ev, vecs = np.linalg.eigh(a)
+    if not np.all(np.isfinite(ev)):
+        raise np.linalg.LinAlgError("non-finite normal equations")
+    eps = 1e-6
+    base = warp_points(hn, corners)
+    keep = np.zeros(len(ev), dtype=bool)
+    for i in np.flatnonzero(ev > 0):
+        moved = warp_points(_update_matrix(eps * vecs[:, i], model) @ hn, corners)
+        per_unit = float(np.sqrt(np.mean(np.sum((moved - base) ** 2, axis=1)))) / eps / scale
+        keep[i] = per_unit * math.sqrt(n_weight / ev[i]) <= max_gain
+    proj = vecs[:, keep].T @ g
+    return vecs[:, keep] @ (proj / (ev[keep] + lam))
+
+
 def refine(
     re: RenderEdges,
     pe: PhotoEdges,
@@ -157,7 +194,9 @@ def refine(
             g = jw.T @ r
             lam = config.damping * float(np.trace(a)) / len(a) + 1e-12
             try:
-                delta = -np.linalg.solve(a + lam * np.eye(len(a)), g)
+                delta = -_observable_solve(
+                    a, g, lam, hn, corners, scale, float(wgt.sum()), config.max_corner_gain, model
+                )
             except np.linalg.LinAlgError:
                 return t_inv @ hn @ t, math.inf
             new = _update_matrix(delta, model) @ hn
