@@ -15,7 +15,8 @@ is measured above the threshold in about 95 % of frames), turned into degrees / 
 run's median sensitivities (px per degree, px per scene unit) about the axis that moves the
 image corners least (so the limit holds whatever the error's axis); the shared limit is the
 shared threshold plus the half-width of the registration fit's own 95 % interval, turned with
-the sensitivities at the evidence points averaged over the axes.
+the image effect of a world rotation / translation as the registration check measures it
+(``world_sensitivity``).
 """
 
 from __future__ import annotations
@@ -128,6 +129,45 @@ def _columns(fa: FrameAccuracy) -> dict[str, Any]:
         "acc_points": f"{fa.n_inliers}/{fa.n_points}",
         "acc_reason": "",
     }
+
+
+def world_sensitivity(measurements: Sequence[FrameMeasurement]) -> tuple[float, float]:
+    """(px per degree, px per scene unit) of a shared error: the image effect of rotating the
+    world by 1 deg about the camera centroid, or shifting it by 1 unit, as the registration
+    check measures it (median over frames of the mean displacement of a frame's evidence
+    points), about / along the world axis where it is smallest (the limit holds whatever the
+    axis). A world rotation also moves the camera centres, which on views around an object
+    undoes much of its image effect: a camera-frame sensitivity would overstate it. NaN
+    without evidence."""
+    from pgt_check.geometry.transforms import axis_angle_to_rotmat
+    from pgt_check.verdict.shared import frame_evidence
+
+    ev = [e for e in frame_evidence(measurements) if len(e.pts3d)]
+    if not ev:
+        return float("nan"), float("nan")
+    c = np.mean([e.world_from_cam[:3, 3] for e in ev], axis=0)
+
+    def effect(move) -> float:
+        per = []
+        for e in ev:
+            r, t = e.world_from_cam[:3, :3], e.world_from_cam[:3, 3]
+            x0 = (e.pts3d - t) @ r
+            x1 = (move(e.pts3d) - t) @ r
+            ok = (x0[:, 2] > 1e-9) & (x1[:, 2] > 1e-9)
+            if not ok.any():
+                continue
+            u0 = (x0[ok] @ e.K.T)[:, :2] / x0[ok, 2:3]
+            u1 = (x1[ok] @ e.K.T)[:, :2] / x1[ok, 2:3]
+            per.append(float(np.mean(np.linalg.norm(u1 - u0, axis=1))))
+        return float(np.median(per)) if per else float("nan")
+
+    eye = np.eye(3)
+    step_deg, step_units = 0.1, 1e-3 * max(float(np.median(
+        [np.linalg.norm(e.pts3d - e.world_from_cam[:3, 3], axis=1).mean() for e in ev])), 1e-9)
+    rots = [axis_angle_to_rotmat(a, step_deg) for a in eye]
+    rot = min(effect(lambda x, rr=rr: (x - c) @ rr.T + c) for rr in rots) / step_deg
+    tra = min(effect(lambda x, d=a: x + step_units * d) for a in eye) / step_units
+    return rot, tra
 
 
 def calibrations_to_remove(
@@ -325,8 +365,13 @@ def detection_limits(
     # 1 of 3 rotations at the limit, random axes)
     ppd = _median([r.get("acc_min_px_per_deg") for r in rows])
     ppu = _median([r.get("acc_min_px_per_unit") for r in rows])
-    pts_ppd = _median([r.get("acc_pts_px_per_deg") for r in rows])
-    pts_ppu = _median([r.get("acc_pts_px_per_unit") for r in rows])
+    # the shared limit: the registration check's own sensitivity to a world rotation /
+    # translation (``world_sensitivity``, stored with the registration entry by judge_run);
+    # else the frames' camera-frame sensitivity at their points
+    reg_s = ((shared or {}).get("registration") or {}).get("sensitivity") or {}
+    pts_ppd = _num(reg_s.get("px_per_deg")) or _median([r.get("acc_pts_px_per_deg") for r in rows])
+    pts_ppu = _num(reg_s.get("px_per_unit")) or _median(
+        [r.get("acc_pts_px_per_unit") for r in rows])
     frame_px = None if noise_px is None else threshold_px + noise_px
     shared_px = None
     reg = (shared or {}).get("registration") or {}
@@ -347,8 +392,9 @@ def detection_limits(
         "into a rotation alone or a translation alone with the run's median sensitivities at "
         "the image corners (where the corner error is measured) about / along the camera axis "
         "that moves them least, so it holds whatever the axis; shared: shared threshold + "
-        "half-width of the registration fit's 95 % interval (px), with the sensitivities at "
-        "the evidence points (where the shared fits measure their effect)",
+        "half-width of the registration fit's 95 % interval (px), turned with the image "
+        "effect of a world rotation about the camera centroid / a world translation as the "
+        "registration check measures it, about / along the world axis where it is smallest",
     )  # fmt: skip
 
 

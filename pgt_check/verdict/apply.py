@@ -9,7 +9,11 @@ from typing import Any
 from pgt_check.config import RunConfig
 from pgt_check.enhance.base import Evidence
 from pgt_check.measure.record import FrameMeasurement
-from pgt_check.verdict.accuracy import calibrations_to_remove, frame_accuracy_columns
+from pgt_check.verdict.accuracy import (
+    calibrations_to_remove,
+    frame_accuracy_columns,
+    world_sensitivity,
+)
 from pgt_check.verdict.decide import (
     Judgement,
     Verdict,
@@ -54,6 +58,10 @@ def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> Ru
     Measurements are not changed (records.jsonl stays as measured)."""
     ms = list(measurements)
     shared = run_shared_checks(ms, config) if config.verdict.shared_checks and ms else None
+    if shared is not None and shared.registration.get("status") not in (None, "not_checked"):
+        # what a world rotation / translation does to the images (the shared detection limit)
+        ppd, ppu = world_sensitivity(ms)
+        shared.registration["sensitivity"] = {"px_per_deg": ppd, "px_per_unit": ppu}
     v = config.verdict
     outs = [path_outcomes(m, v, shared) for m in ms]
     own = own_outcomes(ms, v, shared, outs)

@@ -39,6 +39,11 @@ def test_columns_summary_and_sentences(sample_run, capsys):
     assert acc["n_frames"] == 8 and acc["n_bounded"] == 8
     assert {"limits", "shared", "rotation_bound_deg", "sentences"} <= set(acc)
     assert acc["limits"]["frame_deg"] > 0 and acc["limits"]["shared_deg"] > 0
+    # the shared limit uses the registration check's own sensitivity to a world move
+    sens = s["shared_errors"]["registration"]["sensitivity"]
+    assert sens["px_per_deg"] > 0 and sens["px_per_unit"] > 0
+    assert acc["limits"]["shared_deg"] == pytest.approx(
+        acc["limits"]["shared_px"] / sens["px_per_deg"])
     assert any("frames are verified to within" in x for x in acc["sentences"])
 
 
