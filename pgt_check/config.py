@@ -234,8 +234,16 @@ class EdgeConfig:
     #: UNVERIFIABLE instead of 95 / 0 / 5) and it costs ~0.1 s/frame
     #: (reports/shared_errors_tiles.md, README)
     tile_grid: int = 0
+    #: how an edge alignment is accepted: "significance" (its score against the frame's own
+    #: wrong alignments, false-accept rate about ``alpha`` whatever the scene) or "support"
+    #: (the rule before issue #29: a fixed share of render edges on photo edges; still the
+    #: default, as the significance rule verified fewer colourless 7-Scenes frames);
+    #: reports/edge_evidence.md has both side by side
+    decision: Literal["significance", "support"] = "support"
+    alpha: float = 0.01
 
     def __post_init__(self) -> None:
+        _check_range("edges.alpha", self.alpha, 0, 0.5, lo_open=True)
         if self.resize_max == 0:
             object.__setattr__(self, "resize_max", None)
         _check_range("edges.resize_max", self.resize_max, 16, MAX_IMAGE_SIDE)

@@ -257,3 +257,93 @@ def textureless_scene(out_dir: str | Path, n_frames: int = 24) -> tuple[Trajecto
     if not (out / "trajectories.txt").is_file():
         make_textureless_scene(out, n_frames)
     return read_trajectory(out / "trajectories.txt"), out / "boxes.ply"
+
+
+# -- a scan-like version of the textureless scene (issue #29) ---------------------------------
+def scan_like_mesh(mesh, seed: int = 0, edge_len: float = 0.08, noise: float = 0.01,
+                   smooth_iters: int = 6, hole_fraction: float = 0.04, keep_fraction: float = 0.5):
+    """The boxes mesh as a depth-sensor scan would make it (a documented approximation of TSDF
+    fusion of noisy depth, without marching cubes, which needs scikit-image): subdivided to
+    ~``edge_len`` m, vertices moved by Gaussian noise (``noise`` m) along their normals,
+    Taubin smoothing (rounded edges and creases, no shrinking), blob-shaped holes (about
+    ``hole_fraction`` of the faces removed around random seeds), quadric decimation to
+    ``keep_fraction`` of the faces (fast_simplification, when installed). Returns a trimesh."""
+    import trimesh
+
+    rng = np.random.default_rng(seed)
+    m = trimesh.Trimesh(mesh.vertices.copy(), mesh.faces.copy(), process=True)
+    v, f = trimesh.remesh.subdivide_to_size(m.vertices, m.faces, max_edge=edge_len)
+    m = trimesh.Trimesh(v, f, process=True)
+    m.vertices += m.vertex_normals * rng.normal(0, noise, (len(m.vertices), 1))
+    trimesh.smoothing.filter_taubin(m, lamb=0.5, nu=0.53, iterations=smooth_iters)
+    centres = m.triangles_center
+    drop = np.zeros(len(m.faces), bool)
+    n_holes = max(1, int(hole_fraction * len(m.faces) / 60))
+    for c in centres[rng.choice(len(centres), n_holes, replace=False)]:
+        drop |= np.linalg.norm(centres - c, axis=1) < rng.uniform(0.08, 0.25)
+    m.update_faces(~drop)
+    m.remove_unreferenced_vertices()
+    try:
+        import fast_simplification
+
+        v, f = fast_simplification.simplify(m.vertices.astype(np.float32), m.faces,
+                                            target_reduction=1.0 - keep_fraction)
+        m = trimesh.Trimesh(v, f, process=False)
+    except ImportError:  # the noisy, smoothed, holed mesh as it is
+        pass
+    m.visual.vertex_colors = np.array([[170, 170, 170, 255]] * len(m.vertices), np.uint8)
+    return m
+
+
+def make_scan_like_scene(out_dir: str | Path, n_frames: int = 12, seed: int = 0,
+                         size: tuple[int, int] = (320, 240)) -> Path:
+    """A textureless scene as a handheld RGB-D capture gives it: the mesh ``scan.ply`` is
+    ``scan_like_mesh`` of the boxes (rounded, holed, decimated, no colours), the photos are of
+    the clean boxes plus objects that are not in the mesh (a cylinder, a thin cable-like bar),
+    with exposure changes (gain 0.6-1.4), blur (sigma 0.7-1.8 px), noise and JPEG. LaMAR files
+    with the TRUE poses. Returns the trajectory path."""
+    import cv2
+    import trimesh
+
+    from pgt_check.io.lamar import write_lamar
+    from pgt_check.render import make_renderer, mesh_from_trimesh
+    from pgt_check.types import Camera
+
+    out = Path(out_dir)
+    (out / "images").mkdir(parents=True, exist_ok=True)
+    scene = boxes_scene(seed)
+    clean = trimesh.util.concatenate(list(scene.geometry.values()))
+    scan_like_mesh(clean, seed).export(out / "scan.ply")
+    extra = [trimesh.creation.cylinder(radius=0.25, height=1.0), trimesh.creation.box([2.5, 0.05, 0.05])]
+    extra[0].apply_translation([0.9, -0.6, 0.5])
+    extra[1].apply_translation([-0.3, -0.4, 0.03])
+    for e in extra:
+        e.visual.vertex_colors = np.array([[90, 80, 70, 255]] * len(e.vertices), np.uint8)
+    photo_scene = trimesh.Scene([*scene.geometry.values(), *extra])
+    w, h = size
+    cam = Camera.pinhole(w, h, 0.9 * w, 0.9 * w, (w - 1) / 2, (h - 1) / 2)
+    coloured = make_renderer(mesh_from_trimesh(photo_scene))
+    shaded = make_renderer(mesh_from_trimesh(photo_scene, shading="shaded"))
+    rng = np.random.default_rng(seed + 1)
+    frames = []
+    try:
+        for i in range(n_frames):
+            a = -0.9 + 1.8 * i / max(n_frames - 1, 1)
+            r = 4.0 + 0.5 * np.sin(3 * a)
+            eye = np.array([r * np.sin(a), -r * np.cos(a), 1.6 + 0.3 * np.cos(2 * a)])
+            pose = _look_at(eye, np.array([0.0, 0.6, 0.5]))
+            img = 0.4 * shaded.render(cam, pose).rgb + 0.65 * coloured.render(cam, pose).rgb
+            img = img * rng.uniform(0.6, 1.4)
+            img = cv2.GaussianBlur(img, (0, 0), rng.uniform(0.7, 1.8))
+            img = img + rng.normal(0, 0.03, img.shape).astype(np.float32)
+            name = f"images/{i:04d}.jpg"
+            cv2.imwrite(str(out / name),
+                        cv2.cvtColor((np.clip(img, 0, 1) * 255).astype(np.uint8),
+                                     cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 75])
+            frames.append(Frame(f"{i}", cam, pose, image_path=name, image_file=out / name,
+                                timestamp=float(i)))
+    finally:
+        coloured.close()
+        shaded.close()
+    write_lamar(Trajectory(tuple(frames), str(out), "lamar"), out)
+    return out / "trajectories.txt"

@@ -139,7 +139,7 @@ MEASUREMENT_COLUMNS: tuple[Column, ...] = (
     ),
     Column(
         "edge_reason",
-        "why the edge path is not verifiable (ambiguous, low_support, ...)",
+        "why the edge path is not verifiable (ambiguous, not_significant, ...)",
         _path_attr("edges", "reason", ""),
     ),
     Column("enhanced", "whether the enhanced path ran", lambda m: m.enhance_ran),

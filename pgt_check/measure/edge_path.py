@@ -54,7 +54,16 @@ def measure_edges(
         render.depth, cam_w.K, RenderEdgeConfig(include_borders=config.include_borders)
     )
     pedges = photo_edges(photo_w)
-    al = align_edges(redges, pedges, EdgeAlignConfig(model=config.model, tile_grid=config.tile_grid))
+    al = align_edges(
+        redges,
+        pedges,
+        EdgeAlignConfig(
+            model=config.model,
+            tile_grid=config.tile_grid,
+            decision=config.decision,
+            alpha=config.alpha,
+        ),
+    )
     h = err = dx = dy = zoom = None
     if al.success and al.photo_from_render is not None:
         h_orig = scale_homography(al.photo_from_render, *scale)

@@ -106,7 +106,8 @@ def _ambiguity_after(
     edges moved by ``hmat``. A motion that no single shift fits (a zoom, a strong keystone)
     spreads the shift scores over several peaks, one per image part, and reads as ambiguous;
     once aligned by the model, its edges peak at one shift. A repeated structure or a ridge of
-    parallel edges stays ambiguous (the second peak is still there)."""
+    parallel edges stays ambiguous (the second peak is still there). The significance
+    (``p_value``) is judged there too: a zoom also lowers the best shift's peak."""
     q = warp_points(hmat, re.points)
     inside = np.all(np.isfinite(q), axis=1)
     inside &= (q[:, 0] >= 0) & (q[:, 0] <= re.width - 1) & (q[:, 1] >= 0) & (q[:, 1] <= re.height - 1)
@@ -126,6 +127,8 @@ def _ambiguity_after(
         second_score=again.second_score,
         ambiguity=again.ambiguity,
         ambiguous=False,
+        p_value=again.p_value,
+        n_null=again.n_null,
     )
 
 
@@ -174,6 +177,8 @@ def _measured(
         ambiguity=found.ambiguity,
         ambiguous=found.ambiguous,
         matches=matches,
+        p_value=found.p_value,
+        n_null=found.n_null,
     )
 
 
@@ -216,7 +221,10 @@ def align_edges(
     # (b) refinement of the shift start and of the tile start; the lower robust cost wins
     t2 = time.perf_counter()
     hmat = _refined(re, pe, bins, found.best_shift, tau, config)
-    if found.ambiguous and config.tile_grid >= 2:
+    spread = found.ambiguous or (
+        config.decision == "significance" and not found.p_value <= config.alpha
+    )
+    if spread and config.tile_grid >= 2:
         # with the tile start, a zoom no single shift fits is aligned: judge it again there
         # (not by default: on shaded 7-Scenes renders it accepted wrong alignments that the
         # shift search had called ambiguous, and a 2 deg + 4 % misregistration was flagged
@@ -232,16 +240,21 @@ def align_edges(
         reason = EdgeReason.ILL_CONDITIONED
     elif found.ambiguous:
         reason = EdgeReason.AMBIGUOUS
-    elif support < config.min_support:
+    elif config.decision == "support" and support < config.min_support:
         reason = EdgeReason.LOW_SUPPORT
+    elif config.decision == "significance" and not found.p_value <= config.alpha:
+        reason = EdgeReason.NOT_SIGNIFICANT
     if reason is not None:
         return _failure(reason, re, pe, tau, config, timings, **out)
     logger.debug(
-        "edge alignment: corner error %.2f px, support %.2f (identity %.2f), ambiguity %.2f",
+        "edge alignment: corner error %.2f px, support %.2f (identity %.2f), ambiguity %.2f, "
+        "p %.2g (%d null cells)",
         out["corner_error"],
         support,
         support_id,
         found.ambiguity,
+        found.p_value,
+        found.n_null,
     )
     return EdgeAlignment(
         success=True,

@@ -10,6 +10,8 @@ KIND_OCCLUSION = 0  # depth discontinuity between two surfaces
 KIND_BORDER = 1  # mesh / background border
 KIND_CREASE = 2  # normal discontinuity on one surface
 
+#: decision rules of ``align_edges`` (``EdgeAlignConfig.decision``)
+DECISIONS = ("significance", "support")
 MODELS = ("shift", "similarity", "affine", "homography")
 #: parameters of each model (refinement needs at least 3 matches per parameter)
 N_PARAMS = {"shift": 2, "similarity": 4, "affine": 6, "homography": 8}
@@ -23,6 +25,7 @@ class EdgeReason(str, Enum):
     NO_OVERLAP = "no_overlap"
     LOW_SUPPORT = "low_support"
     AMBIGUOUS = "ambiguous"
+    NOT_SIGNIFICANT = "not_significant"
     ILL_CONDITIONED = "ill_conditioned_homography"
 
 
@@ -105,4 +108,20 @@ class EdgeAlignConfig:
     ambiguity_separation: float = 3.0
     min_edges: int = 50
     min_photo_edges: int = 50
+    #: how a found alignment is accepted (besides not ambiguous, well conditioned):
+    #: "significance": its shift score is significant at level ``alpha`` against the frame's own
+    #: wrong alignments (``search.null_p_value``): the false-accept rate of a frame with no true
+    #: alignment in the search range is about ``alpha`` whatever the scene; "support" (the rule
+    #: before issue #29, still the default: reports/edge_evidence.md): at least
+    #: ``min_support`` of the render edges lie on a photo edge
+    decision: str = "support"
+    alpha: float = 0.01
     min_support: float = 0.3
+
+    def __post_init__(self) -> None:
+        if self.decision not in DECISIONS:
+            raise ValueError(
+                f"decision must be one of {', '.join(DECISIONS)}, got {self.decision!r}"
+            )
+        if not 0.0 < self.alpha < 1.0:
+            raise ValueError(f"alpha must be in (0, 1), got {self.alpha}")

@@ -178,7 +178,9 @@ class EdgeAlignment:
     shifts; ambiguity: (second_score - baseline) / (score - baseline), 0 if there is no runner-up.
     support: share of render edge points within tau of a compatible photo edge after alignment;
     support_identity: the same at the identity. residual_px: median |point-to-line| distance of
-    the matched points. timings: seconds per step.
+    the matched points. timings: seconds per step. p_value: the best shift's significance
+    against the frame's own wrong alignments (``search.null_p_value``; 1 = not tested), over
+    ``n_null`` null cells.
     """
 
     success: bool
@@ -201,3 +203,5 @@ class EdgeAlignment:
     model: str
     matches: EdgeMatches = field(default_factory=_no_matches)
     timings: dict[str, float] = field(default_factory=dict)
+    p_value: float = 1.0
+    n_null: int = 0

@@ -131,11 +131,65 @@ def _fine_search(
     return shifts[i], float(sc[i])
 
 
+#: Euler-Mascheroni constant (mean of the standard Gumbel distribution)
+_EULER_GAMMA = 0.5772156649015329
+
+
+def null_p_value(
+    grid: np.ndarray, xs: np.ndarray, ys: np.ndarray, best: tuple[int, int], min_dist: float,
+    min_cells: int = 8,
+) -> tuple[float, int]:
+    """Significance of the best shift against the null distribution of the same frame.
+
+    The coarse score grid is cut into cells about ``min_dist`` px wide (one peak each); the
+    maxima of the cells farther than ``min_dist`` from the best shift are the frame's own
+    wrong alignments (the same edges against the same photo, so the clutter, edge density and
+    correlation along edges are the frame's own). A Gumbel distribution fitted to them (by
+    moments: the maximum of many correlated scores) gives the chance that one cell reaches the
+    best score; times the number of cells within ``min_dist`` of the best (the place of the
+    alignment, Bonferroni) it is the returned p-value, with the number of null cells.
+
+    What it bounds: on a frame with no true alignment in the search range (a wrong pose whose
+    error is not a 2D shift), a chance alignment at a given place (where a PASS must be: near
+    the identity) is accepted at level alpha with probability about alpha. A chance
+    alignment accepted elsewhere has a large corner error (FAIL, the pose is wrong anyway); the
+    test is not corrected for the number of places (it would be for "some alignment exists").
+    Too few valid null cells: p = 1 (not testable)."""
+    step = float(xs[1] - xs[0]) if len(xs) > 1 else 1.0
+    k = max(1, int(math.ceil(min_dist / step)))
+    ny, nx = grid.shape
+    py, px = (-ny) % k, (-nx) % k
+    padded = np.pad(grid, ((0, py), (0, px)), constant_values=-np.inf)
+    cells = padded.reshape((ny + py) // k, k, (nx + px) // k, k).max(axis=(1, 3))
+    # distance of each cell (its nearest grid point) to the best shift
+    cy = np.arange(cells.shape[0]) * k
+    cx = np.arange(cells.shape[1]) * k
+    by, bx = best
+    dy = np.maximum(0, np.maximum(cy - by, by - (cy + k - 1)))
+    dx = np.maximum(0, np.maximum(cx - bx, bx - (cx + k - 1)))
+    far = np.hypot(dx[None, :] * step, dy[:, None] * step) > min_dist
+    null = cells[far & (cells > 0)]
+    n_near = max(1, int(np.sum(~far & (cells > 0))))
+    if len(null) < min_cells:
+        return 1.0, len(null)
+    best_score = float(grid[by, bx])
+    m, sd = float(np.mean(null)), float(np.std(null, ddof=1))
+    if sd <= 0:
+        return (0.0 if best_score > m else 1.0), len(null)
+    beta = sd * math.sqrt(6.0) / math.pi
+    mu = m - _EULER_GAMMA * beta
+    z = (best_score - mu) / beta
+    p_one = -math.expm1(-math.exp(-z)) if z > -50 else 1.0  # 1 - F(best)
+    return float(min(1.0, n_near * p_one)), len(null)
+
+
 @dataclass(frozen=True)
 class ShiftSearch:
     """Outcome of ``search_shifts``: the best integer shift (dx, dy) and its score, the
     separated runner-up (None: none) and its score, the median score of all coarse shifts
-    (``baseline``), the ambiguity and whether it makes the best shift ambiguous."""
+    (``baseline``), the ambiguity and whether it makes the best shift ambiguous; ``p_value``
+    and ``n_null``: the best shift's significance against the frame's own wrong alignments
+    (``null_p_value``)."""
 
     best_shift: np.ndarray
     best_score: float
@@ -144,6 +198,8 @@ class ShiftSearch:
     baseline: float
     ambiguity: float
     ambiguous: bool
+    p_value: float = 1.0
+    n_null: int = 0
 
 
 def coarse_step(config: EdgeAlignConfig, diag: float, tau: float) -> int:
@@ -182,6 +238,7 @@ def search_shifts(
     by, bx = np.unravel_index(int(np.argmax(sc)), sc.shape)
     sep = config.ambiguity_separation * tau
     runner = _separated_runner_up(sc, offs, offs, (int(by), int(bx)), sep)
+    p_value, n_null = null_p_value(sc, offs, offs, (int(by), int(bx)), sep)
 
     # fine 1-px search around the best and the runner-up
     t1 = time.perf_counter()
@@ -216,5 +273,6 @@ def search_shifts(
     ambiguous = second_shift is not None and ambiguity >= config.ambiguity_ratio
     timings["fine"] = time.perf_counter() - t1
     return ShiftSearch(
-        best_shift, best_score, second_shift, second_score, baseline, ambiguity, ambiguous
+        best_shift, best_score, second_shift, second_score, baseline, ambiguity, ambiguous,
+        p_value, n_null,
     )

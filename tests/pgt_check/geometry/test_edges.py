@@ -704,3 +704,59 @@ def test_lines_through_one_point_leave_the_corners_where_they_are():
     free = align_edges(re, photo_edges(load_image(frame.image_file)),
                        EdgeAlignConfig(max_corner_gain=math.inf))
     assert free.corner_error > 5.0
+
+
+# ---------------------------------------------------------------------------------------------
+# the significance rule (issue #29)
+
+SIG = EdgeAlignConfig(decision="significance")
+
+
+def test_significance_accepts_correct_frames_and_rejects_unrelated_edges():
+    """Drawn photos at the true pose (known truth): every alignment is significant at alpha;
+    the same render edges against photos of other scenes (no true alignment anywhere: the
+    null) are accepted at about alpha or less (0 of 12 here, where alpha = 0.01)."""
+    correct = [align_edges(geometric_edges(blocks_depth(s, 9), K),
+                           photo_edges(photo_from_depth(blocks_depth(s, 9), seed=s)), SIG)
+               for s in range(6)]
+    assert all(a.success and a.p_value <= 0.01 and a.corner_error < 1.5 for a in correct)
+    wrong = [align_edges(geometric_edges(blocks_depth(s, 9), K),
+                         photo_edges(photo_from_depth(blocks_depth(s + 100, 9), seed=s)), SIG)
+             for s in range(12)]
+    assert sum(a.success for a in wrong) <= 1
+    assert all(a.reason in (EdgeReason.NOT_SIGNIFICANT, EdgeReason.AMBIGUOUS)
+               for a in wrong if not a.success)
+    assert np.median([a.p_value for a in wrong]) > 0.05
+    # a shifted photo: the alignment is found and significant, at the shift (a FAIL, not a PASS)
+    z = blocks_depth(3, 9)
+    al = align_edges(geometric_edges(z, K), photo_edges(photo_from_depth(z, translation(14, -9))), SIG)
+    assert al.success and al.p_value <= 0.01
+    assert corner_distance(al.photo_from_render, translation(14, -9)) < 1.0
+
+
+def test_decision_rules_are_selectable():
+    z = blocks_depth(1, 9)
+    re, pe = geometric_edges(z, K), photo_edges(photo_from_depth(z, seed=1))
+    sig = align_edges(re, pe, SIG)
+    old = align_edges(re, pe, EdgeAlignConfig(decision="support", min_support=sig.support + 0.01))
+    assert sig.success and not old.success and old.reason is EdgeReason.LOW_SUPPORT
+    strict = align_edges(re, pe, EdgeAlignConfig(decision="significance", alpha=sig.p_value / 2))
+    assert not strict.success and strict.reason is EdgeReason.NOT_SIGNIFICANT
+    with pytest.raises(ValueError, match="decision"):
+        EdgeAlignConfig(decision="votes")
+    with pytest.raises(ValueError, match="alpha"):
+        EdgeAlignConfig(alpha=0.0)
+
+
+def test_null_p_value_on_a_flat_grid_with_one_peak():
+    from pgt_check.geometry.edges.search import null_p_value
+
+    rng = np.random.default_rng(0)
+    grid = rng.normal(0.3, 0.02, (41, 41)).clip(0.01)
+    xs = np.arange(-20, 21) * 2.0
+    grid[20, 20] = 0.6
+    p, n = null_p_value(grid, xs, xs, (20, 20), 9.0)
+    assert p < 1e-3 and n > 50
+    grid[20, 20] = 0.31  # no higher than the noise
+    assert null_p_value(grid, xs, xs, (20, 20), 9.0)[0] > 0.1
+    assert null_p_value(grid[18:23, 18:23], xs[18:23], xs[18:23], (2, 2), 9.0) == (1.0, 0)

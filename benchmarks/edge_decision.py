@@ -1,0 +1,124 @@
+"""Edge-path decision rules side by side (issue #29): significance vs support.
+
+    nice -n 10 python benchmarks/edge_decision.py [--frames 12] [--out reports/edge_decision.json]
+
+Per dataset, every frame is aligned (``geometry.edges.align_edges``, default settings) at its
+given pose and at a perturbed copy of it (every frame of the copy perturbed, neighbours too:
+2-5 deg about a random axis and a 2-8 % of the scene depth camera move). One alignment per
+frame and pose; the two rules decide on the same alignment:
+- support (before #29): not ambiguous, well conditioned, support >= 0.3;
+- significance (alpha 0.01): not ambiguous, well conditioned, p_value <= alpha.
+PASS = accepted and corner error (original px) <= the default verdict threshold.
+Columns: PASS share on the given poses, per-frame ROC-AUC (score = corner error, not accepted
+= +inf; label = perturbed) and the false PASS rate on the perturbed copy.
+Datasets: boxes (generated, clean), scan-like boxes (``evaluation.make_scan_like_scene``),
+castle (colourless MVS mesh, 1024 px), 7-Scenes redkitchen rendered without colours (640 px).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from pgt_check.config import RunConfig
+from pgt_check.evaluation import make_scan_like_scene, make_textureless_scene, perturb_pose, roc_auc
+from pgt_check.geometry.edges import align_edges, geometric_edges, photo_edges
+from pgt_check.geometry.homography import check_homography, corner_error, scale_homography
+from pgt_check.io import load_image, read_trajectory
+from pgt_check.render import load_mesh, make_renderer
+
+ALPHA = 0.01
+MIN_SUPPORT = 0.3
+
+
+def _datasets(n: int, tmp: Path) -> dict[str, tuple[Path, Path, int]]:
+    shared = Path(os.environ.get("PGT_SHARED_DATA", "/work/shared/data"))
+    out = {
+        "boxes": (make_textureless_scene(tmp / "boxes", n), tmp / "boxes" / "boxes.ply", 320),
+        "boxes scan-like": (make_scan_like_scene(tmp / "scan", n), tmp / "scan" / "scan.ply", 320),
+    }
+    if (shared / "sceaux_castle").is_dir():
+        out["castle"] = (shared / "sceaux_castle/trajectories.txt",
+                         shared / "sceaux_castle/mesh.ply", 1024)
+        out["7s colourless"] = (shared / "7scenes_redkitchen/trajectories.txt",
+                                shared / "7scenes_redkitchen/mesh.ply", 640)
+    return out
+
+
+def measure(traj_path: Path, mesh: Path, size: int, n: int, seed: int = 0) -> list[dict]:
+    import cv2
+
+    traj = read_trajectory(traj_path)
+    idx = np.linspace(0, len(traj.frames) - 1, min(n, len(traj.frames))).round().astype(int)
+    centres = np.array([f.center for f in traj.frames])
+    depth = float(np.linalg.norm(centres - centres.mean(0), axis=1).mean()) or 1.0
+    rng = np.random.default_rng(seed)
+    r = make_renderer(load_mesh(mesh, shading="shaded"))
+    rows = []
+    try:
+        for i in idx:
+            f = traj.frames[int(i)]
+            s = min(1.0, size / max(f.camera.width, f.camera.height))
+            cam = f.camera.scaled(s, s)
+            photo = cv2.resize(load_image(f.image_file), (cam.width, cam.height),
+                               interpolation=cv2.INTER_AREA)
+            pe = photo_edges(photo)
+            bad = perturb_pose(f.world_from_cam, rng.uniform(2, 5), rng.uniform(0.02, 0.08) * depth, rng)
+            for label, pose in (("given", f.world_from_cam), ("perturbed", bad)):
+                al = align_edges(geometric_edges(r.render(cam, pose).depth, cam.K), pe)
+                ok = al.photo_from_render is not None and check_homography(
+                    al.photo_from_render, cam.width, cam.height) is None and not al.ambiguous
+                err = (corner_error(scale_homography(al.photo_from_render, s, s),
+                                    f.camera.width, f.camera.height) if ok else float("inf"))
+                rows.append(dict(frame=f.frame_id, case=label, ok=bool(ok), err=float(err),
+                                 support=float(al.support), p=float(al.p_value),
+                                 reason=al.reason.value if al.reason else "",
+                                 threshold=RunConfig().verdict.threshold_for(
+                                     f.camera.width, f.camera.height)))
+    finally:
+        r.close()
+    return rows
+
+
+def summarise(rows: list[dict]) -> dict[str, dict]:
+    out = {}
+    rules = {"support": lambda x: x["ok"] and x["support"] >= MIN_SUPPORT,
+             "significance": lambda x: x["ok"] and x["p"] <= ALPHA}
+    for name, acc in rules.items():
+        giv = [x for x in rows if x["case"] == "given"]
+        per = [x for x in rows if x["case"] == "perturbed"]
+        passed = lambda x: acc(x) and x["err"] <= x["threshold"]  # noqa: E731
+        score = np.array([x["err"] if acc(x) else np.inf for x in giv + per])
+        lab = np.array([False] * len(giv) + [True] * len(per))
+        out[name] = dict(pass_given=float(np.mean([passed(x) for x in giv])),
+                         auc=roc_auc(score, lab),
+                         false_pass=float(np.mean([passed(x) for x in per])), n=len(giv))
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=12)
+    ap.add_argument("--datasets", default="")
+    ap.add_argument("--out", default="reports/edge_decision.json")
+    a = ap.parse_args(argv)
+    res = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, (traj, mesh, size) in _datasets(a.frames, Path(tmp)).items():
+            if a.datasets and name not in a.datasets.split(","):
+                continue
+            rows = measure(traj, mesh, size, a.frames)
+            res[name] = dict(summary=summarise(rows), rows=rows)
+            print(name, json.dumps(res[name]["summary"]), flush=True)
+    Path(a.out).write_text(json.dumps(res, indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
