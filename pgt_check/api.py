@@ -158,7 +158,7 @@ def check(
 def _rows(out: Path, cfg: RunConfig) -> list[dict[str, Any]]:
     """The judged rows of a finished run directory (verdicts + correction columns)."""
     from pgt_check.measure.correct import add_correction_columns, load_corrections
-    from pgt_check.report.cli import load_run
+    from pgt_check.report.stored import load_run
     from pgt_check.verdict import apply_verdicts
 
     records, _ = load_run(out)

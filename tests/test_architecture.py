@@ -17,8 +17,8 @@ LAYERS = {
     "store": 3,
     "report": 4, "registration_refine": 4,
     "executor": 5, "inputs": 5, "runner": 5, "corrections": 5, "compare": 5,
-    "enhance_cli": 5, "enhance_refs": 5,
-    "cli": 6, "__main__": 6, "api": 6,
+    "enhance_folder": 5, "enhance_refs": 5,
+    "cli": 6, "commands": 6, "__main__": 6, "api": 6,
 }
 
 

@@ -55,7 +55,7 @@ def test_load_config_file(tmp_path):
 
 
 def test_presets_are_valid_configs_and_cli_options_override_them():
-    from pgt_check.cli import build_parser, load_config
+    from pgt_check.commands.check import build_parser, load_config
     from pgt_check.config import PRESETS
 
     for name in PRESETS:

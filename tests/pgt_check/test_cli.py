@@ -12,6 +12,20 @@ def test_help_exits_zero(capsys):
     assert "--mesh" in capsys.readouterr().out
 
 
+def test_help_lists_every_subcommand_and_each_has_help(capsys):
+    from pgt_check.commands import SUBCOMMANDS
+
+    assert set(SUBCOMMANDS) == {"report", "compare", "enhance"}
+    assert main(["--help"]) == 0
+    out = capsys.readouterr().out
+    for name, sub in SUBCOMMANDS.items():
+        assert f"pgt-check {name} {sub.usage}" in out
+        assert main([name, "--help"]) == 0
+        assert capsys.readouterr().out.startswith(f"usage: pgt-check {name} ")
+        assert main([name, "--no-such-flag"]) == 2  # one line (see test_audit2_usage)
+        assert capsys.readouterr().err.startswith(f"pgt-check {name}: error: ")
+
+
 def test_usage_error_exits_two(capsys):
     assert main([]) == 2
     assert main(["traj.txt"]) == 2  # --mesh is required

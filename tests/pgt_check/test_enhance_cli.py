@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from pgt_check.cli import main
-from pgt_check.enhance_cli import (
+from pgt_check.enhance_folder import (
     METRIC_COLUMNS,
     REFERENCE_COLUMNS,
     RenderItem,

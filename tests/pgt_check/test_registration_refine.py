@@ -237,7 +237,7 @@ def test_refine_frames_spreads_the_frames_with_evidence_first(moved_case):
 
 
 def test_config_and_cli_reach_the_rounds():
-    from pgt_check.cli import build_parser, load_config
+    from pgt_check.commands.check import build_parser, load_config
     from pgt_check.errors import ConfigError
 
     with pytest.raises(ConfigError, match="registration_rounds"):
@@ -300,14 +300,14 @@ def test_a_failing_refinement_leaves_the_run_and_its_first_estimate(tmp_path, mo
     monkeypatch.setattr(rr, "refine_run", broken)
     config = RunConfig.from_dict({"input": {"trajectory": "t", "mesh": "m"},
                                   "out": str(tmp_path / "out"), "report_details": 0})
-    summary = check_frames(list(_trajectory(4).frames), config, Checker)
+    summary = check_frames(list(_trajectory(4).frames), config, Checker, input_keys={}, inputs={})
     assert summary["counts"]["UNVERIFIABLE"] == 4
     assert "refinement" not in summary["shared_errors"]["registration"]
     assert (tmp_path / "out" / "summary.json").is_file()
     strict = RunConfig.from_dict({"input": {"trajectory": "t", "mesh": "m"}, "fail_fast": True,
                                   "out": str(tmp_path / "out2"), "report_details": 0})
     with pytest.raises(RuntimeError, match="refinement broke"):
-        check_frames(list(_trajectory(4).frames), strict, Checker)
+        check_frames(list(_trajectory(4).frames), strict, Checker, input_keys={}, inputs={})
 
 
 @pytest.mark.parametrize(

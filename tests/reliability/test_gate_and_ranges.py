@@ -55,7 +55,7 @@ def test_config_file_gets_the_same_checks(tmp_path, cli, base_args, case):
 
 def test_resize_max_zero_means_original_size():
     assert RunConfig.from_dict({"match": {"resize_max": 0}}).match.resize_max is None
-    from pgt_check.cli import build_parser, load_config
+    from pgt_check.commands.check import build_parser, load_config
 
     args = build_parser().parse_args(["t.txt", "--mesh", "m.ply", "--resize-max", "0"])
     assert load_config(args).match.resize_max is None

@@ -15,10 +15,10 @@ from report_testdata import (
     synthetic_measurements,
 )
 
+from pgt_check.commands.report import main as report_main
 from pgt_check.config import RunConfig
 from pgt_check.measure import FrameImages
 from pgt_check.report.assets import select_detail_frames, write_frame_assets
-from pgt_check.report.cli import report_main
 from pgt_check.report.html import (
     build_report,
     display_path,

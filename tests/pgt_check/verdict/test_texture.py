@@ -9,7 +9,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-from pgt_check.cli import shared_error_lines
+from pgt_check.commands.check import shared_error_lines
 from pgt_check.config import RunConfig
 from pgt_check.geometry.shared_errors.texture import FramePoints, texture_offset
 from pgt_check.measure import AbsoluteEvidence, FrameMeasurement

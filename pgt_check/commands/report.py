@@ -2,6 +2,7 @@
 
 Rewrites frames.csv, summary.json, report.html (+ plots) and junit.xml; the detail images already
 in ``OUT_DIR/assets/`` (listed in ``assets/index.json``) are reused, never re-rendered.
+Exit codes: 0 the gate passed, 1 it failed, 2 usage or input error, 130 interrupted.
 """
 
 from __future__ import annotations
@@ -15,60 +16,10 @@ from typing import Any
 from pgt_check._cli import OneLineErrorParser, install_sigterm_handler, parse_args
 from pgt_check.config import RunConfig, merge
 from pgt_check.errors import InputError
-from pgt_check.files import MAX_SMALL_JSON_BYTES, load_json_limited, regular_file_size, safe_text
+from pgt_check.files import MAX_SMALL_JSON_BYTES, load_json_limited, safe_text
 from pgt_check.measure.correct import add_correction_columns, load_corrections
-from pgt_check.measure.record import FrameMeasurement, OldRecordError
-from pgt_check.store import FINGERPRINT_KEY
-
-
-def load_run(out_dir: Path) -> tuple[list[FrameMeasurement], dict]:
-    """The stored measurements (trajectory order) and config.json of a finished run.
-
-    Reads the current records of ``records.jsonl`` (the fingerprint and frame order come from
-    ``run.json``); records of another pgt-check record layout are an InputError.
-    """
-    from pgt_check.store import RUN_FILE, iter_records
-
-    rec_path, cfg_path, run_path = (
-        out_dir / "records.jsonl",
-        out_dir / "config.json",
-        out_dir / RUN_FILE,
-    )
-    for p in (rec_path, cfg_path, run_path):
-        if not p.exists():
-            raise InputError(f"{p} not found: is {out_dir} a pgt-check output directory?")
-    regular_file_size(rec_path, "record store")
-    info = load_json_limited(run_path, MAX_SMALL_JSON_BYTES, "run.json")
-    cfg = load_json_limited(cfg_path, MAX_SMALL_JSON_BYTES, "config.json")
-    if not isinstance(info, dict):
-        raise InputError(f"{run_path}: expected a JSON object; got {type(info).__name__}")
-    if not isinstance(cfg, dict):
-        raise InputError(f"{cfg_path}: expected a JSON object; got {type(cfg).__name__}")
-    ids = info.get("frame_ids")
-    if ids is not None and (
-        not isinstance(ids, list) or not all(isinstance(i, str) for i in ids)
-    ):
-        raise InputError(f"{run_path}: expected 'frame_ids' to be a list of strings")
-    latest = {
-        str(r["frame_id"]): r
-        for r in iter_records(rec_path)
-        if r.get(FINGERPRINT_KEY) == info.get("fingerprint")
-    }
-    order = ids or list(latest)
-    missing = [fid for fid in order if fid not in latest]
-    if missing:
-        raise InputError(
-            f"{out_dir}: {len(missing)} of {len(order)} frames have no record (e.g. "
-            f"{missing[0]!r}): the run did not finish; resume it first"
-        )
-    if not isinstance(info, dict) or not isinstance(cfg, dict):
-        raise InputError(f"{out_dir}: run.json or config.json is not a JSON object")
-    try:
-        return [FrameMeasurement.from_json(latest[fid]) for fid in order], cfg
-    except OldRecordError as err:
-        raise InputError(f"{rec_path}: {err}") from err
-    except (KeyError, ValueError, TypeError, AttributeError, IndexError) as err:
-        raise InputError(f"{rec_path}: a record is malformed ({type(err).__name__}: {err})") from err
+from pgt_check.measure.record import FrameMeasurement
+from pgt_check.report.stored import load_run
 
 
 def _shared_extra(judged: Any, out: Path) -> dict[str, Any]:
@@ -173,7 +124,7 @@ def verdict_overrides(args: argparse.Namespace) -> dict:
     return {n: getattr(args, n) for n, _ in _verdict_fields() if getattr(args, n) is not None}
 
 
-def report_main(argv: Sequence[str]) -> int:
+def build_parser() -> argparse.ArgumentParser:
     p = OneLineErrorParser(
         prog="pgt-check report", description="Rebuild outputs of a run from its stored records."
     )
@@ -185,7 +136,11 @@ def report_main(argv: Sequence[str]) -> int:
         default=None,
         help="show absolute paths of this machine in the report (default: shortened)",
     )
-    args = parse_args(p, argv)
+    return p
+
+
+def main(argv: Sequence[str]) -> int:
+    args = parse_args(build_parser(), argv)
     if isinstance(args, int):
         return args
     install_sigterm_handler()

@@ -1,5 +1,6 @@
-"""``pgt-check enhance RENDERS MODEL --out DIR``: enhance a folder of renders with the nearest
-training photos (MaRINeR's second application: better novel views of a NeRF / mesh).
+"""Enhance a folder of renders with the nearest training photos (MaRINeR's second application:
+better novel views of a NeRF / mesh); the command ``pgt-check enhance RENDERS MODEL --out DIR``
+(``pgt_check.commands.enhance``) wraps ``enhance_folder``.
 
 Inputs and the naming convention:
 
@@ -30,8 +31,6 @@ Outputs in ``--out``: ``images/<render name>.png`` (enhanced, render size), ``re
 renders, resized to the render's size when they differ), ``metrics.csv`` (per render: PSNR-Y,
 SSIM-Y, LPIPS-Alex of the raw render and of the enhanced image against the photo) and
 ``metrics.md`` (the same with means).
-
-Exit codes: 0 done; 2 usage, input or setup error (one line, no traceback).
 """
 
 from __future__ import annotations
@@ -39,20 +38,13 @@ from __future__ import annotations
 import argparse
 import logging
 import math
-import sys
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from pgt_check._cli import (
-    OneLineErrorParser,
-    configure_logging,
-    install_sigterm_handler,
-    parse_args,
-)
-from pgt_check.enhance_refs import (  # re-exported: the subcommand's public helpers
+from pgt_check.enhance_refs import (  # re-exported: the folder enhancement's public helpers
     IMAGE_SUFFIXES,
     RenderItem,
     find_renders,
@@ -74,15 +66,14 @@ __all__ = [
     "METRIC_COLUMNS",
     "REFERENCE_COLUMNS",
     "RenderItem",
-    "build_parser",
     "enhance_folder",
-    "enhance_main",
     "find_gt",
     "find_renders",
     "frame_index",
     "metrics_markdown",
     "nearest_references",
     "pose_renders",
+    "summary_lines",
 ]
 
 logger = logging.getLogger(__name__)
@@ -386,83 +377,17 @@ def enhance_folder(args: argparse.Namespace) -> dict[str, Any]:
     return summary
 
 
-def build_parser() -> argparse.ArgumentParser:
-    from pgt_check.io import FORMATS
-
-    p = OneLineErrorParser(
-        prog="pgt-check enhance",
-        description="Enhance a folder of renders with the nearest training photos (MaRINeR or "
-        "reprojection); with --gt, PSNR-Y/SSIM-Y/LPIPS of raw vs enhanced. Renders are named "
-        "like the model's images (or like the entries of --render-poses) to take their poses. "
-        "Exit codes: 0 done, 2 usage, input or setup error.",
-    )
-    p.add_argument("renders", help="folder of rendered images (.png/.jpg, top level)")
-    p.add_argument("model", help="training images with poses: transforms.json, COLMAP model or "
-                   "any pose file pgt-check reads")
-    p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--format", default="auto", choices=["auto", *FORMATS],
-                   help="format of MODEL")
-    p.add_argument("--images", default=None, help="image folder of MODEL")
-    p.add_argument("--sensors", default=None, help="LaMAR sensors file of MODEL")
-    p.add_argument("--camera", default=None, help="intrinsics for TUM / hloc pose files")
-    p.add_argument("--dataparser-transforms", default=None,
-                   help="nerfstudio dataparser_transforms.json to undo (MODEL)")
-    p.add_argument("--render-poses", default=None,
-                   help="pose file for the renders (any format pgt-check reads); default: the "
-                   "renders are named like MODEL's images")
-    p.add_argument("--render-poses-format", default="auto", choices=["auto", *FORMATS])
-    p.add_argument("--method", default="mariner", choices=["mariner", "reproject"])
-    p.add_argument("--mesh", default=None, help="mesh for --method reproject")
-    p.add_argument("--shading", default="auto", choices=["auto", "vertex", "texture", "shaded"],
-                   help="mesh shading for --method reproject (depth only is used)")
-    p.add_argument("--weights", default=None, help="MaRINeR checkpoint (default: shipped)")
-    p.add_argument("--iterations", type=int, default=None,
-                   help="MaRINeR refinement iterations (default: the checkpoint's)")
-    p.add_argument("--short-side", type=int, default=160,
-                   help="MaRINeR working size, shorter side in px (default 160)")
-    p.add_argument("--device", default="cpu", help="torch device for MaRINeR (cpu, cuda, auto)")
-    p.add_argument("--max-rotation-deg", type=float, default=45.0,
-                   help="largest rotation between a render and its reference (default 45)")
-    p.add_argument("--translation-scale", type=float, default=None,
-                   help="scene units worth 10 deg in the reference distance (default: 10 %% of "
-                   "the training cameras' extent)")
-    p.add_argument("--allow-same-view", action="store_true",
-                   help="let a render take the model photo of its own view (same name or pose) "
-                   "as reference: an upper bound, the enhancer then sees the ground truth")
-    p.add_argument("--gt", default=None, help="folder of ground-truth photos named like the "
-                   "renders: writes metrics.csv and metrics.md")
-    p.add_argument("--no-lpips", action="store_true", help="skip LPIPS in the metrics")
-    p.add_argument("--limit", type=int, default=None, help="only the first N renders")
-    p.add_argument("-q", "--quiet", action="store_true")
-    return p
-
-
-def enhance_main(argv: Sequence[str]) -> int:
-    args = parse_args(build_parser(), argv)
-    if isinstance(args, int):
-        return args
-    configure_logging(0, args.quiet, logging.ERROR)  # -q: errors only
-    install_sigterm_handler()
-    try:
-        summary = enhance_folder(args)
-    except (InputError, ValueError, OSError) as err:
-        if isinstance(err, OSError) and not isinstance(err, InputError) and err.filename:
-            text = f"{err.filename}: {err.strerror or type(err).__name__}"
-        else:
-            text = " ".join(str(err).split("\n"))
-        print(f"pgt-check enhance: error: {safe_text(text)}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print("pgt-check enhance: interrupted", file=sys.stderr)
-        return 130
-    print(f"pgt-check enhance: {summary['enhanced']} of {summary['renders']} renders enhanced "
-          f"({summary['method']}) into {safe_text(Path(args.out) / 'images')}")
+def summary_lines(summary: dict[str, Any], out: str | Path) -> list[str]:
+    """What ``pgt-check enhance`` prints about a finished ``enhance_folder`` run."""
+    lines = [f"pgt-check enhance: {summary['enhanced']} of {summary['renders']} renders enhanced "
+             f"({summary['method']}) into {safe_text(Path(out) / 'images')}"]
     if summary["with_gt"]:
-        print(f"pgt-check enhance: against {summary['with_gt']} photos: PSNR-Y "
-              f"{_fmt(summary['psnr_y_raw'], 2)} -> {_fmt(summary['psnr_y_enhanced'], 2)} dB, "
-              f"SSIM-Y {_fmt(summary['ssim_y_raw'], 3)} -> {_fmt(summary['ssim_y_enhanced'], 3)}"
-              + (f", LPIPS {_fmt(summary['lpips_raw'], 3)} -> "
-                 f"{_fmt(summary['lpips_enhanced'], 3)}" if summary["lpips_raw"] is not None
-                 else "")
-              + f" ({Path(args.out) / 'metrics.md'})")
-    return 0
+        lines.append(
+            f"pgt-check enhance: against {summary['with_gt']} photos: PSNR-Y "
+            f"{_fmt(summary['psnr_y_raw'], 2)} -> {_fmt(summary['psnr_y_enhanced'], 2)} dB, "
+            f"SSIM-Y {_fmt(summary['ssim_y_raw'], 3)} -> {_fmt(summary['ssim_y_enhanced'], 3)}"
+            + (f", LPIPS {_fmt(summary['lpips_raw'], 3)} -> "
+               f"{_fmt(summary['lpips_enhanced'], 3)}" if summary["lpips_raw"] is not None
+               else "")
+            + f" ({Path(out) / 'metrics.md'})")
+    return lines
