@@ -171,8 +171,13 @@ def page_context(
     if not isinstance(comparison, Mapping):
         comparison = path_comparison(records)
     show_comparison = has_enhanced_path(records)
+    settings = summary.get("settings")
+    enhance = settings.get("enhance") if isinstance(settings, Mapping) else None
+    method = enhance.get("method") if isinstance(enhance, Mapping) else None
     return {
         "comparison": comparison_rows(comparison) if show_comparison else [],
+        # which enhancer made the enhanced path (MaRINeR or reprojection), for the table head
+        "enhance_method": str(method) if isinstance(method, str) else "",
         "n_disagree": int(comparison.get("frames_disagree") or 0) if show_comparison else 0,
         "shared_errors": shared_error_rows(summary),
         **_accuracy_context(summary),

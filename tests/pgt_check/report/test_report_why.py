@@ -53,6 +53,24 @@ def test_raw_vs_enhanced_in_summary_and_report(tmp_path, config):
     check_report(tmp_path, recs)
 
 
+def test_comparison_names_the_enhancer(tmp_path, config):
+    """The raw-vs-enhanced table says which enhancer made the enhanced path (MaRINeR or
+    reprojection), read from the run's settings."""
+    import dataclasses
+
+    recs = judged(synthetic_measurements(20, enhanced=True), config)
+    for method in ("mariner", "reproject"):
+        cfg = dataclasses.replace(
+            config, enhance=dataclasses.replace(config.enhance, method=method)
+        )
+        out = tmp_path / method
+        write_outputs(out, recs, cfg)
+        text = strip_tags((out / "report.html").read_text(encoding="utf-8"))
+        assert f"enhanced ({method})" in text
+        other = "reproject" if method == "mariner" else "mariner"
+        assert f"enhanced ({other})" not in text
+
+
 def test_no_enhanced_path_no_comparison_no_empty_plot(tmp_path, config):
     recs = judged(synthetic_measurements(30, enhanced=True), config)
     for r in recs:  # enhancement decided never to run
