@@ -33,7 +33,7 @@ import numpy as np
 from _common import REPORTS, command_line, machine, md_table, shared_data
 
 from pgt_check.config import PRESETS, RunConfig, merge
-from pgt_check.evaluation import move_trajectory, shared_transform
+from pgt_eval import move_trajectory, shared_transform
 from pgt_check.geometry.transforms import axis_angle_to_rotmat
 from pgt_check.io import read_trajectory
 from pgt_check.measure import FrameChecker, FrameMeasurement, pick_references

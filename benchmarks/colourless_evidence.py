@@ -37,7 +37,7 @@ from _common import REPORTS, command_line, machine, md_table
 from shared_errors import cases, datasets, scene_depth
 
 from pgt_check.config import RunConfig
-from pgt_check.evaluation import roc_auc
+from pgt_eval import roc_auc
 from pgt_check.types import Trajectory
 from pgt_check.verdict.decide import Verdict, path_outcome
 

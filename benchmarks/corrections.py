@@ -71,7 +71,7 @@ def scenes(names: list[str]) -> dict[str, tuple[Trajectory, str, dict]]:
 def run_scene(name, truth, mesh, extra, n_frames, rot, trans, seed):
     from pgt_check.config import merge
     from pgt_check.corrections import correct_frame
-    from pgt_check.evaluation import perturb_pose
+    from pgt_eval import perturb_pose
     from pgt_check.geometry.transforms import pose_difference
     from pgt_check.measure import FrameChecker, pick_references
 

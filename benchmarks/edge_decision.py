@@ -11,7 +11,7 @@ frame and pose; the two rules decide on the same alignment:
 PASS = accepted and corner error (original px) <= the default verdict threshold.
 Columns: PASS share on the given poses, per-frame ROC-AUC (score = corner error, not accepted
 = +inf; label = perturbed) and the false PASS rate on the perturbed copy.
-Datasets: boxes (generated, clean), scan-like boxes (``evaluation.make_scan_like_scene``),
+Datasets: boxes (generated, clean), scan-like boxes (``pgt_eval.make_scan_like_scene``),
 castle (colourless MVS mesh, 1024 px), 7-Scenes redkitchen rendered without colours (640 px).
 """
 
@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from pgt_check.config import RunConfig
-from pgt_check.evaluation import make_scan_like_scene, make_textureless_scene, perturb_pose, roc_auc
+from pgt_eval import make_scan_like_scene, make_textureless_scene, perturb_pose, roc_auc
 from pgt_check.geometry.edges import align_edges, geometric_edges, photo_edges
 from pgt_check.geometry.homography import check_homography, corner_error, scale_homography
 from pgt_check.io import load_image, read_trajectory

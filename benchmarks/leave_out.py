@@ -51,7 +51,7 @@ def perturbed_ids() -> set[str]:
 
 
 def main() -> None:
-    from pgt_check.evaluation import roc_auc
+    from pgt_eval import roc_auc
 
     rows = []
     bad = perturbed_ids()

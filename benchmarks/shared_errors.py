@@ -30,7 +30,7 @@ import numpy as np
 from _common import REPORTS, command_line, machine, md_table, shared_data
 
 from pgt_check.config import RunConfig
-from pgt_check.evaluation import (
+from pgt_eval import (
     change_intrinsics,
     drift_trajectory,
     move_pose,
@@ -75,7 +75,7 @@ def datasets(names: list[str], n: int) -> dict[str, tuple[Trajectory, Path, dict
             r = root / "sceaux_castle"
             out[name] = (read_trajectory(r / "trajectories.txt"), r / "mesh.ply", {})
         elif name == "boxes":
-            from pgt_check.evaluation import textureless_scene
+            from pgt_eval import textureless_scene
 
             traj, mesh = textureless_scene(REPORTS.parent / "sample_data" / "boxes", n)
             out[name] = (traj, mesh, {})

@@ -1,4 +1,6 @@
-"""Evaluation helpers shared by tests and benchmarks: pose perturbation and ROC-AUC."""
+"""Evaluation helpers shared by tests and benchmarks (not part of ``pgt_check``): injected pose
+errors (per frame, shared, drift, intrinsics, time offset), ROC-AUC and generated scenes
+(textureless boxes, scan-like meshes)."""
 
 from __future__ import annotations
 

@@ -11,7 +11,7 @@ PKG = Path(__file__).resolve().parents[1] / "pgt_check"
 #: layer of each top-level part; a module may import only its own layer or lower ones
 LAYERS = {
     "errors": 0, "_checks": 0, "files": 0, "types": 0, "config": 0, "config_load": 0, "registry": 0, "_cli": 0,
-    "io": 1, "render": 1, "match": 1, "geometry": 1, "enhance": 1, "evaluation": 1,
+    "io": 1, "render": 1, "match": 1, "geometry": 1, "enhance": 1,
     "measure": 2,
     "verdict": 3,
     "store": 3,
@@ -96,3 +96,20 @@ def test_layers_point_one_way():
 def test_every_part_has_a_layer():
     parts = {_part(m) for m in import_graph()} - {"__init__"}
     assert parts <= set(LAYERS), sorted(parts - set(LAYERS))
+
+
+def test_package_holds_no_test_scaffolding():
+    """Test and benchmark helpers live outside the package (``pgt_eval``, ``tests/``,
+    ``benchmarks/``): nothing in ``pgt_check`` imports them."""
+    bad = []
+    for path in PKG.rglob("*.py"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = []
+            if isinstance(node, ast.Import):
+                names = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                names = [node.module]
+            bad += [f"{path.relative_to(PKG.parent)} imports {n}" for n in names
+                    if n.split(".")[0] in ("pgt_eval", "tests", "benchmarks")]
+    assert not bad, "\n".join(bad)
+    assert not (PKG / "evaluation.py").exists()

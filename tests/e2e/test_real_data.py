@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pgt_check.evaluation import perturb_trajectory, roc_auc
+from pgt_eval import perturb_trajectory, roc_auc
 from pgt_check.io import read_trajectory
 from pgt_check.types import Trajectory
 

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from pgt_check.cli import main
-from pgt_check.evaluation import move_trajectory, shared_transform, textureless_scene
+from pgt_eval import move_trajectory, shared_transform, textureless_scene
 from pgt_check.geometry.transforms import pose_difference
 from pgt_check.io import read_trajectory, write_lamar
 from pgt_check.types import Trajectory
@@ -161,7 +161,7 @@ def test_real_drifting_segment_is_separated(shared_data, dataset, tmp_path, caps
     error, so the reprojected references cannot see it): the drift check separates the
     drifting frames by their drift score, covers the ones without evidence of their own, and
     none of them PASSes."""
-    from pgt_check.evaluation import drift_trajectory, roc_auc
+    from pgt_eval import drift_trajectory, roc_auc
 
     root, depth, extra, traj = _real(shared_data, dataset)
     drifted, ids = drift_trajectory(traj, 0.6, 2.0, 0.04 * depth, seed=2)

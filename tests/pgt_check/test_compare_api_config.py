@@ -8,7 +8,7 @@ import json
 import pytest
 
 from pgt_check.cli import main
-from pgt_check.evaluation import perturb_trajectory
+from pgt_eval import perturb_trajectory
 from pgt_check.io import read_trajectory, write_lamar
 from pgt_check.types import Trajectory
 

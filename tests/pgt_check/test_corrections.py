@@ -106,7 +106,7 @@ def test_real_data_correction_7scenes(shared_data):
     fixed point of render/photo matching is not the given pose itself)."""
     from pgt_check.config import RunConfig
     from pgt_check.corrections import correct_frame
-    from pgt_check.evaluation import perturb_pose
+    from pgt_eval import perturb_pose
     from pgt_check.measure import FrameChecker
 
     d = shared_data / "7scenes_redkitchen"

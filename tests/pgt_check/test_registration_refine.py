@@ -16,7 +16,7 @@ import pytest
 
 from pgt_check.config import RunConfig
 from pgt_check.enhance.base import Evidence
-from pgt_check.evaluation import _look_at, move_trajectory, shared_transform
+from pgt_eval import _look_at, move_trajectory, shared_transform
 from pgt_check.geometry.transforms import invert_rigid, rotation_angle_deg
 from pgt_check.measure import AbsoluteEvidence, FrameMeasurement, PathMeasurement
 from pgt_check.registration_refine import (

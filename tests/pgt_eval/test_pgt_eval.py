@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from pgt_check.evaluation import perturb_pose, perturb_trajectory, roc_auc
+from pgt_eval import perturb_pose, perturb_trajectory, roc_auc
 from pgt_check.geometry.transforms import pose_difference
 from pgt_check.types import Camera, Frame, Trajectory
 

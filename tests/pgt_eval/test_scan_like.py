@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pgt_check.evaluation import boxes_scene, make_scan_like_scene, scan_like_mesh
+from pgt_eval import boxes_scene, make_scan_like_scene, scan_like_mesh
 
 
 def _clean():

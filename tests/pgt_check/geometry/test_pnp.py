@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from pgt_check.evaluation import perturb_pose
+from pgt_eval import perturb_pose
 from pgt_check.geometry.pnp import estimate_pose_correction, lift_keypoints
 from pgt_check.geometry.transforms import apply_rigid, invert_rigid, pose_difference
 from pgt_check.io import read_trajectory

@@ -10,7 +10,7 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from pgt_check.evaluation import roc_auc
+from pgt_eval import roc_auc
 from pgt_check.geometry.shared_errors import (
     FrameEvidence,
     estimate_calibration,

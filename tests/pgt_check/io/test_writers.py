@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pgt_check.evaluation import perturb_trajectory
+from pgt_eval import perturb_trajectory
 from pgt_check.io import read_trajectory
 from pgt_check.io.writers import colmap_images_text, write_trajectory_file
 from pgt_check.types import Trajectory

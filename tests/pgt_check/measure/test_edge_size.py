@@ -9,7 +9,7 @@ import pytest
 
 from pgt_check.config import RunConfig
 from pgt_check.errors import ConfigError
-from pgt_check.evaluation import move_trajectory, shared_transform
+from pgt_eval import move_trajectory, shared_transform
 from pgt_check.io import read_trajectory
 from pgt_check.measure import FrameChecker
 from pgt_check.types import Trajectory
@@ -126,7 +126,7 @@ def test_edges_lead_on_a_colourless_mesh_and_leave_out_the_raw_path(shared_data)
 
 
 def test_edges_tile_grid_from_the_command_line():
-    from pgt_check.cli import build_parser, load_config
+    from pgt_check.commands.check import build_parser, load_config
 
     args = build_parser().parse_args(["traj.txt", "--mesh", "m.ply", "--edges-tile-grid", "3"])
     assert load_config(args).edges.tile_grid == 3

@@ -10,7 +10,7 @@ import pytest
 
 from pgt_check.config import RunConfig
 from pgt_check.enhance.base import Evidence
-from pgt_check.evaluation import shared_transform
+from pgt_eval import shared_transform
 from pgt_check.measure import AbsoluteEvidence, FrameMeasurement, PathMeasurement
 from pgt_check.types import Camera, Frame, Trajectory
 from pgt_check.verdict import judge_run
@@ -82,7 +82,7 @@ def measurements(true: Trajectory, checked: Trajectory, *, relative: bool = Fals
 
 
 def _move(traj: Trajectory, deg: float, shift: float, scale: float = 1.0) -> Trajectory:
-    from pgt_check.evaluation import move_trajectory
+    from pgt_eval import move_trajectory
 
     return move_trajectory(traj, shared_transform(traj, deg, shift, scale=scale, seed=4))
 
@@ -141,7 +141,7 @@ def test_similarity_is_estimated(truth):
 
 
 def test_drifting_segment_is_separated(truth):
-    from pgt_check.evaluation import drift_trajectory, roc_auc
+    from pgt_eval import drift_trajectory, roc_auc
 
     drifted, ids = drift_trajectory(truth, 0.6, 2.0, 0.12, seed=5)
     j = judge_run(measurements(truth, drifted), RunConfig())
@@ -156,7 +156,7 @@ def test_drift_covers_frames_without_evidence_of_their_own(truth):
     """Drifting frames whose own absolute evidence is missing (their raw render found too few
     inliers; a reprojected neighbour, which shares the drift, passes them) lie in the flagged
     segment: they are scored along the trajectory and FAIL, not PASS on relative evidence."""
-    from pgt_check.evaluation import drift_trajectory
+    from pgt_eval import drift_trajectory
 
     drifted, ids = drift_trajectory(truth, 0.6, 2.0, 0.12, seed=5)
     absolute = measurements(truth, drifted)
@@ -208,7 +208,7 @@ def test_a_relative_pass_needs_the_drift_there_within_the_threshold(truth):
 
 def test_calibration_is_a_finding_and_can_be_removed(truth):
     """Photos taken with a principal point 5 px off (every frame shifted the same way)."""
-    from pgt_check.evaluation import change_intrinsics
+    from pgt_eval import change_intrinsics
 
     shifted = change_intrinsics(truth, principal_shift=(5.0, 0.0))
     ms = measurements(truth, truth)
