@@ -33,7 +33,6 @@ import numpy as np
 from _common import REPORTS, command_line, machine, md_table, shared_data
 
 from pgt_check.config import PRESETS, RunConfig, merge
-from pgt_eval import move_trajectory, shared_transform
 from pgt_check.geometry.transforms import axis_angle_to_rotmat
 from pgt_check.io import read_trajectory
 from pgt_check.measure import FrameChecker, FrameMeasurement, pick_references
@@ -42,6 +41,7 @@ from pgt_check.types import Trajectory
 from pgt_check.verdict import judge_run
 from pgt_check.verdict.accuracy import run_accuracy
 from pgt_check.verdict.decide import resolve_threshold_px
+from pgt_eval import move_trajectory, shared_transform
 
 CACHE = Path("/tmp/pgt-check-bench-accuracy")
 

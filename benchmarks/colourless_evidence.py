@@ -37,9 +37,9 @@ from _common import REPORTS, command_line, machine, md_table
 from shared_errors import cases, datasets, scene_depth
 
 from pgt_check.config import RunConfig
-from pgt_eval import roc_auc
 from pgt_check.types import Trajectory
 from pgt_check.verdict.decide import Verdict, path_outcome
+from pgt_eval import roc_auc
 
 CACHE = Path("/tmp/pgt-check-colourless-cache")
 

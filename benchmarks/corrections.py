@@ -4,7 +4,7 @@ For each scene, ``--frames`` frames (evenly spaced) get a random pose error (rot
 ``--rot`` degrees about a random axis, camera-centre shift uniform in ``--trans`` x the frame's
 median render depth, random direction; seeded). Each perturbed frame is measured as a run
 would (default settings: SIFT at 640 px, enhance auto with reproject, PnP), then corrected
-(``pgt_check.corrections.correct_frame``: 3 rounds of render -> raw match -> PnP from the
+(``pgt_check.correct.frames.correct_frame``: 3 rounds of render -> raw match -> PnP from the
 measurement's PnP estimate). Reported: share of corrected poses within 0.1 deg AND 1 % of the
 median scene depth of the reference pose, the error medians, and the baseline: the same
 correction started from the reference pose itself (where the renders' own fixed point lies;
@@ -70,10 +70,10 @@ def scenes(names: list[str]) -> dict[str, tuple[Trajectory, str, dict]]:
 
 def run_scene(name, truth, mesh, extra, n_frames, rot, trans, seed):
     from pgt_check.config import merge
-    from pgt_check.corrections import correct_frame
-    from pgt_eval import perturb_pose
+    from pgt_check.correct.frames import correct_frame
     from pgt_check.geometry.transforms import pose_difference
     from pgt_check.measure import FrameChecker, pick_references
+    from pgt_eval import perturb_pose
 
     cfg = RunConfig.from_dict(merge({"input": {"mesh": mesh}}, extra))
     rng = np.random.default_rng(seed)

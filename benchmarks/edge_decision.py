@@ -27,11 +27,11 @@ from pathlib import Path
 import numpy as np
 
 from pgt_check.config import RunConfig
-from pgt_eval import make_scan_like_scene, make_textureless_scene, perturb_pose, roc_auc
 from pgt_check.geometry.edges import align_edges, geometric_edges, photo_edges
 from pgt_check.geometry.homography import check_homography, corner_error, scale_homography
 from pgt_check.io import load_image, read_trajectory
 from pgt_check.render import load_mesh, make_renderer
+from pgt_eval import make_scan_like_scene, make_textureless_scene, perturb_pose, roc_auc
 
 ALPHA = 0.01
 MIN_SUPPORT = 0.3

@@ -24,10 +24,10 @@ import numpy as np
 from _common import REPORTS, command_line, machine, md_table, shared_data
 
 from pgt_check.config import RunConfig, merge
-from pgt_eval import perturb_trajectory, roc_auc
 from pgt_check.io import read_trajectory
 from pgt_check.measure import FrameChecker, pick_references
 from pgt_check.types import Trajectory
+from pgt_eval import perturb_trajectory, roc_auc
 
 STAGES = ("t_load_s", "t_render_s", "t_enhance_s", "t_match_s", "t_homography_s", "t_pose_s")
 

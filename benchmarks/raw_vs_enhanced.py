@@ -24,11 +24,11 @@ import numpy as np
 from _common import REPORTS, command_line, machine, md_table, shared_data
 
 from pgt_check.config import RunConfig
-from pgt_eval import perturb_trajectory, roc_auc
 from pgt_check.io import read_trajectory
 from pgt_check.measure import FrameChecker, pick_references
 from pgt_check.types import Trajectory
 from pgt_check.verdict import resolve_threshold_px
+from pgt_eval import perturb_trajectory, roc_auc
 
 PAPER = "paper (SuperPoint+SuperGlue, CAB): matches 39.21 -> 58.89, inliers 61.24 % -> 78.16 %, homography error 4.86 -> 1.88 px"
 

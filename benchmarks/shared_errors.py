@@ -30,6 +30,12 @@ import numpy as np
 from _common import REPORTS, command_line, machine, md_table, shared_data
 
 from pgt_check.config import RunConfig
+from pgt_check.geometry.transforms import apply_rigid, invert_rigid
+from pgt_check.io import read_trajectory
+from pgt_check.measure import FrameChecker, pick_references
+from pgt_check.types import Trajectory
+from pgt_check.verdict import judge_run
+from pgt_check.verdict.calibration import camera_matrix
 from pgt_eval import (
     change_intrinsics,
     drift_trajectory,
@@ -40,12 +46,6 @@ from pgt_eval import (
     shared_transform,
     time_offset_trajectory,
 )
-from pgt_check.geometry.transforms import apply_rigid, invert_rigid
-from pgt_check.io import read_trajectory
-from pgt_check.measure import FrameChecker, pick_references
-from pgt_check.types import Trajectory
-from pgt_check.verdict import judge_run
-from pgt_check.verdict.calibration import camera_matrix
 
 
 def _subset(traj: Trajectory, n: int) -> Trajectory:
@@ -229,10 +229,10 @@ def _estimate_errors(truth: dict, row: dict) -> dict:
 
 
 def refined_estimate(key: str, t: Trajectory, mesh: Path, cfg: RunConfig, ms) -> dict:
-    """The run's registration refinement (``pgt_check.registration_refine``, as a run does it
+    """The run's registration refinement (``pgt_check.correct.registration``, as a run does it
     after a failed registration check; cached under ``key``): the refined estimate replaces
     the row's, the first pass's is kept as ``*_first``."""
-    from pgt_check.registration_refine import (
+    from pgt_check.correct.registration import (
         RefinedRegistration,
         apply_refinement,
         refine_registration,

@@ -157,7 +157,7 @@ def check(
 
 def _rows(out: Path, cfg: RunConfig) -> list[dict[str, Any]]:
     """The judged rows of a finished run directory (verdicts + correction columns)."""
-    from pgt_check.measure.correct import add_correction_columns, load_corrections
+    from pgt_check.correct.pose import add_correction_columns, load_corrections
     from pgt_check.report.stored import load_run
     from pgt_check.verdict import apply_verdicts
 

@@ -342,7 +342,7 @@ class VerdictConfig:
 
 @dataclass(frozen=True)
 class CorrectConfig:
-    """Pose corrections after the verdicts (``pgt_check.corrections``): iterate render -> raw
+    """Pose corrections after the verdicts (``pgt_check.correct.frames``): iterate render -> raw
     match -> PnP from each frame's PnP estimate; writes corrected_trajectory.txt."""
 
     #: which frames: "fail" (FAIL verdicts), "all" (every measured frame) or "none"
@@ -352,7 +352,7 @@ class CorrectConfig:
     bootstrap: int = 12
     #: when the registration check fails: at most this many rounds of measuring frames again
     #: at the poses the estimate corrects and fitting what is left, stopping once what is left
-    #: is below the shared threshold twice (``pgt_check.registration_refine``; 0 = off). The
+    #: is below the shared threshold twice (``pgt_check.correct.registration``; 0 = off). The
     #: first estimate's rotation / translation split is off by up to 70-90 % where the
     #: misregistration zooms the images; measured: castle 1-3 rounds, 7-Scenes (noisier) 2-5
     registration_rounds: int = 8

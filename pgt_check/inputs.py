@@ -47,9 +47,9 @@ def load_trajectory(config: RunConfig) -> Trajectory:
 
 def run_output_paths(out: str | Path) -> list[Path]:
     """Every file and folder a run writes in ``out`` (an input there would be overwritten)."""
-    from pgt_check.corrections import BAD_FRAMES_NAME, CORRECTED_NAME
-    from pgt_check.measure.correct import CORRECTIONS_FILE
-    from pgt_check.registration_refine import REFINED_FILE, REGISTERED_NAME
+    from pgt_check.correct.frames import BAD_FRAMES_NAME, CORRECTED_NAME
+    from pgt_check.correct.pose import CORRECTIONS_FILE
+    from pgt_check.correct.registration import REFINED_FILE, REGISTERED_NAME
     from pgt_check.report.assets import ASSETS_DIR
     from pgt_check.report.outputs import COMPLETION_MARKER, OUTPUT_FILES
     from pgt_check.store import RECORDS_FILE, RUN_FILE

@@ -259,7 +259,7 @@ def _check_frames_locked(
     traj = trajectory if trajectory is not None else Trajectory(tuple(frames))
     shared_extra = judged.summary_extra()
     if judged.shared is not None:  # a failed registration check: its estimate refined
-        from pgt_check.registration_refine import refine_run
+        from pgt_check.correct.registration import refine_run
 
         measure = PlainMeasure()
         try:
@@ -276,8 +276,8 @@ def _check_frames_locked(
         finally:
             measure.close()
     corrections: dict[str, Any] = {}
-    if config.correct.frames != "none":  # corrected poses (pgt_check.corrections)
-        from pgt_check.corrections import correct_run
+    if config.correct.frames != "none":  # corrected poses (pgt_check.correct.frames)
+        from pgt_check.correct.frames import correct_run
 
         rows, corrections = correct_run(traj, measurements, rows, config, checker_factory, out)
     assets = write_report_assets(

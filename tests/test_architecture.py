@@ -15,10 +15,11 @@ LAYERS = {
     "measure": 2,
     "verdict": 3,
     "store": 3,
-    "report": 4, "registration_refine": 4,
-    "executor": 5, "inputs": 5, "runner": 5, "corrections": 5, "compare": 5,
-    "enhance_folder": 5, "enhance_refs": 5,
-    "cli": 6, "commands": 6, "__main__": 6, "api": 6,
+    "correct": 4,
+    "report": 5,
+    "executor": 6, "inputs": 6, "runner": 6, "compare": 6,
+    "enhance_folder": 6, "enhance_refs": 6,
+    "cli": 7, "commands": 7, "__main__": 7, "api": 7,
 }
 
 

@@ -15,9 +15,9 @@ from typing import Any
 
 from pgt_check._cli import OneLineErrorParser, install_sigterm_handler, parse_args
 from pgt_check.config import RunConfig, merge
+from pgt_check.correct.pose import add_correction_columns, load_corrections
 from pgt_check.errors import InputError
 from pgt_check.files import MAX_SMALL_JSON_BYTES, load_json_limited, safe_text
-from pgt_check.measure.correct import add_correction_columns, load_corrections
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.report.stored import load_run
 
@@ -26,7 +26,7 @@ def _shared_extra(judged: Any, out: Path) -> dict[str, Any]:
     """The run-level section, with the run's registration refinement where it started from
     this judgement's estimate (other verdict settings may change the estimate: then the
     refinement is stale and left out, with a note)."""
-    from pgt_check.registration_refine import (
+    from pgt_check.correct.registration import (
         REFINED_FILE,
         apply_refinement,
         load_refinement,

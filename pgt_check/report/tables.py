@@ -55,7 +55,7 @@ ENHANCED_COLUMNS: tuple[Col, ...] = (
     ("enhanced_why", "why enhanced", "str", None, True),
     ("reference_id", "reference", "str", None, True),
 )
-#: shown only when some frame was corrected (``pgt_check.corrections``)
+#: shown only when some frame was corrected (``pgt_check.correct.frames``)
 CORRECTION_TABLE_COLUMNS: tuple[tuple[str, str, str, int | None], ...] = (
     ("corr_applied", "corrected", "bool", None),
     ("corr_drot_deg", "corr. rot [deg]", "num", 3),

@@ -12,9 +12,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pgt_eval import perturb_trajectory, roc_auc
 from pgt_check.io import read_trajectory
 from pgt_check.types import Trajectory
+from pgt_eval import perturb_trajectory, roc_auc
 
 pytestmark = [pytest.mark.shared_data, pytest.mark.slow]
 

@@ -14,10 +14,10 @@ import numpy as np
 import pytest
 
 from pgt_check.cli import main
-from pgt_eval import move_trajectory, shared_transform, textureless_scene
 from pgt_check.geometry.transforms import pose_difference
 from pgt_check.io import read_trajectory, write_lamar
 from pgt_check.types import Trajectory
+from pgt_eval import move_trajectory, shared_transform, textureless_scene
 
 
 def _run(traj: Trajectory, mesh: Path, tmp: Path, *extra: str) -> tuple[int, dict, list]:

@@ -8,9 +8,9 @@ import json
 import pytest
 
 from pgt_check.cli import main
-from pgt_eval import perturb_trajectory
 from pgt_check.io import read_trajectory, write_lamar
 from pgt_check.types import Trajectory
+from pgt_eval import perturb_trajectory
 
 
 def test_print_config_and_replay_from_config_json(tmp_path, sample_scene, capsys):

@@ -105,9 +105,9 @@ def test_real_data_correction_7scenes(shared_data):
     converges (the D-SLAM poses fit the photos only to ~8 px, see the data README, so the
     fixed point of render/photo matching is not the given pose itself)."""
     from pgt_check.config import RunConfig
-    from pgt_check.corrections import correct_frame
-    from pgt_eval import perturb_pose
+    from pgt_check.correct.frames import correct_frame
     from pgt_check.measure import FrameChecker
+    from pgt_eval import perturb_pose
 
     d = shared_data / "7scenes_redkitchen"
     f = read_trajectory(d / "trajectories.txt", sensors=d / "sensors.txt")[10]

@@ -15,11 +15,7 @@ import numpy as np
 import pytest
 
 from pgt_check.config import RunConfig
-from pgt_check.enhance.base import Evidence
-from pgt_eval import _look_at, move_trajectory, shared_transform
-from pgt_check.geometry.transforms import invert_rigid, rotation_angle_deg
-from pgt_check.measure import AbsoluteEvidence, FrameMeasurement, PathMeasurement
-from pgt_check.registration_refine import (
+from pgt_check.correct.registration import (
     REGISTERED_NAME,
     apply_refinement,
     load_refinement,
@@ -29,8 +25,12 @@ from pgt_check.registration_refine import (
     refine_run,
     save_refinement,
 )
+from pgt_check.enhance.base import Evidence
+from pgt_check.geometry.transforms import invert_rigid, rotation_angle_deg
+from pgt_check.measure import AbsoluteEvidence, FrameMeasurement, PathMeasurement
 from pgt_check.types import Camera, Frame, Trajectory
 from pgt_check.verdict import judge_run
+from pgt_eval import _look_at, move_trajectory, shared_transform
 
 CAM = Camera.pinhole(640, 480, 500.0, 500.0, 319.5, 239.5)
 #: share of the way from the checked projection to the true one that the simulated
@@ -283,7 +283,7 @@ def test_the_runners_measure_keeps_one_serial_checker_over_the_rounds(monkeypatc
 def test_a_failing_refinement_leaves_the_run_and_its_first_estimate(tmp_path, monkeypatch):
     """The refinement is a correction step: if it breaks, the run still writes its outputs
     (verdicts and the first estimate), and says so in the log."""
-    import pgt_check.registration_refine as rr
+    import pgt_check.correct.registration as rr
     from pgt_check.measure import MeasureReason, failed_measurement
     from pgt_check.runner import check_frames
 

@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
 
-from pgt_eval import perturb_pose, perturb_trajectory, roc_auc
 from pgt_check.geometry.transforms import pose_difference
 from pgt_check.types import Camera, Frame, Trajectory
+from pgt_eval import perturb_pose, perturb_trajectory, roc_auc
 
 
 def test_roc_auc_basic():

@@ -2,9 +2,9 @@ import numpy as np
 import pytest
 
 from pgt_check.enhance.reproject import reproject_reference
-from pgt_eval import perturb_pose
 from pgt_check.io import load_image, read_trajectory
 from pgt_check.render import load_mesh, make_renderer
+from pgt_eval import perturb_pose
 
 
 @pytest.fixture(scope="module")

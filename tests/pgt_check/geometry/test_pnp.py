@@ -1,12 +1,12 @@
 import numpy as np
 import pytest
 
-from pgt_eval import perturb_pose
 from pgt_check.geometry.pnp import estimate_pose_correction, lift_keypoints
 from pgt_check.geometry.transforms import apply_rigid, invert_rigid, pose_difference
 from pgt_check.io import read_trajectory
 from pgt_check.match import make_matcher
 from pgt_check.render import load_mesh, make_renderer
+from pgt_eval import perturb_pose
 
 
 def test_lift_keypoints_back_projects_exactly():

@@ -10,7 +10,6 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
-from pgt_eval import roc_auc
 from pgt_check.geometry.shared_errors import (
     FrameEvidence,
     estimate_calibration,
@@ -18,6 +17,7 @@ from pgt_check.geometry.shared_errors import (
     estimate_registration,
 )
 from pgt_check.geometry.transforms import axis_angle_to_rotmat
+from pgt_eval import roc_auc
 
 THRESHOLD_PX = 2.0
 

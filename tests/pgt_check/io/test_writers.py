@@ -4,10 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from pgt_eval import perturb_trajectory
 from pgt_check.io import read_trajectory
 from pgt_check.io.writers import colmap_images_text, write_trajectory_file
 from pgt_check.types import Trajectory
+from pgt_eval import perturb_trajectory
 
 
 def _same_poses(a: Trajectory, b: Trajectory, ids=None) -> None:

@@ -9,11 +9,11 @@ import pytest
 
 from pgt_check.config import RunConfig
 from pgt_check.errors import ConfigError
-from pgt_eval import move_trajectory, shared_transform
 from pgt_check.io import read_trajectory
 from pgt_check.measure import FrameChecker
 from pgt_check.types import Trajectory
 from pgt_check.verdict.shared import frame_evidence
+from pgt_eval import move_trajectory, shared_transform
 
 
 def _project(evidence, world_from_cam: np.ndarray) -> np.ndarray:

@@ -8,6 +8,7 @@ import math
 import numpy as np
 import pytest
 
+from pgt_check.correct.pose import CORRECTION_COLUMNS
 from pgt_check.enhance.base import Evidence
 from pgt_check.measure import (
     MEASUREMENT_COLUMNS,
@@ -20,7 +21,6 @@ from pgt_check.measure import (
     Timings,
     failed_measurement,
 )
-from pgt_check.measure.correct import CORRECTION_COLUMNS
 from pgt_check.report.outputs import FRAME_COLUMNS
 from pgt_check.types import Camera, Frame
 
@@ -93,9 +93,10 @@ def test_columns_are_declared_once_and_feed_frames_csv():
     names = [c.name for c in MEASUREMENT_COLUMNS]
     assert len(names) == len(set(names))
     from pgt_check.verdict import VERDICT_COLUMNS
+    from pgt_check.verdict.accuracy import ACCURACY_COLUMNS
 
     csv_measured = [n for n in FRAME_COLUMNS if n not in VERDICT_COLUMNS
-                    and n not in CORRECTION_COLUMNS]
+                    and n not in ACCURACY_COLUMNS and n not in CORRECTION_COLUMNS]
     assert csv_measured == [c.name for c in MEASUREMENT_COLUMNS if c.csv]
     assert all(c.doc for c in MEASUREMENT_COLUMNS)
 

@@ -10,10 +10,10 @@ import pytest
 
 from pgt_check.config import RunConfig
 from pgt_check.enhance.base import Evidence
-from pgt_eval import shared_transform
 from pgt_check.measure import AbsoluteEvidence, FrameMeasurement, PathMeasurement
 from pgt_check.types import Camera, Frame, Trajectory
 from pgt_check.verdict import judge_run
+from pgt_eval import shared_transform
 
 CAM = Camera.pinhole(640, 480, 500.0, 500.0, 319.5, 239.5)
 

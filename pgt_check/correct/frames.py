@@ -1,7 +1,7 @@
 """The correction step of a run (after the verdicts): corrected poses and the files built on them.
 
 For the frames chosen by ``config.correct.frames`` ("fail": FAIL verdicts; "all": every frame)
-``pgt_check.measure.correct.refine_pose`` iterates render -> raw match -> PnP from the
+``pgt_check.correct.pose.refine_pose`` iterates render -> raw match -> PnP from the
 measurement's PnP estimate (from the checked pose when there is none, or when the estimate's
 first round fails). Writes into the run directory:
 
@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from pgt_check.config import RunConfig
-from pgt_check.measure.correct import (
+from pgt_check.correct.pose import (
     Correction,
     add_correction_columns,
     refine_pose,
@@ -131,8 +131,8 @@ def correct_run(
     out: str | Path,
 ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Run the correction step; returns (rows with the correction columns, summary part)."""
+    from pgt_check.files import atomic_write_text
     from pgt_check.io.writers import write_trajectory_file
-    from pgt_check.report.files import atomic_write_text
 
     out = Path(out)
     ids = chosen_frames(rows, config.correct.frames)
