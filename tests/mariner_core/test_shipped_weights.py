@@ -22,26 +22,36 @@ def test_checkpoint_loads_strictly_with_metadata() -> None:
     assert set(ckpt) == {"config", "state_dict", "meta"}
     assert ckpt["meta"]["fp16"] is True
     enhancer = Enhancer.from_pretrained()  # load_state_dict(strict=True) inside
-    n = sum(p.numel() for p in enhancer.model.parameters())
-    assert n == sum(v.numel() for v in ckpt["state_dict"].values() if v.is_floating_point())
+    n = sum(v.numel() for v in enhancer.model.state_dict().values())
+    assert n == sum(v.numel() for v in ckpt["state_dict"].values())
     assert all(torch.isfinite(p).all() for p in enhancer.model.parameters())
 
 
-def test_enhances_a_shared_frame(shared_data) -> None:
-    from pgt_check.io import load_image, read_trajectory
+def _render_kitchen(shared_data, frame_indices, colourless: bool = False):
+    from pgt_check.io import read_trajectory
     from pgt_check.render import load_mesh, make_renderer
 
     pytest.importorskip("moderngl")
     scene = shared_data / "7scenes_redkitchen"
     traj = read_trajectory(scene / "trajectories.txt")
-    frame, ref_frame = traj.frames[0], traj.frames[2]
-    cam = frame.camera.scaled(213 / 640, 160 / 480)
-    renderer = make_renderer(load_mesh(scene / "mesh.ply"))
+    mesh = load_mesh(scene / "mesh.ply")
+    renderer = make_renderer(mesh.without_colour() if colourless else mesh)
     try:
-        render = renderer.render(cam, frame.world_from_cam).rgb
+        frames = [traj.frames[i] for i in frame_indices]
+        renders = [
+            renderer.render(f.camera.scaled(213 / 640, 160 / 480), f.world_from_cam).rgb
+            for f in frames
+        ]
     finally:
         renderer.close()
-    reference = load_image(ref_frame.image_file)
+    return traj, renders
+
+
+def test_enhances_a_shared_frame(shared_data) -> None:
+    from pgt_check.io import load_image
+
+    traj, (render,) = _render_kitchen(shared_data, [0])
+    reference = load_image(traj.frames[2].image_file)
     enhancer = Enhancer.from_pretrained()
     out = enhancer.enhance_working(render, reference, short_side=160)
     assert out.image.shape == (160, 213, 3) and out.image.dtype == np.float32
@@ -49,3 +59,28 @@ def test_enhances_a_shared_frame(shared_data) -> None:
     assert out.scale_x == pytest.approx(1.0) and out.scale_y == pytest.approx(1.0)
     # it produces an image, not a blank: some structure and colour
     assert out.image.std() > 0.02
+
+
+@pytest.mark.shared_data
+@pytest.mark.parametrize("colourless", [False, True])
+def test_shipped_model_uses_its_reference(shared_data, colourless: bool) -> None:
+    """On evaluation frames no model was trained on: the frame's own photo as reference gives
+    a better result than a photo 20 frames away, which beats the raw render (PSNR-Y)."""
+    from mariner_core.metrics import psnr_y
+    from pgt_check.io import load_image
+    from pgt_check.io.images import resize_image
+
+    idx = [5, 40, 75]
+    traj, renders = _render_kitchen(shared_data, idx, colourless=colourless)
+    photos = [resize_image(load_image(traj.frames[i].image_file), (213, 160), "area") for i in idx]
+    far = [resize_image(load_image(traj.frames[i + 2].image_file), (213, 160), "area") for i in idx]
+    enhancer = Enhancer.from_pretrained()
+    r = np.stack(renders).astype(np.float32)
+    p = np.stack(photos).astype(np.float32)
+    with_target = enhancer.enhance(r, p)
+    with_far = enhancer.enhance(r, np.stack(far).astype(np.float32))
+    raw_db = float(psnr_y(r, p).mean())
+    far_db = float(psnr_y(with_far, p).mean())
+    target_db = float(psnr_y(with_target, p).mean())
+    assert far_db > raw_db + 1.0, (raw_db, far_db, target_db)
+    assert target_db > far_db + 1.0, (raw_db, far_db, target_db)
