@@ -294,22 +294,41 @@ def check_enhance_options(args: argparse.Namespace) -> None:
     )
 
 
-def enhance_folder(args: argparse.Namespace) -> dict[str, Any]:
-    """Run the subcommand; returns a summary (counts and the metric means)."""
-    from pgt_check.io import load_image, read_trajectory
+def _enhance_item(it: RenderItem, method: Any, out: Path, gt_dir: Path | None,
+                  metrics: Any) -> tuple[str, dict[str, Any] | None]:
+    """Enhance one render that has a reference: writes ``images/<name>.png``; returns its
+    status and, when its ground-truth photo is found, its metrics row."""
+    from pgt_check.io import load_image
     from pgt_check.io.images import resize_image
 
-    check_enhance_options(args)
-    files = find_renders(args.renders)
-    if args.limit is not None:
-        files = files[: args.limit]
-    gt_dir = None
-    if args.gt is not None:
-        gt_dir = Path(args.gt)
-        if not gt_dir.is_dir():
-            raise InputError(f"--gt folder not found: {gt_dir}")
-    if args.method == "reproject" and not args.mesh:
-        raise InputError("--method reproject needs --mesh")
+    status = it.status
+    render = load_image(it.file)
+    photo = load_image(it.reference.image_file)
+    enhanced = method(render, it.frame, photo, it.reference)
+    _save_png(out / "images" / f"{it.name}.png", enhanced)
+    gt_file = find_gt(gt_dir, it.name) if gt_dir is not None else None
+    if gt_dir is not None and gt_file is None:
+        status = "enhanced_no_gt"
+    if gt_file is None:
+        return status, None
+    gt = load_image(gt_file)
+    h, w = render.shape[:2]
+    gt = resize_image(gt, (w, h), "area" if gt.shape[1] >= w else "cubic")
+    raw_m = metrics(render, np.clip(gt, 0, 1))
+    enh_m = metrics(enhanced, np.clip(gt, 0, 1))
+    return status, {
+        "render": it.name, "reference": it.reference.image_path,
+        "psnr_y_raw": _fmt(raw_m[0]), "psnr_y_enhanced": _fmt(enh_m[0]),
+        "ssim_y_raw": _fmt(raw_m[1]), "ssim_y_enhanced": _fmt(enh_m[1]),
+        "lpips_raw": _fmt(raw_m[2]), "lpips_enhanced": _fmt(enh_m[2]),
+    }
+
+
+def _render_items(args: argparse.Namespace, files: Sequence[Path]) -> list[RenderItem]:
+    """The renders with their poses (MODEL's, or ``--render-poses``) and nearest reference
+    photos; InputError when no render has one."""
+    from pgt_check.io import read_trajectory
+
     extra = {"camera": args.camera} if args.camera else {}
     model = read_trajectory(args.model, args.format, images=args.images, sensors=args.sensors,
                             dataparser_transforms=args.dataparser_transforms, **extra)
@@ -324,6 +343,23 @@ def enhance_folder(args: argparse.Namespace) -> dict[str, Any]:
     if not any(it.reference is not None for it in items):
         raise InputError(f"no render has a model photo within {args.max_rotation_deg:g} deg "
                          "(--max-rotation-deg) to take appearance from")
+    return items
+
+
+def enhance_folder(args: argparse.Namespace) -> dict[str, Any]:
+    """Run the subcommand; returns a summary (counts and the metric means)."""
+    check_enhance_options(args)
+    files = find_renders(args.renders)
+    if args.limit is not None:
+        files = files[: args.limit]
+    gt_dir = None
+    if args.gt is not None:
+        gt_dir = Path(args.gt)
+        if not gt_dir.is_dir():
+            raise InputError(f"--gt folder not found: {gt_dir}")
+    if args.method == "reproject" and not args.mesh:
+        raise InputError("--method reproject needs --mesh")
+    items = _render_items(args, files)
     metrics = _Metrics(lpips=not args.no_lpips) if gt_dir is not None else None
     if args.method == "mariner":
         method: Any = _Mariner(args.weights, args.device, args.short_side, args.iterations)
@@ -335,25 +371,9 @@ def enhance_folder(args: argparse.Namespace) -> dict[str, Any]:
         for it in items:
             status = it.status
             if it.reference is not None:
-                render = load_image(it.file)
-                photo = load_image(it.reference.image_file)
-                enhanced = method(render, it.frame, photo, it.reference)
-                _save_png(out / "images" / f"{it.name}.png", enhanced)
-                gt_file = find_gt(gt_dir, it.name) if gt_dir is not None else None
-                if gt_dir is not None and gt_file is None:
-                    status = "enhanced_no_gt"
-                if gt_file is not None:
-                    gt = load_image(gt_file)
-                    h, w = render.shape[:2]
-                    gt = resize_image(gt, (w, h), "area" if gt.shape[1] >= w else "cubic")
-                    raw_m = metrics(render, np.clip(gt, 0, 1))
-                    enh_m = metrics(enhanced, np.clip(gt, 0, 1))
-                    metric_rows.append({
-                        "render": it.name, "reference": it.reference.image_path,
-                        "psnr_y_raw": _fmt(raw_m[0]), "psnr_y_enhanced": _fmt(enh_m[0]),
-                        "ssim_y_raw": _fmt(raw_m[1]), "ssim_y_enhanced": _fmt(enh_m[1]),
-                        "lpips_raw": _fmt(raw_m[2]), "lpips_enhanced": _fmt(enh_m[2]),
-                    })
+                status, metric_row = _enhance_item(it, method, out, gt_dir, metrics)
+                if metric_row is not None:
+                    metric_rows.append(metric_row)
             ref_rows.append({
                 "render": it.file.name,
                 "pose": "" if it.frame is None else it.frame.frame_id,

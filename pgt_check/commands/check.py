@@ -228,8 +228,9 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--version", action="version", version=f"pgt-check {__version__}")
 
 
-def _cli_overrides(args: argparse.Namespace) -> dict[str, Any]:
-    table = {
+def _override_table(args: argparse.Namespace) -> dict[tuple[str, ...], Any]:
+    """Config key path -> the value its command-line option gives (None: not given)."""
+    return {
         ("input", "trajectory"): args.trajectory,
         ("input", "mesh"): args.mesh,
         ("input", "format"): args.format,
@@ -282,8 +283,12 @@ def _cli_overrides(args: argparse.Namespace) -> dict[str, Any]:
         ("workers",): args.workers,
         ("scheduler",): args.scheduler,
     }
+
+
+def _cli_overrides(args: argparse.Namespace) -> dict[str, Any]:
+    """The settings the command-line options give, nested like a config file."""
     out: dict[str, Any] = {}
-    for path, value in table.items():
+    for path, value in _override_table(args).items():
         if value is None or value is ...:
             continue
         node = out

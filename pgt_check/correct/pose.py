@@ -244,6 +244,64 @@ def _bootstrap(
     return float(np.sqrt(np.mean(np.square(rots)))), float(np.sqrt(np.mean(np.square(dts))))
 
 
+@dataclass(frozen=True, eq=False)
+class _Rounds:
+    """What the rounds of ``refine_pose`` left: the first round, the last round whose PnP
+    succeeded (None when the first round's failed), its start and result poses, the steps
+    (deg, scene units) and the rounds counted."""
+
+    first: _Round
+    last: _Round | None
+    last_start: np.ndarray
+    pose: np.ndarray
+    steps: list[tuple[float, float]]
+    n_done: int
+    depth_scale: float | None
+
+
+def _run_rounds(
+    checker: Any,
+    frame: Frame,
+    pose: np.ndarray,
+    photo_w: np.ndarray,
+    camera: Any,
+    size: tuple[int, int],
+    rounds: int,
+) -> _Rounds:
+    """Up to ``rounds`` rounds from ``pose``; stops early when a round moves the pose by
+    < 0.002 deg and < 1e-5 x the scene depth, or when a later round's PnP fails."""
+    from pgt_check.geometry.transforms import pose_difference
+
+    steps: list[tuple[float, float]] = []
+    first: _Round | None = None
+    rnd: _Round | None = None
+    last_start = pose
+    depth_scale: float | None = None
+    n_done = 0
+    prev: _Round | None = None
+    for k in range(rounds):
+        rnd = _round(checker, frame, pose, photo_w, camera, size)
+        n_done = k + 1
+        if k == 0:
+            first = rnd
+            d = rnd.depth[rnd.depth > 0]
+            depth_scale = float(np.median(d)) if d.size else None
+        if rnd.pose is None:
+            if k == 0:
+                return _Rounds(rnd, None, last_start, pose, steps, n_done, depth_scale)
+            rnd = prev  # keep the last round whose PnP succeeded
+            n_done -= 1
+            break
+        dt, dr = pose_difference(pose, rnd.pose)
+        steps.append((dr, dt))
+        last_start, pose = pose, rnd.pose
+        prev = rnd
+        if dr < 2e-3 and dt < 1e-5 * (depth_scale or 1.0):
+            break
+    assert first is not None and rnd is not None and rnd.pose is not None
+    return _Rounds(first, rnd, last_start, pose, steps, n_done, depth_scale)
+
+
 def refine_pose(
     checker: Any,
     frame: Frame,
@@ -260,7 +318,6 @@ def refine_pose(
     config are used). Stops early when a round moves the pose by < 0.002 deg and < 1e-5 x the
     scene depth. Never raises for an unusable frame: ``success`` False with a ``reason``.
     """
-    from pgt_check.geometry.transforms import pose_difference
     from pgt_check.io import load_image
     from pgt_check.io.images import resize_image
     from pgt_check.io.photo import prepare_photo, working_scale
@@ -279,45 +336,39 @@ def refine_pose(
         if threshold_px is None
         else threshold_px
     )
+    done = _run_rounds(checker, frame, pose, photo_w, camera, size, rounds)
+    first_err = done.first.corner_error_px
+    if done.last is None:
+        return Correction(
+            frame.frame_id,
+            False,
+            done.first.reason or "pnp_failed",
+            corner_error_px_before=first_err,
+            n_inliers=done.first.n_inliers,
+            rounds=done.n_done,
+            start=start_kind,
+            depth=done.depth_scale,
+        )
+    return _correction(checker, frame, checked, done, thr, bootstrap, seed, start_kind)
 
-    first_err: float | None = None
-    steps: list[tuple[float, float]] = []
-    rnd: _Round | None = None
-    last_start = pose
-    depth_scale: float | None = None
-    n_done = 0
-    prev: _Round | None = None
-    for k in range(rounds):
-        rnd = _round(checker, frame, pose, photo_w, camera, size)
-        n_done = k + 1
-        if k == 0:
-            first_err = rnd.corner_error_px
-            d = rnd.depth[rnd.depth > 0]
-            depth_scale = float(np.median(d)) if d.size else None
-        if rnd.pose is None:
-            if k == 0:
-                return Correction(
-                    frame.frame_id,
-                    False,
-                    rnd.reason or "pnp_failed",
-                    corner_error_px_before=first_err,
-                    n_inliers=rnd.n_inliers,
-                    rounds=n_done,
-                    start=start_kind,
-                    depth=depth_scale,
-                )
-            rnd = prev  # keep the last round whose PnP succeeded
-            n_done -= 1
-            break
-        dt, dr = pose_difference(pose, rnd.pose)
-        steps.append((dr, dt))
-        last_start, pose = pose, rnd.pose
-        prev = rnd
-        if dr < 2e-3 and dt < 1e-5 * (depth_scale or 1.0):
-            break
-    assert rnd is not None and rnd.pose is not None
-    final = pose
-    boot_r, boot_t = _bootstrap(rnd, last_start, final, bootstrap, seed, checker.config)
+
+def _correction(
+    checker: Any,
+    frame: Frame,
+    checked: np.ndarray,
+    done: _Rounds,
+    thr: float,
+    bootstrap: int,
+    seed: int,
+    start_kind: str,
+) -> Correction:
+    """The ``Correction`` of rounds that succeeded: uncertainty (bootstrap and last step),
+    verified (raw corner error within ``thr``) and applied (verified and certain)."""
+    from pgt_check.geometry.transforms import pose_difference
+
+    rnd, final, steps = done.last, done.pose, done.steps
+    assert rnd is not None
+    boot_r, boot_t = _bootstrap(rnd, done.last_start, final, bootstrap, seed, checker.config)
     last_r, last_t = steps[-1] if steps else (0.0, 0.0)
     sigma_r = math.hypot(boot_r, last_r)
     sigma_t = math.hypot(boot_t, last_t)
@@ -336,12 +387,12 @@ def refine_pose(
         dt,
         sigma_r,
         sigma_t,
-        first_err,
+        done.first.corner_error_px,
         err,
         rnd.n_inliers,
-        n_done,
+        done.n_done,
         start_kind,
-        depth_scale,
+        done.depth_scale,
         applied,
         tuple((float(a), float(b)) for a, b in steps),
     )

@@ -165,6 +165,35 @@ def _f(x: Any) -> float | None:
     return None if x is None or not math.isfinite(float(x)) else float(x)
 
 
+def _measure_round(
+    k: int, todo: Sequence[Frame], c_rigid: np.ndarray, measure: MeasureFn, ecfg: RunConfig
+) -> tuple[RefineRound, dict[str, Any]]:
+    """Round ``k``: the frames moved by ``c_rigid`` measured again and the shared checks run on
+    them; the round's record and the checks' summary (its registration entry: what is left)."""
+    from pgt_check.verdict.shared import run_shared_checks
+
+    t0 = time.perf_counter()
+    moved = [f.with_pose(move_pose(f.world_from_cam, c_rigid)) for f in todo]
+    ms = measure(moved, ecfg)
+    order = {f.frame_id: i for i, f in enumerate(moved)}
+    ms = sorted(ms, key=lambda m: order.get(m.frame_id, len(order)))
+    res = run_shared_checks(ms, ecfg).summary()
+    reg = res["registration"]
+    rnd = RefineRound(
+        k, len(ms), sum(m.evidence is not None for m in ms), str(reg.get("status")),
+        _f(reg.get("angle_deg")), reg.get("angle_deg_ci"), _f(reg.get("translation")),
+        reg.get("translation_ci"), _f(reg.get("effect_px")), reg.get("effect_px_ci"),
+        time.perf_counter() - t0,
+    )  # fmt: skip
+    logger.info(
+        "registration round %d: what is left moves the images by %s px (%s)",
+        k,
+        "?" if rnd.effect_px is None else f"{rnd.effect_px:.2f}",
+        reg.get("status"),
+    )
+    return rnd, res
+
+
 def refine_registration(
     frames: Sequence[Frame],
     measurements: Sequence[FrameMeasurement],
@@ -177,8 +206,6 @@ def refine_registration(
     ``summary``: the main pass's ``shared_errors`` section; ``measure(frames, config)``: the absolute
     evidence of the frames at their (moved) poses, in any order. None when there is nothing to
     refine (``needs_refinement`` false, rounds 0, or no frame to measure)."""
-    from pgt_check.verdict.shared import run_shared_checks
-
     rounds = config.correct.registration_rounds
     if rounds <= 0 or not needs_refinement(summary):
         return None
@@ -199,27 +226,9 @@ def refine_registration(
         len(todo),
     )
     for k in range(1, rounds + 1):
-        t0 = time.perf_counter()
-        moved = [f.with_pose(move_pose(f.world_from_cam, c_rigid)) for f in todo]
-        ms = measure(moved, ecfg)
-        order = {f.frame_id: i for i, f in enumerate(moved)}
-        ms = sorted(ms, key=lambda m: order.get(m.frame_id, len(order)))
-        res = run_shared_checks(ms, ecfg).summary()
+        rnd, res = _measure_round(k, todo, c_rigid, measure, ecfg)
         reg = res["registration"]
-        done.append(
-            RefineRound(
-                k, len(ms), sum(m.evidence is not None for m in ms), str(reg.get("status")),
-                _f(reg.get("angle_deg")), reg.get("angle_deg_ci"), _f(reg.get("translation")),
-                reg.get("translation_ci"), _f(reg.get("effect_px")), reg.get("effect_px_ci"),
-                time.perf_counter() - t0,
-            )
-        )  # fmt: skip
-        logger.info(
-            "registration round %d: what is left moves the images by %s px (%s)",
-            k,
-            "?" if done[-1].effect_px is None else f"{done[-1].effect_px:.2f}",
-            reg.get("status"),
-        )
+        done.append(rnd)
         if reg.get("corrected_world_from_world") is None:
             stopped = f"round {k}: no residual fit ({reg.get('reason') or reg.get('status')})"
             break
