@@ -1,9 +1,12 @@
-"""Composes a run: read -> measure every frame (executor + store) -> verdicts -> outputs.
+"""Composes a run: read -> measure every frame (executor + store) -> verdicts -> corrections
+-> outputs.
 
-Stage 1 (``pgt_check.measure``) produces one ``FrameMeasurement`` per frame and never raises
-for one bad frame; measurements stream into ``out/records.jsonl`` (append-only, resumable).
-Stage 2 (``pgt_check.verdict``) applies thresholds; stage 3 (``pgt_check.report``) writes
-frames.csv, summary.json, junit.xml and report.html from the verdict rows.
+Stage 1 (``pgt_check.measure``) produces one ``FrameMeasurement`` per frame (raw, enhanced and
+geometric-edge paths) and never raises for one bad frame; measurements stream into
+``out/records.jsonl`` (append-only, resumable). Stage 2 (``pgt_check.verdict``) runs the
+run-level checks and applies thresholds; stage 3 (``pgt_check.correct``) refines a failed
+registration check's estimate and corrects the chosen frames' poses; stage 4
+(``pgt_check.report``) writes frames.csv, summary.json, junit.xml and report.html from the rows.
 """
 
 from __future__ import annotations
@@ -255,9 +258,44 @@ def _check_frames_locked(
         store, frames, config, checker_factory, stats, input_keys=input_keys
     )
     judged = judge_run(measurements, config)
-    rows = judged.rows
     traj = trajectory if trajectory is not None else Trajectory(tuple(frames))
     shared_extra = judged.summary_extra()
+    rows, corrections = _correct(traj, measurements, judged, shared_extra, config,
+                                 checker_factory)
+    assets = write_report_assets(
+        frames, rows, config, checker_factory, measurement_fingerprint(config, inputs)
+    )
+    shadings = sorted({str(m.shading) for m in measurements if m.shading})
+    summary_extra = {
+        "shading": shadings[0] if len(shadings) == 1 else (shadings or None),
+        "executor": {
+            "kind": config.executor,
+            "workers": stats.workers,
+            "frames_measured": stats.yielded,
+            "frames_reused": n_reused,
+            "worker_crashes": stats.worker_crashes,
+        },
+        **(extra or {}),
+        **shared_extra,
+        **corrections,
+        "wall_time_s": time.perf_counter() - t0,
+    }
+    return write_outputs(out, rows, config, extra=summary_extra, assets=assets)
+
+
+def _correct(
+    traj: Trajectory,
+    measurements: list[FrameMeasurement],
+    judged: Any,
+    shared_extra: dict[str, Any],
+    config: RunConfig,
+    checker_factory: Callable[[], Any],
+) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """The correction stage (``pgt_check.correct``) after the verdicts: a failed registration
+    check's estimate refined (in ``shared_extra["shared_errors"]``), then the corrected poses
+    of the chosen frames; the rows (with correction columns) and the corrections' summary."""
+    out = Path(config.out)
+    rows = judged.rows
     if judged.shared is not None:  # a failed registration check: its estimate refined
         from pgt_check.correct.registration import refine_run
 
@@ -280,25 +318,7 @@ def _check_frames_locked(
         from pgt_check.correct.frames import correct_run
 
         rows, corrections = correct_run(traj, measurements, rows, config, checker_factory, out)
-    assets = write_report_assets(
-        frames, rows, config, checker_factory, measurement_fingerprint(config, inputs)
-    )
-    shadings = sorted({str(m.shading) for m in measurements if m.shading})
-    summary_extra = {
-        "shading": shadings[0] if len(shadings) == 1 else (shadings or None),
-        "executor": {
-            "kind": config.executor,
-            "workers": stats.workers,
-            "frames_measured": stats.yielded,
-            "frames_reused": n_reused,
-            "worker_crashes": stats.worker_crashes,
-        },
-        **(extra or {}),
-        **shared_extra,
-        **corrections,
-        "wall_time_s": time.perf_counter() - t0,
-    }
-    return write_outputs(out, rows, config, extra=summary_extra, assets=assets)
+    return rows, corrections
 
 
 class PlainMeasure:
