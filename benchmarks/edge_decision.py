@@ -93,7 +93,7 @@ def summarise(rows: list[dict]) -> dict[str, dict]:
     for name, acc in rules.items():
         giv = [x for x in rows if x["case"] == "given"]
         per = [x for x in rows if x["case"] == "perturbed"]
-        passed = lambda x: acc(x) and x["err"] <= x["threshold"]  # noqa: E731
+        passed = lambda x, acc=acc: acc(x) and x["err"] <= x["threshold"]  # noqa: E731
         score = np.array([x["err"] if acc(x) else np.inf for x in giv + per])
         lab = np.array([False] * len(giv) + [True] * len(per))
         out[name] = dict(pass_given=float(np.mean([passed(x) for x in giv])),

@@ -105,6 +105,7 @@ def main() -> None:
     ap.add_argument("--matchers", default="sift,xfeat")
     ap.add_argument("--methods", default="reproject,mariner")
     ap.add_argument("--fraction", type=float, default=0.34)
+    ap.add_argument("--out", default="raw_vs_enhanced", help="report name under reports/")
     args = ap.parse_args()
     data = shared_data()
     methods = args.methods.split(",")
@@ -192,8 +193,8 @@ def main() -> None:
         "",
     ])
     REPORTS.mkdir(exist_ok=True)
-    (REPORTS / "raw_vs_enhanced.md").write_text(text)
-    (REPORTS / "raw_vs_enhanced.json").write_text(json.dumps(raw_json, indent=2))
+    (REPORTS / f"{args.out}.md").write_text(text)
+    (REPORTS / f"{args.out}.json").write_text(json.dumps(raw_json, indent=2))
     print(text)
 
 

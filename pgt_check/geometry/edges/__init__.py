@@ -43,10 +43,10 @@ from __future__ import annotations
 
 from pgt_check.geometry.edges.align import align_edges, auto_tau
 from pgt_check.geometry.edges.config import (
+    DECISIONS,
     KIND_BORDER,
     KIND_CREASE,
     KIND_OCCLUSION,
-    DECISIONS,
     MODELS,
     EdgeAlignConfig,
     EdgeReason,
