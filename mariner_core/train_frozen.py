@@ -13,7 +13,7 @@ Two steps, both resumable, both reading a frame cache (``mariner_core.data``):
    ``--resume``; ``log.csv`` is the learning curve.
 
     python -m mariner_core.train_frozen cache --data FRAME_CACHE --out RUN [--pairs 2]
-    python -m mariner_core.train_frozen train --out RUN --max-minutes 90 [--resume]
+    python -m mariner_core.train_frozen train --out RUN --max-minutes 90 [--resume | --init W]
 """
 
 from __future__ import annotations
@@ -217,9 +217,16 @@ def _validate(model: FrozenMariner, imgs, scores, k: int, jobs: list) -> dict[st
     return {g: float(np.mean(v)) for g, v in groups.items()}
 
 
-def train(out: str | Path, max_minutes: float, settings: TrainSettings, resume: bool) -> Path:
-    """Train the fusion decoder on the cached triples; returns the path of ``best.pt``."""
-    from .enhancer import save_checkpoint
+def train(
+    out: str | Path, max_minutes: float, settings: TrainSettings, resume: bool,
+    init: str | Path | None = None,
+) -> Path:
+    """Train the fusion decoder on the cached triples; returns the path of ``best.pt``.
+
+    ``init``: start from these weights (e.g. the shipped checkpoint, whose decoder size must
+    match ``settings``) instead of a zero-initialised head; ignored when resuming ``last.pt``.
+    """
+    from .enhancer import load_checkpoint, save_checkpoint
     from .losses import PerceptualLoss
     from .pretrained import backbone_state_dict
 
@@ -242,6 +249,12 @@ def train(out: str | Path, max_minutes: float, settings: TrainSettings, resume: 
     val_jobs = meta["val_jobs"]
     model = FrozenMariner(cfg)
     model.load_vgg(backbone_state_dict("vgg16"))
+    if init is not None and not (resume and (out / "last.pt").is_file()):
+        start = load_checkpoint(init)
+        if not isinstance(start, FrozenMariner) or start.cfg != cfg:
+            raise ValueError(f"{init}: not a frozen-matcher checkpoint with config {cfg}")
+        model.load_state_dict(start.state_dict(), strict=True)
+        logger.info("initialised from %s", init)
     model.train()
     params = [p for n, p in model.named_parameters() if not n.startswith("vgg.")]
     opt = torch.optim.Adam(params, lr=settings.lr)
@@ -345,6 +358,8 @@ def main(argv: list[str] | None = None) -> int:
     t.add_argument("--out", required=True)
     t.add_argument("--max-minutes", type=float, required=True)
     t.add_argument("--resume", action="store_true")
+    t.add_argument("--init", default=None, help="start from these weights (e.g. the shipped "
+                   "mariner_core/weights/mariner.pt)")
     t.add_argument("--crop", type=int, default=TrainSettings.crop)
     t.add_argument("--batch-size", type=int, default=TrainSettings.batch_size)
     t.add_argument("--lr", type=float, default=TrainSettings.lr)
@@ -359,7 +374,7 @@ def main(argv: list[str] | None = None) -> int:
     settings = TrainSettings(crop=args.crop, batch_size=args.batch_size, lr=args.lr,
                              lambda_per=args.lambda_per, threads=args.threads,
                              channels=args.channels)
-    train(args.out, args.max_minutes, settings, args.resume)
+    train(args.out, args.max_minutes, settings, args.resume, init=args.init)
     return 0
 
 

@@ -1,0 +1,97 @@
+"""The cpu-frozen trainer on a tiny synthetic frame cache: cache, train, best checkpoint, resume."""
+
+from __future__ import annotations
+
+import csv
+import json
+
+import numpy as np
+import pytest
+import torch
+
+from mariner_core.enhancer import load_checkpoint
+from mariner_core.frozen import FrozenMariner
+from mariner_core.train_frozen import TrainSettings, build_triples, train
+
+
+def _write_cache(root, n: int = 24, h: int = 48, w: int = 64) -> None:
+    """Smooth random photos 10 time units apart; renders are a darker, tinted copy."""
+    rng = np.random.default_rng(0)
+    base = rng.random((n, h // 8, w // 8, 3))
+    photo = np.kron(base, np.ones((1, 8, 8, 1)))
+    render = np.clip(photo * 0.5 + np.array([0.2, 0.0, 0.1]), 0, 1)
+    u8 = lambda a: (a * 255).round().astype(np.uint8)  # noqa: E731
+    root.mkdir()
+    frames = []
+    for i in range(n):
+        name = f"frame_{i:06d}.npz"
+        np.savez(root / name, photo=u8(photo[i]), render=u8(render[i]),
+                 render_colourless=u8(render[i].mean(-1, keepdims=True).repeat(3, -1)))
+        frames.append({"frame_id": str(i), "t": 10.0 * i, "file": name})
+    (root / "index.json").write_text(json.dumps({"frames": frames}))
+
+
+@pytest.fixture()
+def run(tmp_path, converted_weights):
+    _write_cache(tmp_path / "cache")
+    build_triples(tmp_path / "cache", tmp_path / "run", pairs=1)
+    return tmp_path / "run"
+
+
+SMALL = TrainSettings(crop=32, batch_size=2, val_every_minutes=0.02, ckpt_every_minutes=0.01,
+                      threads=1, channels=4, blocks=(1, 1, 1))
+
+
+def _log(run) -> list[dict]:
+    with (run / "log.csv").open() as f:
+        return list(csv.DictReader(f))
+
+
+def test_cache_train_checkpoint_and_resume(run) -> None:
+    meta = json.loads((run / "triples.json").read_text())
+    n_train = json.loads((run / "train_done.json").read_text())["n"]
+    assert n_train == len(meta["train_jobs"]) > 0
+    # every training reference is 10-60 time units away from its frame, in the training range
+    assert all(10 <= 10 * abs(i - j) <= 60 for i, j, _ in meta["train_jobs"])
+    kinds = {tuple(j[2:]) for j in meta["val_jobs"]}
+    assert ("render", "offset") in kinds and ("render_colourless", "ref_target") in kinds
+    imgs = np.load(run / "train_images.npy", mmap_mode="r")
+    assert imgs.shape[1] == 3 + 3 * 4 + 3 + 3 and imgs.shape[2:] == (48, 64)
+
+    best = train(run, max_minutes=0.05, settings=SMALL, resume=False)
+    rows = _log(run)
+    assert len(rows) >= 2 and int(rows[-1]["step"]) > 0
+    assert all(np.isfinite(float(r["val_mean"])) for r in rows)
+    model = load_checkpoint(best)
+    assert isinstance(model, FrozenMariner) and model.cfg.channels == 4
+    ck = torch.load(run / "last.pt", weights_only=False)
+    steps = ck["state"]["step"]
+    train(run, max_minutes=0.1, settings=SMALL, resume=True)
+    assert torch.load(run / "last.pt", weights_only=False)["state"]["step"] > steps
+
+
+def test_init_from_weights_must_match(run, tmp_path) -> None:
+    from mariner_core.enhancer import save_checkpoint
+    from mariner_core.train_frozen import _validate
+
+    best = train(run, max_minutes=0.02, settings=SMALL, resume=False)
+    start = load_checkpoint(best)
+    with torch.no_grad():
+        start.head.bias.fill_(0.3)  # far from anything the short run could reach
+    init = save_checkpoint(start, tmp_path / "init.pt")
+    other = tmp_path / "other"
+    other.mkdir()
+    for f in run.iterdir():
+        if f.suffix in (".npy", ".json"):
+            (other / f.name).symlink_to(f)
+    train(other, max_minutes=0.02, settings=SMALL, resume=False, init=init)
+    # the first validation of the new run scores the weights it started from
+    jobs = json.loads((run / "triples.json").read_text())["val_jobs"]
+    res = _validate(start, np.load(run / "val_images.npy"), np.load(run / "val_scores.npy"), 4,
+                    jobs)
+    want = (res["coloured_offset"] + res["colourless_offset"]) / 2
+    assert float(_log(other)[0]["val_mean"]) == pytest.approx(want, abs=0.01)
+    assert float(_log(run)[0]["val_mean"]) > want + 1.0  # the zero-initialised start differs
+    wider = TrainSettings(**{**SMALL.__dict__, "channels": 8})
+    with pytest.raises(ValueError, match="config"):
+        train(other, max_minutes=0.02, settings=wider, resume=False, init=init)
