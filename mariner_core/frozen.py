@@ -78,7 +78,7 @@ class FrozenMarinerConfig:
     patch_size: int = 15
     iterations: int = 1
     min_reference_size: int = 32
-    max_match_positions: int = 8_000_000
+    max_match_positions: int = 32_000_000
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "blocks", tuple(int(b) for b in self.blocks))
@@ -222,6 +222,13 @@ class FrozenMariner(nn.Module):
             position of the reference patch. ``reference_features`` (``self.vgg(reference)``)
             skips the reference's forward pass when one photo serves many renders.
         """
+        if render.shape[0] > 1:  # one image at a time: the chunk size is per image
+            parts = [
+                self.match(render[b : b + 1], reference[b : b + 1],
+                           None if reference_features is None else reference_features[b : b + 1])
+                for b in range(render.shape[0])
+            ]
+            return torch.cat([p[0] for p in parts]), torch.cat([p[1] for p in parts])
         f_r = self.vgg(render)
         f_p = self.vgg(reference) if reference_features is None else reference_features
         n, _, h4, w4 = f_r.shape
@@ -240,7 +247,8 @@ class FrozenMariner(nn.Module):
         lp = hp * wp
         k = min(self.cfg.top_k, lp)
         per_row = (w4 + 2 * r) * (hp + 2 * r) * (wp + 2 * r) * n
-        rows = max(1, self.cfg.max_match_positions // per_row - 2 * r)
+        # chunks of render rows; each carries a 2r-row halo, so keep them much taller than 2r
+        rows = max(1, 4 * r, self.cfg.max_match_positions // per_row - 2 * r)
         scores, idx = [], []
         for y0 in range(0, h4, rows):
             y1 = min(h4, y0 + rows)
