@@ -341,15 +341,10 @@ class FrozenMariner(nn.Module):
         return (base + self.head(d1)[..., :h, :w])
 
     def check_inputs(self, render: torch.Tensor, reference: torch.Tensor) -> None:
-        from .model import check_image_tensor
+        """Validate render/reference tensors; raises ValueError with the reason."""
+        from .model import check_image_pair
 
-        check_image_tensor(render, "render")
-        check_image_tensor(reference, "reference")
-        if reference.shape[0] != render.shape[0]:
-            raise ValueError(
-                f"render and reference batch sizes differ: {render.shape[0]} vs "
-                f"{reference.shape[0]}"
-            )
+        check_image_pair(render, reference)
         m = self.cfg.min_reference_size
         if min(reference.shape[-2:]) < m or min(render.shape[-2:]) < 2:
             raise ValueError(

@@ -17,7 +17,7 @@ from .matching import MEM
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["Mariner", "check_image_tensor", "pad_render", "pad_reference"]
+__all__ = ["Mariner", "check_image_pair", "check_image_tensor", "pad_render", "pad_reference"]
 
 
 def check_image_tensor(x: torch.Tensor, name: str) -> None:
@@ -32,6 +32,16 @@ def check_image_tensor(x: torch.Tensor, name: str) -> None:
         raise ValueError(f"{name} is empty: {tuple(x.shape)}")
     if not bool(torch.isfinite(x).all()):
         raise ValueError(f"{name} contains NaN or inf values")
+
+
+def check_image_pair(render: torch.Tensor, reference: torch.Tensor) -> None:
+    """Both finite floating (N, 3, H, W) tensors with the same batch size; ValueError if not."""
+    check_image_tensor(render, "render")
+    check_image_tensor(reference, "reference")
+    if reference.shape[0] != render.shape[0]:
+        raise ValueError(
+            f"render and reference batch sizes differ: {render.shape[0]} vs {reference.shape[0]}"
+        )
 
 
 def pad_render(x: torch.Tensor, multiple: int) -> tuple[torch.Tensor, tuple[int, int, int, int]]:
@@ -110,13 +120,7 @@ class Mariner(nn.Module):
 
     def check_inputs(self, render: torch.Tensor, reference: torch.Tensor) -> None:
         """Validate render/reference tensors; raises ValueError with the reason."""
-        check_image_tensor(render, "render")
-        check_image_tensor(reference, "reference")
-        if reference.shape[0] != render.shape[0]:
-            raise ValueError(
-                f"render and reference batch sizes differ: {render.shape[0]} vs "
-                f"{reference.shape[0]}"
-            )
+        check_image_pair(render, reference)
         m = self.cfg.min_reference_size
         if min(reference.shape[-2:]) < m:
             raise ValueError(
