@@ -191,6 +191,16 @@ class FrozenMariner(nn.Module):
         nn.init.zeros_(self.head.weight)
         nn.init.zeros_(self.head.bias)
 
+    @classmethod
+    def from_pretrained(cls, path: str) -> FrozenMariner:
+        """Load a checkpoint strictly (``weights_only=True``); it must be a frozen-matcher one."""
+        from .enhancer import load_checkpoint
+
+        model = load_checkpoint(path)
+        if not isinstance(model, cls):
+            raise ValueError(f"{path} holds a {type(model).__name__}, not a FrozenMariner")
+        return model
+
     # -- frozen part -------------------------------------------------------------------------
     def load_vgg(self, state_dict: dict[str, torch.Tensor]) -> None:
         """Load the ImageNet VGG16 (``pretrained.backbone_state_dict('vgg16')``) into the
@@ -210,9 +220,9 @@ class FrozenMariner(nn.Module):
     ) -> tuple[torch.Tensor, torch.Tensor]:
         """Top-k global patch matches at relu3_3 (cosine of ``patch_size``^2-position patches).
 
-        The patch similarity is summed from the pointwise one along both images' shifts, which
-        costs ``patch_size``^2 additions per pair instead of a ``patch_size``^2 longer
-        descriptor.
+        The patch similarity is summed from the pointwise one along both images' shifts,
+        separably (x, then y): 2 x ``patch_size`` additions per pair instead of a
+        ``patch_size``^2 times longer descriptor.
 
         Args:
             render: (N, 3, H, W), H and W multiples of 4; reference: (N, 3, Hr, Wr), same.

@@ -108,6 +108,7 @@ def test_checkpoint_round_trip_dispatches_on_architecture(tmp_path) -> None:
     path = save_checkpoint(m, tmp_path / "f.pt", extra={"step": 1})
     loaded = load_checkpoint(path)
     assert isinstance(loaded, FrozenMariner) and loaded.cfg == SMALL
+    assert FrozenMariner.from_pretrained(path).cfg == SMALL
     enh = Enhancer.from_pretrained(path)
     x, r = torch.rand(1, 3, 40, 52), torch.rand(1, 3, 48, 48)
     with torch.no_grad():
@@ -139,3 +140,13 @@ def test_rejects_bad_inputs() -> None:
         m(torch.rand(2, 3, 32, 32), torch.rand(1, 3, 32, 32))
     with pytest.raises(ValueError, match="NaN"):
         m(torch.full((1, 3, 32, 32), float("nan")), torch.rand(1, 3, 32, 32))
+
+
+def test_from_pretrained_refuses_the_spec_network(tmp_path) -> None:
+    from mariner_core.config import MarinerConfig
+    from mariner_core.model import Mariner
+
+    spec = Mariner(MarinerConfig(channels=8, encoder_blocks=(1, 1, 1), decoder_blocks=(1, 1, 1)))
+    path = save_checkpoint(spec, tmp_path / "spec.pt")
+    with pytest.raises(ValueError, match="not a FrozenMariner"):
+        FrozenMariner.from_pretrained(path)
