@@ -55,6 +55,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--translation", type=float, default=0.04)
     p.add_argument("--methods", default="mariner,reproject")
     p.add_argument("--matcher", default="sift")
+    p.add_argument("--out", default="mariner_absolute", help="report name under reports/")
     a = p.parse_args(argv)
     data = shared_data()
     k = data / "7scenes_redkitchen"
@@ -79,7 +80,7 @@ def main(argv: list[str] | None = None) -> int:
                            "trajectory": label, **_stats(recs, path, cfg), "s_per_frame": spf}
                     results.append(row)
                     print(json.dumps(row), flush=True)
-    (REPORTS / "mariner_absolute.json").write_text(json.dumps(results, indent=1))
+    (REPORTS / f"{a.out}.json").write_text(json.dumps(results, indent=1))
     rows = [[r["case"], r["method"], r["trajectory"], f"{r['verifiable']}/{r['n']}",
              f"{r['within']}/{r['n']}", f"{r['flagged']}/{r['n']}",
              "-" if r["median_px"] is None else f"{r['median_px']:.1f}"] for r in results]
@@ -99,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
                    "median corner error px"], rows),
         "",
     ]
-    (REPORTS / "mariner_absolute.md").write_text("\n".join(lines))
+    (REPORTS / f"{a.out}.md").write_text("\n".join(lines))
     return 0
 
 
