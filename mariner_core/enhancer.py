@@ -95,8 +95,7 @@ def load_checkpoint(
             f"{sorted(CHECKPOINT_KEYS)}, got {keys}"
         )
     model = build_model(dict(ckpt["config"]))
-    state = {k: v.float() if v.is_floating_point() else v for k, v in ckpt["state_dict"].items()}
-    model.load_state_dict(state, strict=True)
+    model.load_state_dict(ckpt["state_dict"], strict=True)  # fp16 storage: copied to float32
     logger.info("loaded MaRINeR checkpoint %s (meta %s)", path, ckpt["meta"])
     return model
 

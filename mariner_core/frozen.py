@@ -304,6 +304,12 @@ class FrozenMariner(nn.Module):
             out.append(F.fold(sel, size, p, padding=STRIDE, stride=STRIDE) / norm)
         return torch.stack(out, 1)
 
+    @torch.no_grad()
+    def features(self, image: torch.Tensor) -> torch.Tensor:
+        """relu3_3 of an image padded as ``prepare`` pads it: (N, 3, H, W) -> (N, 256, ~H/4,
+        ~W/4); pass it as ``reference_features`` when one photo serves many renders."""
+        return self.vgg(_pad_to(image, STRIDE)[0])
+
     @staticmethod
     def upsample_scores(score: torch.Tensor, size: tuple[int, int]) -> torch.Tensor:
         """(N, k, H/4, W/4) similarities -> (N, k, H, W) (bilinear), as ``fuse`` reads them."""

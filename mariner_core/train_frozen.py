@@ -31,7 +31,14 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from .data import RENDER_VARIANTS, FrameCache, load_frame_cache, reference_candidates, split_frames
+from .data import (
+    RENDER_VARIANTS,
+    FrameCache,
+    load_frame_cache,
+    reference_candidates,
+    split_frames,
+    to_tensor,
+)
 from .frozen import FrozenMariner, FrozenMarinerConfig
 from .metrics import psnr_y
 
@@ -72,8 +79,6 @@ def _prepare_one(
     model: FrozenMariner, render: np.ndarray, ref: np.ndarray, target: np.ndarray,
     ref_features: torch.Tensor | None = None,
 ):
-    from .data import to_tensor
-
     prep = model.prepare(to_tensor(render)[None], to_tensor(ref)[None], low_res_scores=True,
                          reference_features=ref_features)
     x = prep["render"]
@@ -134,27 +139,24 @@ def _write_set(model: FrozenMariner, cache: FrameCache, jobs: list, stem: Path, 
     sc_path = stem.with_name(stem.name + "_scores.npy")
     done_path = stem.with_name(stem.name + "_done.json")
     done = json.loads(done_path.read_text())["n"] if done_path.is_file() else 0
-    i0, j0, v0 = jobs[0]
-    im0, sc0 = _prepare_one(model, cache.images[v0][i0], cache.images["photo"][j0],
-                            cache.images["photo"][i0])
-    mode = "r+" if img_path.is_file() and done > 0 else "w+"
-    imgs = np.lib.format.open_memmap(img_path, mode=mode, dtype=np.uint8,
-                                     shape=(len(jobs), *im0.shape))
-    scs = np.lib.format.open_memmap(sc_path, mode=mode, dtype=np.float16,
-                                    shape=(len(jobs), *sc0.shape))
-    t0 = time.perf_counter()
-    from .data import to_tensor
-    from .frozen import _pad_to
-
     photo_features: dict[int, torch.Tensor] = {}  # each photo's relu3_3 once (~2 MB each)
-    for n in range(done, len(jobs)):
+
+    def prepared(n: int) -> tuple[np.ndarray, np.ndarray]:
         i, j, v = jobs[n]
         if j not in photo_features:
-            with torch.no_grad():
-                padded, _ = _pad_to(to_tensor(cache.images["photo"][j])[None], 4)
-                photo_features[j] = model.vgg(padded)
-        imgs[n], scs[n] = _prepare_one(model, cache.images[v][i], cache.images["photo"][j],
-                                       cache.images["photo"][i], photo_features[j])
+            photo_features[j] = model.features(to_tensor(cache.images["photo"][j])[None])
+        return _prepare_one(model, cache.images[v][i], cache.images["photo"][j],
+                            cache.images["photo"][i], photo_features[j])
+
+    first = prepared(done if done < len(jobs) else 0)  # the array shapes
+    mode = "r+" if img_path.is_file() and done > 0 else "w+"
+    imgs = np.lib.format.open_memmap(img_path, mode=mode, dtype=np.uint8,
+                                     shape=(len(jobs), *first[0].shape))
+    scs = np.lib.format.open_memmap(sc_path, mode=mode, dtype=np.float16,
+                                    shape=(len(jobs), *first[1].shape))
+    t0 = time.perf_counter()
+    for n in range(done, len(jobs)):
+        imgs[n], scs[n] = first if n == done else prepared(n)
         if (n + 1) % 100 == 0 or n + 1 == len(jobs):
             imgs.flush()
             scs.flush()
