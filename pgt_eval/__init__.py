@@ -205,6 +205,40 @@ def boxes_scene(seed: int = 0):
     return trimesh.Scene(parts)
 
 
+def _photograph_boxes(out: Path, photo_scene, cam, n_frames: int, rng: np.random.Generator,
+                      degrade, jpeg_quality: int) -> Path:
+    """Photos of ``photo_scene`` along an arc in front of the boxes' wall (vertex colours mixed
+    with head-light shading, then ``degrade(img, rng)``, JPEG) and LaMAR files with the TRUE
+    poses in ``out``; returns the trajectory path. Shared by the generated scenes."""
+    import cv2
+
+    from pgt_check.io.lamar import write_lamar
+    from pgt_check.render import make_renderer, mesh_from_trimesh
+
+    coloured = make_renderer(mesh_from_trimesh(photo_scene))
+    shaded = make_renderer(mesh_from_trimesh(photo_scene, shading="shaded"))
+    frames = []
+    try:
+        for i in range(n_frames):
+            a = -0.9 + 1.8 * i / max(n_frames - 1, 1)  # an arc in front of the wall
+            r = 4.0 + 0.5 * np.sin(3 * a)
+            eye = np.array([r * np.sin(a), -r * np.cos(a), 1.6 + 0.3 * np.cos(2 * a)])
+            pose = _look_at(eye, np.array([0.0, 0.6, 0.5]))
+            img = 0.4 * shaded.render(cam, pose).rgb + 0.65 * coloured.render(cam, pose).rgb
+            img = degrade(img, rng)
+            name = f"images/{i:04d}.jpg"
+            cv2.imwrite(str(out / name),
+                        cv2.cvtColor((np.clip(img, 0, 1) * 255).astype(np.uint8),
+                                     cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, jpeg_quality])
+            frames.append(Frame(f"{i}", cam, pose, image_path=name, image_file=out / name,
+                                timestamp=float(i)))
+    finally:
+        coloured.close()
+        shaded.close()
+    write_lamar(Trajectory(tuple(frames), str(out), "lamar"), out)
+    return out / "trajectories.txt"
+
+
 def make_textureless_scene(out_dir: str | Path, n_frames: int = 24, seed: int = 0,
                            size: tuple[int, int] = (320, 240)) -> Path:
     """Write a textureless scene: ``boxes.ply`` (plain vertex colours), photos rendered at the
@@ -214,8 +248,6 @@ def make_textureless_scene(out_dir: str | Path, n_frames: int = 24, seed: int = 
     import cv2
     import trimesh
 
-    from pgt_check.io.lamar import write_lamar
-    from pgt_check.render import make_renderer, mesh_from_trimesh
     from pgt_check.types import Camera
 
     out = Path(out_dir)
@@ -225,30 +257,12 @@ def make_textureless_scene(out_dir: str | Path, n_frames: int = 24, seed: int = 
     mesh.export(out / "boxes.ply")  # generated here: not a copy of any shared dataset
     w, h = size
     cam = Camera.pinhole(w, h, 0.9 * w, 0.9 * w, (w - 1) / 2, (h - 1) / 2)
-    coloured = make_renderer(mesh_from_trimesh(scene))
-    shaded = make_renderer(mesh_from_trimesh(scene, shading="shaded"))
-    rng = np.random.default_rng(seed)
-    frames = []
-    try:
-        for i in range(n_frames):
-            a = -0.9 + 1.8 * i / max(n_frames - 1, 1)  # an arc in front of the wall
-            r = 4.0 + 0.5 * np.sin(3 * a)
-            eye = np.array([r * np.sin(a), -r * np.cos(a), 1.6 + 0.3 * np.cos(2 * a)])
-            pose = _look_at(eye, np.array([0.0, 0.6, 0.5]))
-            img = 0.4 * shaded.render(cam, pose).rgb + 0.65 * coloured.render(cam, pose).rgb
-            img = cv2.GaussianBlur(img, (0, 0), 0.7)
-            img = img + rng.normal(0, 0.015, img.shape).astype(np.float32)
-            name = f"images/{i:04d}.jpg"
-            cv2.imwrite(str(out / name),
-                        cv2.cvtColor((np.clip(img, 0, 1) * 255).astype(np.uint8),
-                                     cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 85])
-            frames.append(Frame(f"{i}", cam, pose, image_path=name, image_file=out / name,
-                                timestamp=float(i)))
-    finally:
-        coloured.close()
-        shaded.close()
-    write_lamar(Trajectory(tuple(frames), str(out), "lamar"), out)
-    return out / "trajectories.txt"
+
+    def degrade(img: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        img = cv2.GaussianBlur(img, (0, 0), 0.7)
+        return img + rng.normal(0, 0.015, img.shape).astype(np.float32)
+
+    return _photograph_boxes(out, scene, cam, n_frames, np.random.default_rng(seed), degrade, 85)
 
 
 def textureless_scene(out_dir: str | Path, n_frames: int = 24) -> tuple[Trajectory, Path]:
@@ -307,8 +321,6 @@ def make_scan_like_scene(out_dir: str | Path, n_frames: int = 12, seed: int = 0,
     import cv2
     import trimesh
 
-    from pgt_check.io.lamar import write_lamar
-    from pgt_check.render import make_renderer, mesh_from_trimesh
     from pgt_check.types import Camera
 
     out = Path(out_dir)
@@ -324,28 +336,11 @@ def make_scan_like_scene(out_dir: str | Path, n_frames: int = 12, seed: int = 0,
     photo_scene = trimesh.Scene([*scene.geometry.values(), *extra])
     w, h = size
     cam = Camera.pinhole(w, h, 0.9 * w, 0.9 * w, (w - 1) / 2, (h - 1) / 2)
-    coloured = make_renderer(mesh_from_trimesh(photo_scene))
-    shaded = make_renderer(mesh_from_trimesh(photo_scene, shading="shaded"))
-    rng = np.random.default_rng(seed + 1)
-    frames = []
-    try:
-        for i in range(n_frames):
-            a = -0.9 + 1.8 * i / max(n_frames - 1, 1)
-            r = 4.0 + 0.5 * np.sin(3 * a)
-            eye = np.array([r * np.sin(a), -r * np.cos(a), 1.6 + 0.3 * np.cos(2 * a)])
-            pose = _look_at(eye, np.array([0.0, 0.6, 0.5]))
-            img = 0.4 * shaded.render(cam, pose).rgb + 0.65 * coloured.render(cam, pose).rgb
-            img = img * rng.uniform(0.6, 1.4)
-            img = cv2.GaussianBlur(img, (0, 0), rng.uniform(0.7, 1.8))
-            img = img + rng.normal(0, 0.03, img.shape).astype(np.float32)
-            name = f"images/{i:04d}.jpg"
-            cv2.imwrite(str(out / name),
-                        cv2.cvtColor((np.clip(img, 0, 1) * 255).astype(np.uint8),
-                                     cv2.COLOR_RGB2BGR), [cv2.IMWRITE_JPEG_QUALITY, 75])
-            frames.append(Frame(f"{i}", cam, pose, image_path=name, image_file=out / name,
-                                timestamp=float(i)))
-    finally:
-        coloured.close()
-        shaded.close()
-    write_lamar(Trajectory(tuple(frames), str(out), "lamar"), out)
-    return out / "trajectories.txt"
+
+    def degrade(img: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        img = img * rng.uniform(0.6, 1.4)
+        img = cv2.GaussianBlur(img, (0, 0), rng.uniform(0.7, 1.8))
+        return img + rng.normal(0, 0.03, img.shape).astype(np.float32)
+
+    return _photograph_boxes(out, photo_scene, cam, n_frames, np.random.default_rng(seed + 1),
+                             degrade, 75)
