@@ -21,8 +21,8 @@ from pgt_check.correct.pose import CORRECTION_COLUMNS
 from pgt_check.files import safe_text
 from pgt_check.measure.columns import MEASUREMENT_COLUMNS, TIMING_COLUMNS
 from pgt_check.report.files import atomic_write_text
-from pgt_check.verdict.accuracy import ACCURACY_COLUMNS
 from pgt_check.verdict.apply import VERDICT_COLUMNS
+from pgt_check.verdict.frame_bounds import ACCURACY_COLUMNS
 
 logger = logging.getLogger(__name__)
 

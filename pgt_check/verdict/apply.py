@@ -9,11 +9,6 @@ from typing import Any
 from pgt_check.config import RunConfig
 from pgt_check.enhance.base import Evidence
 from pgt_check.measure.record import FrameMeasurement
-from pgt_check.verdict.accuracy import (
-    calibrations_to_remove,
-    frame_accuracy_columns,
-    world_sensitivity,
-)
 from pgt_check.verdict.decide import (
     Judgement,
     Verdict,
@@ -21,6 +16,11 @@ from pgt_check.verdict.decide import (
     own_outcomes,
     path_outcomes,
     vouched_reference,
+)
+from pgt_check.verdict.frame_bounds import (
+    calibrations_to_remove,
+    frame_accuracy_columns,
+    world_sensitivity,
 )
 from pgt_check.verdict.off_mesh import off_mesh_frames
 from pgt_check.verdict.shared import SharedChecks, run_shared_checks
@@ -77,7 +77,7 @@ def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> Ru
     # second pass: a frame judged through a reference the run does not pass is judged
     # through another tried reference that it passes, where one aligned (``vouched_reference``)
     first = {m.frame_id: j.verdict for m, j in zip(ms, judged, strict=True)}
-    # the pose accuracy each frame's absolute evidence supports (``verdict.accuracy``), after
+    # the pose accuracy each frame's absolute evidence supports (``verdict.frame_bounds``), after
     # taking out the calibration error the verdicts take out
     cals = calibrations_to_remove(
         v, None if shared is None else shared.summary(), [m.camera_id for m in ms]

@@ -9,7 +9,7 @@ import json
 import pytest
 
 from pgt_check.cli import main
-from pgt_check.verdict.accuracy import ACCURACY_COLUMNS
+from pgt_check.verdict.frame_bounds import ACCURACY_COLUMNS
 
 
 @pytest.fixture(scope="module")

@@ -93,7 +93,7 @@ def test_columns_are_declared_once_and_feed_frames_csv():
     names = [c.name for c in MEASUREMENT_COLUMNS]
     assert len(names) == len(set(names))
     from pgt_check.verdict import VERDICT_COLUMNS
-    from pgt_check.verdict.accuracy import ACCURACY_COLUMNS
+    from pgt_check.verdict.frame_bounds import ACCURACY_COLUMNS
 
     csv_measured = [n for n in FRAME_COLUMNS if n not in VERDICT_COLUMNS
                     and n not in ACCURACY_COLUMNS and n not in CORRECTION_COLUMNS]

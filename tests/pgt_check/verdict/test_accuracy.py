@@ -7,7 +7,8 @@ import pytest
 
 from pgt_check.config import RunConfig, VerdictConfig
 from pgt_check.errors import ConfigError
-from pgt_check.verdict.accuracy import ACCURACY_COLUMNS, run_accuracy
+from pgt_check.verdict.accuracy import run_accuracy
+from pgt_check.verdict.frame_bounds import ACCURACY_COLUMNS
 
 
 def _row(fid: str, verdict: str, rot: float | None, t: float | None, noise_px: float = 0.5):

@@ -1,0 +1,179 @@
+"""Per-frame pose accuracy: the error each frame's **absolute** evidence supports, in degrees,
+scene units and px, with one-sided 95 % bounds (``frame_accuracy_columns``, the ``acc_*``
+columns of frames.csv), and the image effect of a world rotation / translation that the run's
+statement turns shared errors with (``world_sensitivity``).
+
+The bound comes from ``geometry.frame_accuracy`` (robust fit of the camera-frame correction to
+the frame's 2D-3D points, image-block bootstrap). A frame whose verdict rests on relative
+evidence alone (reprojected references) has no bound of its own: relative evidence cannot see an
+error it shares with its references. The run-level statement is ``verdict.accuracy``.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+
+from pgt_check.config import VerdictConfig
+from pgt_check.geometry.frame_accuracy import FrameAccuracy, frame_accuracy
+from pgt_check.measure.record import FrameMeasurement
+from pgt_check.verdict.calibration import CameraCalibration, camera_matrix
+
+logger = logging.getLogger(__name__)
+
+#: frames.csv columns of the per-frame accuracy, with their meaning (docs/outputs.md)
+ACCURACY_COLUMNS: dict[str, str] = {
+    "acc_rot_deg": "estimated rotation error of the pose, deg (from its absolute evidence)",
+    "acc_rot_bound_deg": "95 % upper bound of the rotation error, deg",
+    "acc_t": "estimated camera-centre error, scene units",
+    "acc_t_bound": "95 % upper bound of the camera-centre error, scene units",
+    "acc_px": "mean image displacement of the estimated error at the frame's points, px",
+    "acc_px_bound": "95 % upper bound of that displacement, px",
+    "acc_noise_deg": "rotation the frame cannot tell from zero (bootstrap noise, 95 %), deg",
+    "acc_noise_t": "camera-centre shift it cannot tell from zero, scene units",
+    "acc_noise_px": "image displacement it cannot tell from zero, px",
+    "acc_px_per_deg": "sensitivity: image corners moved per degree of rotation, px (mean "
+    "over the camera axes)",
+    "acc_px_per_unit": "sensitivity: image corners moved per scene unit of camera translation "
+    "at the evidence's median depth, px (mean over the camera axes)",
+    "acc_min_px_per_deg": "the same about the camera axis that moves the corners least "
+    "(usually the roll), px per degree",
+    "acc_min_px_per_unit": "the same along the camera axis that moves the corners least "
+    "(usually forward), px per scene unit",
+    "acc_pts_px_per_deg": "the same at the frame's evidence points, px per degree",
+    "acc_pts_px_per_unit": "the same at the frame's evidence points, px per scene unit",
+    "acc_depth": "median depth of the fit's points, scene units",
+    "acc_points": "2D-3D points of the fit (inliers / all)",
+    "acc_evidence": "what the bound rests on: absolute sources (raw, enhanced, edges), "
+    "'+calibration removed' when a calibration error was taken out first; '' = no bound",
+    "acc_reason": "why the frame has no bound ('' when it has one)",
+}
+
+_MAX_POINTS = 400  # per frame (evenly spaced): the fit's cost stays a few ms
+
+
+def frame_accuracy_columns(
+    measurements: Sequence[FrameMeasurement],
+    calibrations: Mapping[str, CameraCalibration] | None = None,
+) -> dict[str, dict[str, Any]]:
+    """frame id -> the ``ACCURACY_COLUMNS`` of every measurement. ``calibrations``: camera id ->
+    a calibration error to take out of the evidence first (``--remove-calibration``,
+    ``--calibration-from``)."""
+    from pgt_check.geometry.shared_errors import FrameEvidence
+
+    out: dict[str, dict[str, Any]] = {}
+    for i, m in enumerate(measurements):
+        row: dict[str, Any] = dict.fromkeys(ACCURACY_COLUMNS)
+        row.update(acc_evidence="", acc_reason="no_absolute_evidence")
+        out[m.frame_id] = row
+        if m.evidence is None or not len(m.evidence) or m.world_from_cam is None or not m.intrinsics:
+            continue
+        p2 = np.asarray(m.evidence.pts2d, np.float64).reshape(-1, 2)
+        pc = np.asarray(m.evidence.pts_cam, np.float64).reshape(-1, 3)
+        if len(p2) > _MAX_POINTS:
+            keep = np.linspace(0, len(p2) - 1, _MAX_POINTS).round().astype(int)
+            p2, pc = p2[keep], pc[keep]
+        k = camera_matrix(m.intrinsics)
+        cal = (calibrations or {}).get(m.camera_id)
+        if cal is not None:
+            wfc = np.asarray(m.world_from_cam, np.float64)
+            ev = FrameEvidence(
+                m.frame_id, i, m.camera_id, wfc, k, m.width, m.height, p2,
+                pc @ wfc[:3, :3].T + wfc[:3, 3],
+            )  # fmt: skip
+            p2 = cal.remove(ev).pts2d
+        fa = frame_accuracy(p2, pc, k, m.width, m.height)
+        row.update(_columns(fa))
+        if fa.success:
+            row["acc_evidence"] = "+".join(m.evidence.sources) + (
+                "+calibration removed" if cal is not None else ""
+            )
+    return out
+
+
+def _columns(fa: FrameAccuracy) -> dict[str, Any]:
+    if not fa.success:
+        return {"acc_reason": fa.reason, "acc_points": f"{fa.n_inliers}/{fa.n_points}"}
+    return {
+        "acc_rot_deg": fa.rotation_deg,
+        "acc_rot_bound_deg": fa.rotation_bound_deg,
+        "acc_t": fa.translation,
+        "acc_t_bound": fa.translation_bound,
+        "acc_px": fa.effect_px,
+        "acc_px_bound": fa.effect_bound_px,
+        "acc_noise_deg": fa.rotation_noise_deg,
+        "acc_noise_t": fa.translation_noise,
+        "acc_noise_px": fa.effect_noise_px,
+        "acc_px_per_deg": fa.px_per_deg,
+        "acc_px_per_unit": fa.px_per_unit,
+        "acc_min_px_per_deg": fa.min_px_per_deg,
+        "acc_min_px_per_unit": fa.min_px_per_unit,
+        "acc_pts_px_per_deg": fa.points_px_per_deg,
+        "acc_pts_px_per_unit": fa.points_px_per_unit,
+        "acc_depth": fa.depth,
+        "acc_points": f"{fa.n_inliers}/{fa.n_points}",
+        "acc_reason": "",
+    }
+
+
+def world_sensitivity(measurements: Sequence[FrameMeasurement]) -> tuple[float, float]:
+    """(px per degree, px per scene unit) of a shared error: the image effect of rotating the
+    world by 1 deg about the camera centroid, or shifting it by 1 unit, as the registration
+    check measures it (median over frames of the mean displacement of a frame's evidence
+    points), about / along the world axis where it is smallest (the limit holds whatever the
+    axis). A world rotation also moves the camera centres, which on views around an object
+    undoes much of its image effect: a camera-frame sensitivity would overstate it. NaN
+    without evidence."""
+    from pgt_check.geometry.transforms import axis_angle_to_rotmat
+    from pgt_check.verdict.shared import frame_evidence
+
+    ev = [e for e in frame_evidence(measurements) if len(e.pts3d)]
+    if not ev:
+        return float("nan"), float("nan")
+    c = np.mean([e.world_from_cam[:3, 3] for e in ev], axis=0)
+
+    def effect(move) -> float:
+        per = []
+        for e in ev:
+            r, t = e.world_from_cam[:3, :3], e.world_from_cam[:3, 3]
+            x0 = (e.pts3d - t) @ r
+            x1 = (move(e.pts3d) - t) @ r
+            ok = (x0[:, 2] > 1e-9) & (x1[:, 2] > 1e-9)
+            if not ok.any():
+                continue
+            u0 = (x0[ok] @ e.K.T)[:, :2] / x0[ok, 2:3]
+            u1 = (x1[ok] @ e.K.T)[:, :2] / x1[ok, 2:3]
+            per.append(float(np.mean(np.linalg.norm(u1 - u0, axis=1))))
+        return float(np.median(per)) if per else float("nan")
+
+    eye = np.eye(3)
+    step_deg, step_units = 0.1, 1e-3 * max(float(np.median(
+        [np.linalg.norm(e.pts3d - e.world_from_cam[:3, 3], axis=1).mean() for e in ev])), 1e-9)
+    rots = [axis_angle_to_rotmat(a, step_deg) for a in eye]
+    rot = min(effect(lambda x, rr=rr: (x - c) @ rr.T + c) for rr in rots) / step_deg
+    tra = min(effect(lambda x, d=a: x + step_units * d) for a in eye) / step_units
+    return rot, tra
+
+
+def calibrations_to_remove(
+    config: VerdictConfig, shared: Mapping[str, Any] | None, camera_ids: Sequence[str]
+) -> dict[str, CameraCalibration]:
+    """The calibration errors the verdicts take out (the same the run-level checks used)."""
+    if config.calibration_from:
+        from pgt_check.verdict.calibration import trusted_calibration
+
+        return trusted_calibration(config.calibration_from, sorted(set(camera_ids)))
+    if config.remove_calibration and shared:
+        cals = {}
+        for cam_id, entry in (shared.get("calibration") or {}).items():
+            cal = CameraCalibration.from_summary(entry) if isinstance(entry, Mapping) else None
+            if cal is not None:
+                cals[cam_id] = cal
+        return cals
+    return {}
+
+
+# --- the run ---------------------------------------------------------------------------------
