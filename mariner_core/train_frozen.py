@@ -67,6 +67,8 @@ class TrainSettings:
     ckpt_every_minutes: float = 3.0
     threads: int = 2
     seed: int = 0
+    #: share of training crops whose reference and target get one random colour change
+    colour_aug: float = 0.0
     channels: int = 24
     blocks: tuple[int, int, int] = (1, 2, 3)
 
@@ -169,9 +171,41 @@ def _write_set(model: FrozenMariner, cache: FrameCache, jobs: list, stem: Path, 
     done_path.write_text(json.dumps({"n": len(jobs)}))
 
 
+def _recolour(
+    prep: dict[str, torch.Tensor], target: torch.Tensor, share: float, rng: np.random.Generator,
+) -> torch.Tensor:
+    """Give the reference-derived inputs and the target one random colour change per sample.
+
+    Why: a decoder trained on one scene learns that scene's colours and brightness from the
+    render (the castle, unseen, scored below the untrained matching, ``reports/mariner_quality.md``).
+    When the photo's colours change with the reference's and not with the render, the only way
+    to predict them is to read them from the reference. Per-channel gain and a shared gamma, so
+    the colour-transferred render (per-channel mean / std moved to the reference's) follows
+    approximately. The render itself is left as it is. Modifies ``prep`` in place; returns the
+    changed target.
+    """
+    n = target.shape[0]
+    on = torch.from_numpy(rng.random(n) < share)
+    gain = torch.from_numpy(np.exp(rng.uniform(-0.35, 0.35, (n, 1, 1, 1))
+                                   + rng.uniform(-0.2, 0.2, (n, 3, 1, 1)))).float()
+    gamma = torch.from_numpy(np.exp(rng.uniform(-0.35, 0.35, (n, 1, 1, 1)))).float()
+    gain = torch.where(on[:, None, None, None], gain, torch.ones_like(gain))
+    gamma = torch.where(on[:, None, None, None], gamma, torch.ones_like(gamma))
+
+    def change(x: torch.Tensor) -> torch.Tensor:
+        c = x.shape[1]
+        y = x.reshape(n, c // 3, 3, *x.shape[-2:])
+        y = (gain[:, None] * y.clamp_min(1e-4) ** gamma[:, None]).clamp(0, 1)
+        return y.reshape(x.shape)
+
+    prep["warped"] = change(prep["warped"])
+    prep["colour"] = change(prep["colour"])
+    return change(target)
+
+
 def _batch_inputs(
     imgs: np.ndarray, scores: np.ndarray, k: int, idx: np.ndarray, crop: int | None,
-    rng: np.random.Generator | None,
+    rng: np.random.Generator | None, colour_aug: float = 0.0,
 ) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
     lay = _layout(k)
     x = torch.from_numpy(np.ascontiguousarray(imgs[idx])).float().div_(255.0)
@@ -193,7 +227,10 @@ def _batch_inputs(
         x, sc = torch.stack(xc), torch.stack(scc)
     prep = {key: x[:, sl] for key, sl in lay.items() if key != "target"}
     prep["score"] = sc
-    return prep, x[:, lay["target"]]
+    target = x[:, lay["target"]]
+    if colour_aug > 0 and rng is not None:
+        target = _recolour(prep, target, colour_aug, rng)
+    return prep, target
 
 
 def _cosine(progress: float, lr: float, lr_min: float) -> float:
@@ -322,7 +359,7 @@ def train(
         for g in opt.param_groups:
             g["lr"] = lr
         idx = rng.integers(0, len(imgs), size=settings.batch_size)
-        prep, tgt = _batch_inputs(imgs, scores, k, idx, settings.crop, rng)
+        prep, tgt = _batch_inputs(imgs, scores, k, idx, settings.crop, rng, settings.colour_aug)
         y = model.fuse(prep)
         l1 = (y - tgt).abs().mean()
         lp = per(y, tgt) if settings.lambda_per > 0 else torch.zeros(())
@@ -368,6 +405,8 @@ def main(argv: list[str] | None = None) -> int:
     t.add_argument("--lambda-per", type=float, default=TrainSettings.lambda_per)
     t.add_argument("--threads", type=int, default=TrainSettings.threads)
     t.add_argument("--channels", type=int, default=TrainSettings.channels)
+    t.add_argument("--colour-aug", type=float, default=TrainSettings.colour_aug,
+                   help="share of crops whose reference and target change colour together")
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
     if args.cmd == "cache":
@@ -375,7 +414,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     settings = TrainSettings(crop=args.crop, batch_size=args.batch_size, lr=args.lr,
                              lambda_per=args.lambda_per, threads=args.threads,
-                             channels=args.channels)
+                             channels=args.channels, colour_aug=args.colour_aug)
     train(args.out, args.max_minutes, settings, args.resume, init=args.init)
     return 0
 

@@ -95,3 +95,22 @@ def test_init_from_weights_must_match(run, tmp_path) -> None:
     wider = TrainSettings(**{**SMALL.__dict__, "channels": 8})
     with pytest.raises(ValueError, match="config"):
         train(other, max_minutes=0.02, settings=wider, resume=False, init=init)
+
+
+def test_recolour_changes_reference_and_target_together_not_render() -> None:
+    """Colour augmentation: one change per sample on the warped references, the colour-transferred
+    render and the target; the render is left alone; share 0 changes nothing."""
+    from mariner_core.train_frozen import _recolour
+
+    rng = np.random.default_rng(3)
+    same = torch.rand(6, 3, 8, 8) * 0.9 + 0.05
+    prep = {"render": same.clone(), "warped": same.repeat(1, 4, 1, 1),
+            "colour": same.clone(), "score": torch.rand(6, 4, 8, 8)}
+    target = _recolour(prep, same.clone(), 1.0, rng)
+    assert torch.equal(prep["render"], same)
+    assert (target - same).abs().mean() > 0.02  # it did change the colours
+    for k in range(4):  # the same change on every warped reference, the colour input and target
+        assert torch.allclose(prep["warped"][:, 3 * k : 3 * k + 3], target, atol=1e-6)
+    assert torch.allclose(prep["colour"], target, atol=1e-6)
+    untouched = {"warped": same.repeat(1, 4, 1, 1), "colour": same.clone()}
+    assert torch.allclose(_recolour(untouched, same.clone(), 0.0, rng), same, atol=1e-6)
