@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import logging
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -20,6 +21,8 @@ from pgt_check.files import check_inputs_not_outputs
 from pgt_check.measure import SCHEMA_VERSION
 from pgt_check.store import content_hash
 from pgt_check.types import Frame, Trajectory
+
+logger = logging.getLogger(__name__)
 
 
 def load_trajectory(config: RunConfig) -> Trajectory:
@@ -63,7 +66,7 @@ def check_side_inputs(config: RunConfig, frames: Sequence[Frame]) -> None:
     """Validate the run's other input files before any frame is measured (a typo must not cost
     the whole run): no input is one of the outputs the run writes into ``--out``;
     ``--calibration-from`` is a trusted summary.json with an estimate for every camera of
-    ``frames``. Raises InputError."""
+    ``frames``; the mesh fits in memory (``check_mesh_memory``). Raises InputError."""
     from pgt_check.measure.record import camera_key
     from pgt_check.verdict.calibration import trusted_calibration
 
@@ -77,6 +80,30 @@ def check_side_inputs(config: RunConfig, frames: Sequence[Frame]) -> None:
         trusted_calibration(
             config.verdict.calibration_from, sorted({camera_key(f.camera) for f in frames})
         )
+    check_mesh_memory(config, frames)
+
+
+def check_mesh_memory(config: RunConfig, frames: Sequence[Frame]) -> None:
+    """Refuse (SetupError, one line) a run whose mesh and render buffers will not fit in the
+    available memory, estimated from the mesh file's header before anything is loaded
+    (``pgt_check.render.memory``): one process renders (serial, or a remote Dask cluster whose
+    workers are on other machines) or each of the local worker processes loads its own copy."""
+    from pgt_check.render.memory import check_memory_fits
+
+    if not config.input.mesh or not Path(config.input.mesh).is_file() or not frames:
+        return  # a missing mesh is reported by the preflight
+    workers = 0
+    if config.executor == "process" or (config.executor == "dask" and not config.scheduler):
+        from pgt_check.executor.common import default_workers
+
+        workers = config.workers or default_workers()
+    width = max(f.camera.width for f in frames)
+    height = max(f.camera.height for f in frames)
+    counts, need, available = check_memory_fits(config.input.mesh, width, height, workers)
+    logger.info(
+        "mesh %s: %d faces%s; memory estimate %.2f GiB of %s available", config.input.mesh,
+        counts.n_faces, "" if counts.exact else " (guessed from the file size)", need / 2**30,
+        "unknown" if available is None else f"{available / 2**30:.1f} GiB")
 
 
 def preflight(config: RunConfig, references: Any = None, panel_sink: Any = None) -> Any:
