@@ -344,3 +344,12 @@ def make_scan_like_scene(out_dir: str | Path, n_frames: int = 12, seed: int = 0,
 
     return _photograph_boxes(out, photo_scene, cam, n_frames, np.random.default_rng(seed + 1),
                              degrade, 75)
+
+
+# -- the TSDF-fused scene (issue #29) lives in pgt_eval.tsdf (marching cubes needs scikit-image)
+from pgt_eval.tsdf import (  # noqa: E402
+    TsdfVolume,
+    make_tsdf_scene,
+    noisy_depth,
+    tsdf_fuse_mesh,
+)
