@@ -12,15 +12,17 @@ import numpy as np
 from pgt_check.geometry.edges.config import MODELS, EdgeAlignConfig, EdgeReason
 from pgt_check.geometry.edges.refine import (
     correspond,
+    final_scale_px,
     polish,
     refine,
+    robust_cost,
     rotation_homography,
     support_at,
     translation_matrix,
     warp_points,
 )
 from pgt_check.geometry.edges.results import EdgeAlignment, EdgeMatches, PhotoEdges, RenderEdges
-from pgt_check.geometry.edges.search import ShiftSearch, bins_of, search_shifts
+from pgt_check.geometry.edges.search import ShiftSearch, bins_of, search_shifts, subset
 from pgt_check.geometry.edges.tiles import tile_start
 from pgt_check.geometry.homography import check_homography, corner_error
 
@@ -67,6 +69,59 @@ def _failure(
     return EdgeAlignment(**base)
 
 
+def _part(re: RenderEdges, keep: np.ndarray) -> RenderEdges:
+    return dataclasses.replace(
+        re, points=re.points[keep], normals=re.normals[keep], depth=re.depth[keep],
+        kind=re.kind[keep],
+    )  # fmt: skip
+
+
+def select_model(
+    re: RenderEdges,
+    pe: PhotoEdges,
+    bins: np.ndarray,
+    start: np.ndarray,
+    tau: float,
+    config: EdgeAlignConfig,
+) -> tuple[str, dict[str, float]]:
+    """The motion model the frame's edges support, by two-fold spatial cross-validation.
+
+    The render edges are split by image quadrant into two folds (top-left + bottom-right, and
+    the other diagonal). Each model from shift up to ``config.model`` is refined from ``start``
+    on one fold and its robust cost (``refine.robust_cost``, final Tukey scale) is measured on
+    the other, both ways; the model of the lowest held-out cost wins (ties: the simpler one).
+    A model whose extra parameters fit the frame's systematic misfit (the rounded, shrunk
+    silhouettes of a fused scan, clutter near the mesh's edges) rather than the motion predicts
+    the other half of the image worse, and an over-fitted homography is what makes the corner
+    error of a correct pose large (issue #29: 4-9.5 px on the TSDF scene where a shift gives
+    1-3 px). Nothing in it is a tuned constant: it adapts to each frame's edges. Returns the
+    model and the held-out cost of each tried model (inf: a fold had too few edges)."""
+    cands = MODELS[: MODELS.index(config.model) + 1]
+    cx, cy = (re.width - 1) / 2, (re.height - 1) / 2
+    fold = (re.points[:, 0] < cx) == (re.points[:, 1] < cy)
+    c_min = final_scale_px(tau, config)
+    costs: dict[str, float] = {}
+    for m in cands:
+        cfg = dataclasses.replace(config, model=m)
+        total = 0.0
+        for train in (fold, ~fold):
+            test = np.flatnonzero(~train)
+            if train.sum() < config.min_edges or len(test) < config.min_edges:
+                total = math.inf
+                break
+            h, cost = refine(_part(re, train), pe, bins[train], start, tau, cfg)
+            if not math.isfinite(cost):
+                total = math.inf
+                break
+            test = test[subset(len(test), config.refine_points)]
+            total += robust_cost(h, re.points[test], bins[test], pe, c_min) / len(test)
+        costs[m] = total
+    finite = [m for m in cands if math.isfinite(costs[m])]
+    if not finite:
+        return config.model, costs
+    return min(finite, key=lambda m: (costs[m], cands.index(m))), costs
+
+
 def _refined(
     re: RenderEdges,
     pe: PhotoEdges,
@@ -74,23 +129,29 @@ def _refined(
     shift: np.ndarray,
     tau: float,
     config: EdgeAlignConfig,
-) -> np.ndarray:
+) -> tuple[np.ndarray, str]:
     """The refined start: the best shift as a translation or as the camera rotation that
     produces it, whichever puts more edges exactly on photo edges (narrow score), polished and
     refined; replaced by the refined affine map of the tile shifts (``tiles.tile_start``) where
     that has the lower robust cost. (Choosing between the shift and rotation starts by their
-    refined cost instead made the castle's 2 deg rotation test off by 6.6 px at the corners.)"""
+    refined cost instead made the castle's 2 deg rotation test off by 6.6 px at the corners.)
+    With ``select_model``, refined with the model ``select_model`` picks (returned)."""
     starts = [translation_matrix(*shift)]
     if re.camera_K is not None and np.hypot(*shift) > 0.5:
         starts.append(rotation_homography(re.camera_K, *shift))
     polished = [polish(re, pe, bins, h0, tau, config) for h0 in starts]
-    hmat, cost = refine(re, pe, bins, max(polished, key=lambda hs: hs[1])[0], tau, config)
+    h_start = max(polished, key=lambda hs: hs[1])[0]
+    if config.select_model:
+        config = dataclasses.replace(
+            config, model=select_model(re, pe, bins, h_start, tau, config)[0]
+        )
+    hmat, cost = refine(re, pe, bins, h_start, tau, config)
     tiled = tile_start(re, pe, bins, shift, tau, config)
     if tiled is not None:
         h_t, cost_t = refine(re, pe, bins, polish(re, pe, bins, tiled, tau, config)[0], tau, config)
         if cost_t < cost:
-            return h_t
-    return hmat
+            return h_t, config.model
+    return hmat, config.model
 
 
 def _ambiguity_after(
@@ -220,7 +281,7 @@ def align_edges(
         )
     # (b) refinement of the shift start and of the tile start; the lower robust cost wins
     t2 = time.perf_counter()
-    hmat = _refined(re, pe, bins, found.best_shift, tau, config)
+    hmat, model = _refined(re, pe, bins, found.best_shift, tau, config)
     spread = found.ambiguous or (
         config.decision == "significance" and not found.p_value <= config.alpha
     )
@@ -235,6 +296,7 @@ def align_edges(
     support, matches = _evaluate(re, pe, bins, hmat, tau)
     timings["total"] = time.perf_counter() - t0
     out = _measured(found, hmat, support, support_id, matches, w, h)
+    out["model"] = model
     reason = None
     if check_homography(hmat, w, h) is not None:
         reason = EdgeReason.ILL_CONDITIONED
@@ -259,7 +321,6 @@ def align_edges(
     return EdgeAlignment(
         success=True,
         reason=None,
-        model=config.model,
         tau_px=tau,
         n_edges=len(re),
         n_photo_edges=len(pe),

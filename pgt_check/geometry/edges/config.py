@@ -79,7 +79,10 @@ class EdgeAlignConfig:
     refine_points: int = 2000
     #: a shift must keep at least this share of the render edges inside the photo
     min_inside: float = 0.5
+    #: the most general motion model; with ``select_model`` the frame's edges pick the model
+    #: from shift up to this one by spatial cross-validation (``align.select_model``, issue #29)
     model: str = "homography"
+    select_model: bool = True
     #: refinement iterations in all (split over the stages shift -> ... -> model)
     iterations: int = 30
     #: a stage stops when an update moves no image corner by more than this (px)

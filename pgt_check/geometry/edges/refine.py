@@ -170,7 +170,7 @@ def refine(
     scale = t[0, 0]
     corners = image_corners(re.width, re.height) @ t[:2, :2].T + t[:2, 2]
     final = MODELS.index(config.model)
-    c_min = min(tau, max(config.min_scale_px, tau * config.final_scale))
+    c_min = final_scale_px(tau, config)
     # stages: the models up to the requested one at the Tukey scale tau, then the requested
     # model with the scale annealed to c_min (wide first: large corrections need the far points)
     stages = [(m, tau) for m in MODELS[: final + 1]]
@@ -206,12 +206,24 @@ def refine(
             if moved < config.converged_px:
                 break
     hmat = t_inv @ hn @ t
-    # robust cost at the final scale: Tukey rho (0..1) per point, 1 for unmatched points
-    q = warp_points(hmat, re.points[sub])
-    ok, e = correspond(q, bins, pe, c_min)
+    return hmat, robust_cost(hmat, re.points[sub], bins, pe, c_min)
+
+
+def final_scale_px(tau: float, config: EdgeAlignConfig) -> float:
+    """The Tukey scale (px) of the last refinement stage and of ``robust_cost``."""
+    return min(tau, max(config.min_scale_px, tau * config.final_scale))
+
+
+def robust_cost(
+    hmat: np.ndarray, pts: np.ndarray, bins: np.ndarray, pe: PhotoEdges, c: float
+) -> float:
+    """Robust cost of ``hmat`` on render points ``pts`` (N, 2) with orientation ``bins``: the
+    Tukey rho (0..1, scale ``c`` px) of each point-to-line residual, 1 for an unmatched point."""
+    q = warp_points(hmat, pts)
+    ok, e = correspond(q, bins, pe, c)
     r = np.sum(pe.normals[e[ok]] * (q[ok] - pe.points[e[ok]]), axis=1)
-    rho = 1.0 - (1.0 - np.minimum((r / c_min) ** 2, 1.0)) ** 3
-    return hmat, float(rho.sum() + (~ok).sum())
+    rho = 1.0 - (1.0 - np.minimum((r / c) ** 2, 1.0)) ** 3
+    return float(rho.sum() + (~ok).sum())
 
 
 def support_at(

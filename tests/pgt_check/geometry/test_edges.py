@@ -700,10 +700,14 @@ def test_lines_through_one_point_leave_the_corners_where_they_are():
     assert set(np.unique(re.kind)) == {KIND_CREASE}
     al = align_edges(re, photo_edges(load_image(frame.image_file)))
     assert al.success and al.corner_error < 2.0
-    # with every direction free (the old refinement) it drifts
+    # with every direction free (the old refinement) a fixed homography drifts
     free = align_edges(re, photo_edges(load_image(frame.image_file)),
-                       EdgeAlignConfig(max_corner_gain=math.inf))
+                       EdgeAlignConfig(max_corner_gain=math.inf, select_model=False))
     assert free.corner_error > 5.0
+    # the model chosen by cross-validation does not need the guard (a simpler model wins)
+    cv = align_edges(re, photo_edges(load_image(frame.image_file)),
+                     EdgeAlignConfig(max_corner_gain=math.inf))
+    assert cv.model != "homography" and cv.corner_error < 2.0
 
 
 # ---------------------------------------------------------------------------------------------
@@ -760,3 +764,18 @@ def test_null_p_value_on_a_flat_grid_with_one_peak():
     grid[20, 20] = 0.31  # no higher than the noise
     assert null_p_value(grid, xs, xs, (20, 20), 9.0)[0] > 0.1
     assert null_p_value(grid[18:23, 18:23], xs[18:23], xs[18:23], (2, 2), 9.0) == (1.0, 0)
+
+
+# ---------------------------------------------------------------------------------------------
+# the motion model chosen by spatial cross-validation (issue #29)
+
+
+def test_select_model_keeps_a_real_perspective():
+    """A keystone the photo really has: cross-validation keeps the homography."""
+    warp = np.array([[1.0, 0.02, 2.0], [0.01, 1.0, -1.0], [1.5e-4, -1e-4, 1.0]])
+    z = blocks_depth(seed=2, n=9)
+    al = align_edges(geometric_edges(z, K), photo_edges(photo_from_depth(z, warp)))
+    assert corner_error(warp, W, H) > 6.0
+    assert al.success and al.model == "homography"
+    assert corner_distance(al.photo_from_render, warp) < 1.0
+
