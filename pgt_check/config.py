@@ -415,10 +415,14 @@ class RunConfig:
     overwrite: bool = False
     #: times a frame whose worker process died is run again before it is UNVERIFIABLE
     retries: int = 1
+    #: after the verdicts, measure this many PASS frames again at poses moved by known amounts
+    #: around the stated detection limits (0 = off; ``pgt_check.verdict.self_test``)
+    self_test: int = 0
 
     def __post_init__(self) -> None:
         _check_range("workers", self.workers, 1, 4096)
         _check_range("retries", self.retries, 0, 100)
+        _check_range("self_test", self.self_test, 0, 100_000)
         _check_range("limit", self.limit, 1)
         _check_range("report_details", self.report_details, 0)
         _check_scheduler(self.scheduler)

@@ -262,6 +262,8 @@ def _check_frames_locked(
     shared_extra = judged.summary_extra()
     rows, corrections = _correct(traj, measurements, judged, shared_extra, config,
                                  checker_factory)
+    if config.self_test > 0:  # the stated detection limits tested (``verdict.self_test``)
+        shared_extra["self_test"] = _self_test(traj, rows, judged, shared_extra, config)
     assets = write_report_assets(
         frames, rows, config, checker_factory, measurement_fingerprint(config, inputs)
     )
@@ -321,15 +323,37 @@ def _correct(
     return rows, corrections
 
 
-class PlainMeasure:
-    """``measure(frames, config)`` for the registration refinement's rounds: the absolute
-    paths only (no store, no references), with ``config``'s executor, in any order. In serial
-    mode one checker is kept over all rounds (the mesh and renderer are built once); call
-    ``close`` at the end. Raises RunInterrupted after a Ctrl-C / SIGTERM (the main pass's
-    frames stay stored)."""
+def _self_test(traj: Trajectory, rows: list[dict[str, Any]], judged: Any,
+               shared_extra: dict[str, Any], config: RunConfig) -> dict[str, Any]:
+    """summary.json ``self_test``: ``config.self_test`` frames measured again at poses moved
+    around this run's stated detection limits (``pgt_check.verdict.self_test``)."""
+    from pgt_check.verdict.accuracy import run_accuracy
+    from pgt_check.verdict.decide import resolve_threshold_px
+    from pgt_check.verdict.self_test import run_self_test
 
-    def __init__(self) -> None:
+    w, h = (int(rows[0]["width"]), int(rows[0]["height"])) if rows else (0, 0)
+    acc = run_accuracy(rows, shared_extra.get("shared_errors"), config.verdict,
+                       resolve_threshold_px(config.verdict, w, h))
+    measure = PlainMeasure("pgt-check self-test")
+    try:
+        st = run_self_test(traj.frames, rows, judged.shared, acc.limits, config, measure,
+                           config.self_test)
+    finally:
+        measure.close()
+    logger.info("%s", st.sentence)
+    return st.to_json()
+
+
+class PlainMeasure:
+    """``measure(frames, config)`` for the registration refinement's rounds and the
+    self-test: the absolute paths only (no store, no references), with ``config``'s executor,
+    in any order. In serial mode one checker is kept over all rounds (the mesh and renderer
+    are built once); call ``close`` at the end. Raises RunInterrupted after a Ctrl-C / SIGTERM
+    (the main pass's frames stay stored)."""
+
+    def __init__(self, desc: str = "pgt-check registration") -> None:
         self._checker: Any = None
+        self._desc = desc
 
     def __call__(self, frames: Sequence[Frame], config: RunConfig) -> list[FrameMeasurement]:
         from pgt_check.executor import iter_results, stop_on_sigint
@@ -341,7 +365,7 @@ class PlainMeasure:
             factory = functools.partial(_Borrowed, self._checker)
         with stop_on_sigint() as stop:
             results = iter_results(frames, factory, config, stop=stop)
-            ms = list(_progress(results, len(frames), "pgt-check registration"))
+            ms = list(_progress(results, len(frames), self._desc))
             if stop.is_set() and len(ms) < len(frames):
                 raise RunInterrupted(len(ms), len(frames), str(config.out))
         return ms

@@ -172,6 +172,11 @@ def _add_verdict_args(p: argparse.ArgumentParser) -> None:
                    "--max-fail-fraction of the frames, or of a shared error, exceeds DEG "
                    "degrees or UNITS scene units (summary.json accuracy; the px threshold "
                    "still decides PASS / FAIL)")
+    g.add_argument("--self-test", type=int, default=None, metavar="N",
+                   help="after the verdicts, measure N PASS frames again at poses moved by "
+                   "0.5-2x the stated detection limits (and those frames moved together for "
+                   "the shared limit): the empirical detection curve in summary.json "
+                   "self_test and the report; default 0 = off (docs/outputs.md#self-test)")
     g.add_argument("--calibration-from", default=None, metavar="SUMMARY_JSON",
                    help="remove the calibration estimated by a trusted run (its summary.json) "
                    "instead of one estimated on this run")
@@ -266,6 +271,7 @@ def _override_table(args: argparse.Namespace) -> dict[tuple[str, ...], Any]:
         ("correct", "rounds"): args.correct_rounds,
         ("correct", "registration_rounds"): args.registration_rounds,
         ("report_details",): args.report_details,
+        ("self_test",): args.self_test,
         ("absolute_paths",): True if args.absolute_paths else None,
         # 0 = original size: MatchConfig turns it into None
         ("match", "resize_max"): args.resize_max,
@@ -334,6 +340,7 @@ _OPTION_OF = {
     "verdict.require_accuracy_deg": "--require-accuracy",
     "verdict.require_accuracy_units": "--require-accuracy",
     "scheduler": "--scheduler",
+    "self_test": "--self-test",
 }
 
 
@@ -387,6 +394,8 @@ def _print_summary(summary: dict[str, Any], out: str) -> None:
         print(f"pgt-check: {line}")
     for line in (summary.get("accuracy") or {}).get("sentences") or ():
         print(f"pgt-check: accuracy: {line}")
+    if (summary.get("self_test") or {}).get("sentence"):
+        print(f"pgt-check: {summary['self_test']['sentence']}")
     gate = summary["gate"]
     print(f"pgt-check: gate {'PASSED' if gate['passed'] else 'FAILED'}: {gate['explanation']}")
     print(f"pgt-check: report: {safe_text(Path(out) / 'report.html')} (all outputs in "

@@ -172,7 +172,8 @@ def _report(args: argparse.Namespace) -> int:
         extra = {
             k: old[k]
             for k in ("trajectory_format", "shading", "setup_s", "wall_time_s",
-                      "images_outside_dataset", "warnings", "executor", "corrections")
+                      "images_outside_dataset", "warnings", "executor", "corrections",
+                      "self_test")
             if k in old
         }
         try:

@@ -223,7 +223,7 @@ def _accuracy_context(summary: Mapping[str, Any]) -> dict[str, Any]:
     (``summary["accuracy"]``, ``pgt_check.verdict.accuracy``)."""
     acc = summary.get("accuracy")
     if not isinstance(acc, Mapping):
-        return {"accuracy_sentences": [], "accuracy_rows": []}
+        return {"accuracy_sentences": [], "accuracy_rows": [], **_self_test_context({}, str)}
 
     def g(v: Any) -> str:
         return fmt(v, ".3g") if isinstance(v, (int, float)) else "-"
@@ -252,7 +252,34 @@ def _accuracy_context(summary: Mapping[str, Any]) -> dict[str, Any]:
     rows.append(("one frame's noise (median)", g(lim.get("noise_deg")),
                  g(lim.get("noise_units")), g(lim.get("noise_px"))))
     return {"accuracy_sentences": [str(x) for x in acc.get("sentences") or []],
-            "accuracy_rows": rows}
+            "accuracy_rows": rows, **_self_test_context(summary, g)}
+
+
+def _self_test_context(summary: Mapping[str, Any], g: Any) -> dict[str, Any]:
+    """The self-test's detection curves next to the stated limits (``summary["self_test"]``,
+    ``pgt_check.verdict.self_test``): one row per limit, the share flagged per injected size."""
+    st = summary.get("self_test")
+    if not isinstance(st, Mapping):
+        return {"self_test_sentence": "", "self_test_head": [], "self_test_rows": []}
+    ks = [k for k in st.get("multiples") or [] if isinstance(k, (int, float))]
+    rows = []
+    for c in st.get("curves") or []:
+        if not isinstance(c, Mapping):
+            continue
+        by_k = {p.get("k"): p for p in c.get("points") or [] if isinstance(p, Mapping)}
+
+        def cell(k: float, by_k: Mapping = by_k) -> str:
+            p = by_k.get(k)
+            return "-" if not p or not p.get("n") else f"{p.get('flagged')}/{p.get('n')}"
+
+        rows.append((
+            f"{'single frame' if c.get('test') == 'single_frame' else 'shared'} {c.get('kind')}",
+            f"{g(c.get('stated'))} {c.get('unit', '')} ({g(c.get('stated_px'))} px)",
+            [cell(0.0), *[cell(k) for k in ks]], g(c.get("k50")), g(c.get("k95")),
+            str(c.get("judgement", "")),
+        ))
+    return {"self_test_sentence": str(st.get("sentence") or ""),
+            "self_test_head": ["0x", *[f"{k:g}x" for k in ks]], "self_test_rows": rows}
 
 
 def _environment():

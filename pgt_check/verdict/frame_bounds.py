@@ -120,19 +120,32 @@ def _columns(fa: FrameAccuracy) -> dict[str, Any]:
 
 
 def world_sensitivity(measurements: Sequence[FrameMeasurement]) -> tuple[float, float]:
-    """(px per degree, px per scene unit) of a shared error: the image effect of rotating the
+    """(px per degree, px per scene unit) of a shared error about / along the world axis where
+    it is smallest (``world_axis_sensitivity``; the limit holds whatever the axis)."""
+    rot, tra = world_axis_sensitivity(measurements)
+
+    def least(a: np.ndarray) -> float:
+        return float(np.nanmin(a)) if np.isfinite(a).any() else float("nan")
+
+    return least(rot), least(tra)
+
+
+def world_axis_sensitivity(
+    measurements: Sequence[FrameMeasurement],
+) -> tuple[np.ndarray, np.ndarray]:
+    """(px per degree, px per scene unit) per world axis x, y, z, each (3,) float64: the image
+    effect of rotating the
     world by 1 deg about the camera centroid, or shifting it by 1 unit, as the registration
     check measures it (median over frames of the mean displacement of a frame's evidence
-    points), about / along the world axis where it is smallest (the limit holds whatever the
-    axis). A world rotation also moves the camera centres, which on views around an object
-    undoes much of its image effect: a camera-frame sensitivity would overstate it. NaN
-    without evidence."""
+    points), about / along each world axis. A world rotation also moves the camera centres,
+    which on views around an object undoes much of its image effect: a camera-frame
+    sensitivity would overstate it. NaN without evidence."""
     from pgt_check.geometry.transforms import axis_angle_to_rotmat
     from pgt_check.verdict.shared import frame_evidence
 
     ev = [e for e in frame_evidence(measurements) if len(e.pts3d)]
     if not ev:
-        return float("nan"), float("nan")
+        return np.full(3, np.nan), np.full(3, np.nan)
     c = np.mean([e.world_from_cam[:3, 3] for e in ev], axis=0)
 
     def effect(move) -> float:
@@ -153,8 +166,8 @@ def world_sensitivity(measurements: Sequence[FrameMeasurement]) -> tuple[float, 
     step_deg, step_units = 0.1, 1e-3 * max(float(np.median(
         [np.linalg.norm(e.pts3d - e.world_from_cam[:3, 3], axis=1).mean() for e in ev])), 1e-9)
     rots = [axis_angle_to_rotmat(a, step_deg) for a in eye]
-    rot = min(effect(lambda x, rr=rr: (x - c) @ rr.T + c) for rr in rots) / step_deg
-    tra = min(effect(lambda x, d=a: x + step_units * d) for a in eye) / step_units
+    rot = np.array([effect(lambda x, rr=rr: (x - c) @ rr.T + c) for rr in rots]) / step_deg
+    tra = np.array([effect(lambda x, d=a: x + step_units * d) for a in eye]) / step_units
     return rot, tra
 
 
