@@ -14,6 +14,16 @@ relative) and fits the correction that is left; the total is the composition (ou
 Gauss-Newton iterations). The remaining motion shrinks every round, where the alignment is
 unbiased: castle 4 % -> 27 % off after one round, 9 % after two.
 
+The rounds are bounded (issue #28: a run that fails pays only for what it reports): at most
+``correct.registration_rounds`` rounds, at most ``correct.registration_budget`` times the main
+pass's measuring time, and they stop when what is left grows from one round to the next (the
+estimate does not converge: the one before the update that made it grow is kept). Where the
+views cannot separate the registration from a calibration error each round may re-decide which
+of the two the shared error is: on the 7-Scenes sweep failing on its calibration offset the
+rounds oscillated (reports/pipeline_timing.md); they now stop at the first growth with the
+estimate before it kept. ``refinement.stopped`` in the summary says which rule ended the
+rounds, ``refinement.rounds_kept`` how many updates the estimate holds.
+
 The frames' verdicts stay those of the main pass (the run is misregistered either way); the
 summary's registration entry gets the refined correction (the first estimate under
 ``refinement.first_pass``; the similarity entry keeps its own), and
@@ -52,6 +62,10 @@ REGISTERED_NAME = "registered_trajectory.txt"
 #: rounds would follow the evidence's noise)
 CONVERGED_REL = 0.25
 
+#: a round's residual may be this much larger than the round before's and still count as
+#: converging (the evidence's noise); beyond it the rounds stop as "not converging"
+GROWTH_TOLERANCE = 1.0
+
 #: the start correction of a stored refinement must match the main pass's within this
 #: (elementwise, absolute) to be reused
 SAME_START_ATOL = 1e-6
@@ -87,8 +101,10 @@ class RefinedRegistration:
     centroid of the checked camera centres of every measured frame (the refined translation
     is that point's displacement; the first pass's is about the centroid of the frames with
     evidence, a difference of (R - I) times their offset: negligible for small angles);
-    ``stopped``: why the rounds ended ("converged", "round limit", or the round whose
-    residual fit did not succeed)."""
+    ``stopped``: why the rounds ended ("converged", "round limit", "time limit", "not
+    converging", or the round whose residual fit did not succeed);
+    ``kept``: how many rounds' updates ``rigid`` composes (fewer than ``rounds`` where a later
+    update made what is left grow; None = all)."""
 
     start: list[list[float]]
     rigid: list[list[float]]
@@ -97,6 +113,12 @@ class RefinedRegistration:
     stopped: str
     fingerprint: str = ""
     frame_ids: tuple[str, ...] = field(default_factory=tuple)
+    kept: int | None = None
+
+    @property
+    def n_kept(self) -> int:
+        """Rounds whose updates ``rigid`` composes."""
+        return len(self.rounds) if self.kept is None else self.kept
 
     def to_json(self) -> dict[str, Any]:
         d = asdict(self)
@@ -114,6 +136,7 @@ class RefinedRegistration:
             stopped=str(d.get("stopped", "")),
             fingerprint=str(d.get("fingerprint", "")),
             frame_ids=tuple(d.get("frame_ids", ())),
+            kept=d.get("kept"),
         )
 
 
@@ -166,13 +189,14 @@ def _f(x: Any) -> float | None:
 
 
 def _measure_round(
-    k: int, todo: Sequence[Frame], c_rigid: np.ndarray, measure: MeasureFn, ecfg: RunConfig
+    k: int, todo: Sequence[Frame], c_rigid: np.ndarray, measure: MeasureFn, ecfg: RunConfig,
+    clock: Callable[[], float] = time.perf_counter,
 ) -> tuple[RefineRound, dict[str, Any]]:
     """Round ``k``: the frames moved by ``c_rigid`` measured again and the shared checks run on
     them; the round's record and the checks' summary (its registration entry: what is left)."""
     from pgt_check.verdict.shared import run_shared_checks
 
-    t0 = time.perf_counter()
+    t0 = clock()
     moved = [f.with_pose(move_pose(f.world_from_cam, c_rigid)) for f in todo]
     ms = measure(moved, ecfg)
     order = {f.frame_id: i for i, f in enumerate(moved)}
@@ -183,7 +207,7 @@ def _measure_round(
         k, len(ms), sum(m.evidence is not None for m in ms), str(reg.get("status")),
         _f(reg.get("angle_deg")), reg.get("angle_deg_ci"), _f(reg.get("translation")),
         reg.get("translation_ci"), _f(reg.get("effect_px")), reg.get("effect_px_ci"),
-        time.perf_counter() - t0,
+        clock() - t0,
     )  # fmt: skip
     logger.info(
         "registration round %d: what is left moves the images by %s px (%s)",
@@ -200,39 +224,73 @@ def refine_registration(
     summary: Mapping[str, Any],
     config: RunConfig,
     measure: MeasureFn,
+    clock: Callable[[], float] = time.perf_counter,
 ) -> RefinedRegistration | None:
     """Rounds of measure-at-the-corrected-poses -> residual fit -> compose (module docstring).
 
     ``summary``: the main pass's ``shared_errors`` section; ``measure(frames, config)``: the absolute
     evidence of the frames at their (moved) poses, in any order. None when there is nothing to
-    refine (``needs_refinement`` false, rounds 0, or no frame to measure)."""
-    rounds = config.correct.registration_rounds
+    refine (``needs_refinement`` false, rounds 0, or no frame to measure). Bounds: ``CorrectConfig.registration_rounds`` /
+    ``registration_budget`` and the growth rule (module docstring); ``clock`` for tests."""
+    c = config.correct
+    rounds = c.registration_rounds
     if rounds <= 0 or not needs_refinement(summary):
         return None
-    todo = refine_frames(measurements, frames, config.correct.registration_frames)
+    todo = refine_frames(measurements, frames, c.registration_frames)
     if len(todo) < 3:
         return None
     ecfg = evidence_config(config)
     start = np.asarray(summary["registration"]["corrected_world_from_world"], np.float64)
     centres = [np.asarray(m.world_from_cam)[:3, 3] for m in measurements if m.world_from_cam]
     origin = np.mean(centres, axis=0)
+
+    def result(rigid: np.ndarray, done: Sequence[RefineRound], stopped: str,
+               kept: int | None = None) -> RefinedRegistration:
+        return RefinedRegistration(
+            start=start.tolist(), rigid=rigid.tolist(), origin=origin.tolist(),
+            rounds=tuple(done), stopped=stopped, fingerprint=refine_fingerprint(config),
+            frame_ids=tuple(f.frame_id for f in todo), kept=kept,
+        )  # fmt: skip
+
+    budget = c.registration_budget * _main_pass_seconds(measurements)
+    t_start = clock()
     c_rigid = start.copy()
+    history = [start.copy()]  # history[k]: the correction after k rounds' updates
     done: list[RefineRound] = []
-    stopped = "round limit"
+    stopped, kept = "round limit", None
     logger.info(
         "registration check failed: refining its estimate (up to %d round(s) of "
-        "measuring %d frames again at the corrected poses)",
+        "measuring %d frames again at the corrected poses%s)",
         rounds,
         len(todo),
+        f", at most {budget:.0f} s" if budget > 0 else "",
     )
     for k in range(1, rounds + 1):
-        rnd, res = _measure_round(k, todo, c_rigid, measure, ecfg)
+        if k > 1 and budget > 0 and clock() - t_start + done[-1].time_s > budget:
+            stopped = (f"time limit: {k - 1} round(s) took {clock() - t_start:.1f} s of the "
+                       f"{budget:.1f} s budget (correct.registration_budget "
+                       f"{c.registration_budget:g} x the main pass)")
+            break
+        rnd, res = _measure_round(k, todo, c_rigid, measure, ecfg, clock)
         reg = res["registration"]
         done.append(rnd)
+        prev = done[-2].effect_px if len(done) >= 2 else None
+        if prev is not None and rnd.effect_px is not None and (
+            rnd.effect_px > GROWTH_TOLERANCE * prev
+        ):
+            # the last update moved the poses further from what the evidence says: the
+            # estimate does not converge (an ill-posed split); keep the one before it
+            kept = k - 2
+            c_rigid = history[kept]
+            stopped = (f"not converging: what is left grew from {prev:.1f} px to "
+                       f"{rnd.effect_px:.1f} px in round {k}; the estimate measured in round "
+                       f"{k - 1} is kept")
+            break
         if reg.get("corrected_world_from_world") is None:
             stopped = f"round {k}: no residual fit ({reg.get('reason') or reg.get('status')})"
             break
         c_rigid = np.asarray(reg["corrected_world_from_world"], np.float64) @ c_rigid
+        history.append(c_rigid.copy())
         total_angle, total_t, _ = _summary_of(c_rigid, origin)
         done[-1] = replace(done[-1], total_angle_deg=total_angle, total_translation=total_t)
         eff = done[-1].effect_px
@@ -244,15 +302,20 @@ def refine_registration(
             # evidence, which further rounds would only follow
             stopped = "converged (passed twice)"
             break
-    return RefinedRegistration(
-        start=start.tolist(),
-        rigid=c_rigid.tolist(),
-        origin=origin.tolist(),
-        rounds=tuple(done),
-        stopped=stopped,
-        fingerprint=refine_fingerprint(config),
-        frame_ids=tuple(f.frame_id for f in todo),
-    )
+    logger.info("registration refinement: %d round(s) in %.1f s, %s", len(done),
+                clock() - t_start, stopped)
+    return result(c_rigid, done, stopped, kept)
+
+
+def _main_pass_seconds(measurements: Sequence[FrameMeasurement]) -> float:
+    """The main pass's measuring time: the frames' summed ``timings.total`` (0 when not
+    recorded)."""
+    total = 0.0
+    for m in measurements:
+        t = getattr(m.timings, "total", None)
+        if t is not None and math.isfinite(float(t)):
+            total += float(t)
+    return total
 
 
 def _refined_entry(
@@ -266,18 +329,6 @@ def _refined_entry(
     intervals: the refined value +- half the width of the last round's interval (approximate:
     the uncertainty of the last residual fit, the earlier rounds' being applied)."""
     angle, t, _ = _summary_of(c, origin)
-    first_keys = (
-        "angle_deg",
-        "angle_deg_ci",
-        "translation",
-        "translation_ci",
-        "translation_rel_depth",
-        "translation_rel_depth_ci",
-        "scale",
-        "scale_ci",
-        "corrected_world_from_world",
-        "message",
-    )
     out = dict(entry)
     t1, rel1 = entry.get("translation"), entry.get("translation_rel_depth")
     depth = t1 / rel1 if t1 and rel1 else None
@@ -300,15 +351,27 @@ def _refined_entry(
         else [v / depth for v in t_ci],
         corrected_world_from_world=c.tolist(),
     )
-    out["refinement"] = {
-        "first_pass": {k: entry.get(k) for k in first_keys},
+    out["refinement"] = _refinement_record(entry, refined)
+    return out
+
+
+_FIRST_KEYS = (
+    "angle_deg", "angle_deg_ci", "translation", "translation_ci", "translation_rel_depth",
+    "translation_rel_depth_ci", "scale", "scale_ci", "corrected_world_from_world", "message",
+)
+
+
+def _refinement_record(entry: Mapping[str, Any], refined: RefinedRegistration) -> dict[str, Any]:
+    """The summary's ``refinement`` block: the first estimate, the rounds, why they stopped."""
+    return {
+        "first_pass": {k: entry.get(k) for k in _FIRST_KEYS},
         "rounds": [asdict(r) for r in refined.rounds],
+        "rounds_kept": refined.n_kept,
         "stopped": refined.stopped,
-        "n_frames": len(refined.frame_ids),
+        "n_frames": len(refined.frame_ids) if refined.rounds else 0,
         "file": REFINED_FILE,
         "trajectory_file": REGISTERED_NAME,
     }
-    return out
 
 
 def apply_refinement(
@@ -318,15 +381,23 @@ def apply_refinement(
     statuses and image effects stay the main pass's, which decided the verdicts). The
     similarity entry keeps its first estimate: its scale was already right (x1.03 recovered
     within 0.1 % on the castle and the boxes) and rigid rounds cannot refine a scale."""
-    if refined is None or not refined.rounds:
+    if refined is None:
         return shared_summary
     out = dict(shared_summary)
     origin = np.asarray(refined.origin, np.float64)
-    last = refined.rounds[-1]
     n = len(refined.rounds)
     entry = shared_summary.get("registration")
     if not entry or entry.get("corrected_world_from_world") is None:
         return out
+    if refined.n_kept == 0:  # every update undone: the first estimate stands
+        new = dict(entry)
+        new["refinement"] = _refinement_record(entry, refined)
+        did = (f"Refinement stopped after {n} round(s) ({refined.stopped}): the first "
+               f"estimate is reported")
+        new["message"] = f"{entry.get('message', '')}. {did}"
+        out["registration"] = new
+        return out
+    last = refined.rounds[refined.n_kept - 1]
     new = _refined_entry(entry, np.asarray(refined.rigid, np.float64), origin, last, refined)
     f = new["refinement"]["first_pass"]
     rel = new["translation_rel_depth"]
@@ -335,12 +406,18 @@ def apply_refinement(
         f"again at the corrected poses ({n} round(s), {refined.stopped}): "
         f"{new['angle_deg']:.2f} deg, {new['translation']:.4g} scene units"
         + (f" ({100 * rel:.1f} % of the scene depth)" if rel is not None else "")
-        + f" (first estimate {f['angle_deg']:.2f} deg, {f['translation']:.4g}); the last "
-        f"round found {last.effect_px if last.effect_px is not None else float('nan'):.1f} "
-        f"px left ({last.status})"
+        + f" (first estimate {f['angle_deg']:.2f} deg, {f['translation']:.4g}); "
+        + (f"the last round found {_px(last.effect_px)} px left ({last.status})"
+           if refined.n_kept == n else
+           f"round {refined.n_kept + 1} found {_px(refined.rounds[refined.n_kept].effect_px)} "
+           f"px left at it ({refined.rounds[refined.n_kept].status})")
     )
     out["registration"] = new
     return out
+
+
+def _px(x: float | None) -> str:
+    return f"{x if x is not None else float('nan'):.1f}"
 
 
 def save_refinement(out_dir: str | Path, refined: RefinedRegistration) -> Path:
@@ -403,7 +480,7 @@ def refine_run(
             if refined is not None:
                 save_refinement(out, refined)
     path = out / REGISTERED_NAME
-    if refined is None or not refined.rounds:
+    if refined is None:
         path.unlink(missing_ok=True)  # a previous run's file would no longer be true
         return summary
     write_trajectory_file(registered_trajectory(trajectory, refined), path)

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import hashlib
 import logging
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -13,6 +16,21 @@ from pgt_check.types import check_shape
 logger = logging.getLogger(__name__)
 
 OPENCV_METHODS = ("sift", "orb", "akaze")
+
+#: photos whose features are kept per process (keyed by the grey image's content and the
+#: detector settings): the raw and enhanced paths of a frame, the registration refinement's
+#: rounds, the per-frame corrections and the report's re-measured panels match the same photos
+#: again (issue #28). 32 entries hold the refinement's 30 frames; about 1 MB each at 2,000
+#: SIFT keypoints (2 MB at the 4,096 cap).
+PHOTO_CACHE_SIZE = 32
+_PHOTO_FEATURES: OrderedDict[tuple, tuple[np.ndarray, np.ndarray | None]] = OrderedDict()
+_PHOTO_LOCK = threading.Lock()
+
+
+def clear_photo_cache() -> None:
+    """Forget the cached photo features (tests, or to free memory)."""
+    with _PHOTO_LOCK:
+        _PHOTO_FEATURES.clear()
 
 
 def to_gray_u8(image: np.ndarray) -> np.ndarray:
@@ -91,19 +109,30 @@ class OpenCVMatcher:
         return np.array([k.pt for k in kpts], dtype=np.float64), desc
 
     def _photo_features(self, image1: np.ndarray):
-        """Features of the photo; the raw and enhanced paths of a frame match the same photo
-        array, so its features are computed once (kept for the last photo object only)."""
-        cached = getattr(self, "_photo_cache", None)
-        if cached is not None and cached[0] is image1:
-            return cached[1]
-        feats = self._detect(to_gray_u8(image1), None)
-        self._photo_cache = (image1, feats)
+        """Features of the photo, computed once per photo content and detector settings
+        (``PHOTO_CACHE_SIZE``, least recently used dropped first): detection is deterministic
+        in the grey image, so a cached result is the one a new detection would give."""
+        gray = to_gray_u8(image1)
+        key = (self.method, self.max_keypoints, self.clahe, self.rootsift, gray.shape,
+               hashlib.blake2b(np.ascontiguousarray(gray).data, digest_size=16).digest())
+        with _PHOTO_LOCK:
+            feats = _PHOTO_FEATURES.get(key)
+            if feats is not None:
+                _PHOTO_FEATURES.move_to_end(key)
+                return feats
+        feats = self._detect(gray, None)
+        for a in feats:
+            if a is not None:
+                a.setflags(write=False)  # shared between calls: never modified in place
+        with _PHOTO_LOCK:
+            _PHOTO_FEATURES[key] = feats
+            while len(_PHOTO_FEATURES) > PHOTO_CACHE_SIZE:
+                _PHOTO_FEATURES.popitem(last=False)
         return feats
 
     def __getstate__(self) -> dict:
         """Pickles without OpenCV objects or cached features (rebuilt on first use)."""
         state = dict(self.__dict__)
-        state.pop("_photo_cache", None)
         state["_detector"] = None
         return state
 
