@@ -1,18 +1,24 @@
-"""Edge-path decision rules side by side (issue #29): significance vs support.
+"""Edge-path decision rules side by side (issue #29): significance vs support, on a fixed
+homography and on the motion model chosen per frame by cross-validation.
 
-    nice -n 10 python benchmarks/edge_decision.py [--frames 12] [--out reports/edge_decision.json]
+    PYTHONPATH=. nice -n 10 python benchmarks/edge_decision.py [--frames 12]
+        [--datasets "boxes tsdf,castle"] [--out reports/edge_decision.json]
 
-Per dataset, every frame is aligned (``geometry.edges.align_edges``, default settings) at its
-given pose and at a perturbed copy of it (every frame of the copy perturbed, neighbours too:
-2-5 deg about a random axis and a 2-8 % of the scene depth camera move). One alignment per
-frame and pose; the two rules decide on the same alignment:
-- support (before #29): not ambiguous, well conditioned, support >= 0.3;
-- significance (alpha 0.01): not ambiguous, well conditioned, p_value <= alpha.
+Per dataset, every frame is aligned (``geometry.edges.align_edges``) at its given pose and at a
+perturbed copy of it (every frame of the copy perturbed, neighbours too: 2-5 deg about a random
+axis and a 2-8 % of the scene depth camera move), once with a fixed homography
+(``select_model=False``, before #29) and once with the cross-validated model (the default).
+The rules decide on the same alignment:
+- support (the default): not ambiguous, well conditioned, support >= 0.3;
+- significance (alpha 0.01; 0.02 and 0.05 also reported): not ambiguous, well conditioned,
+  p_value <= alpha.
 PASS = accepted and corner error (original px) <= the default verdict threshold.
 Columns: PASS share on the given poses, per-frame ROC-AUC (score = corner error, not accepted
-= +inf; label = perturbed) and the false PASS rate on the perturbed copy.
-Datasets: boxes (generated, clean), scan-like boxes (``pgt_eval.make_scan_like_scene``),
-castle (colourless MVS mesh, 1024 px), 7-Scenes redkitchen rendered without colours (640 px).
+= +inf; label = perturbed), the false PASS rate on the perturbed copy, median seconds.
+Datasets: boxes (generated, clean), scan-like boxes (``pgt_eval.make_scan_like_scene``), TSDF-
+fused boxes (``pgt_eval.make_tsdf_scene``; needs scikit-image, skipped with a message without
+it), castle (colourless MVS mesh, 1024 px), 7-Scenes redkitchen rendered without colours
+(640 px).
 """
 
 from __future__ import annotations

@@ -347,9 +347,4 @@ def make_scan_like_scene(out_dir: str | Path, n_frames: int = 12, seed: int = 0,
 
 
 # -- the TSDF-fused scene (issue #29) lives in pgt_eval.tsdf (marching cubes needs scikit-image)
-from pgt_eval.tsdf import (  # noqa: E402
-    TsdfVolume,
-    make_tsdf_scene,
-    noisy_depth,
-    tsdf_fuse_mesh,
-)
+from pgt_eval.tsdf import TsdfVolume, make_tsdf_scene, noisy_depth, tsdf_fuse_mesh  # noqa: E402, F401

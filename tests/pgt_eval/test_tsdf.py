@@ -25,7 +25,7 @@ def _sphere_depth(k: np.ndarray, w: int, h: int, radius: float, dist: float) -> 
 def test_tsdf_fuses_a_sphere_to_its_radius():
     k = np.array([[120.0, 0, 79.5], [0, 120.0, 59.5], [0, 0, 1]])
     vol = TsdfVolume.empty([-0.6, -0.6, 1.4], [0.6, 0.6, 2.6], voxel=0.02)
-    for i, ang in enumerate(np.linspace(-0.6, 0.6, 5)):
+    for ang in np.linspace(-0.6, 0.6, 5):
         # cameras on a circle about the sphere centre (0, 0, 2), looking at it
         c, s = np.cos(ang), np.sin(ang)
         world_from_cam = np.eye(4)
