@@ -358,18 +358,19 @@ class CorrectConfig:
     registration_rounds: int = 8
     #: frames measured per round (evenly spaced; the pooled fit needs a few dozen)
     registration_frames: int = 30
-    #: the rounds together may take at most this multiple of the main pass's measuring time
-    #: (the frames' summed ``timings.total``); a round is not started when the rounds so far
-    #: plus one more (as long as the last) would exceed it; the first round always runs (0 =
-    #: no bound). The rounds also stop when what is left grows (the estimate oscillates)
-    registration_budget: float = 2.0
+    #: the registration rounds together, and the per-frame corrections together, may each
+    #: take at most this multiple of the main pass's measuring time (the frames' summed
+    #: ``timings.total``): a round / frame is not started when those so far plus one more
+    #: (as long as the mean so far) would exceed it; the first always runs (0 = no bound).
+    #: The rounds also stop when what is left grows (the estimate oscillates)
+    budget: float = 2.0
 
     def __post_init__(self) -> None:
         _check_range("correct.rounds", self.rounds, 1, 1000)
         _check_range("correct.bootstrap", self.bootstrap, 0, 10_000)
         _check_range("correct.registration_rounds", self.registration_rounds, 0, 1000)
         _check_range("correct.registration_frames", self.registration_frames, 3, 100_000)
-        _check_range("correct.registration_budget", self.registration_budget, 0, 1e6)
+        _check_range("correct.budget", self.budget, 0, 1e6)
 
 
 #: a Dask scheduler address: [tcp|tls|ucx|ws|wss://]host[:port], or inproc://...
@@ -481,6 +482,10 @@ PRESETS: dict[str, dict[str, Any]] = {
         # the default 1024 on large photos; shared errors of a few px are still flagged,
         # their size underestimated (reports/shared_errors.md, Presets)
         "edges": {"resize_max": 640},
+        # a failing run pays only for what it reports: the registration refinement is left to
+        # an explicit --registration-rounds N (the first estimate is reported; with --resume
+        # a rerun measures only the rounds); reports/pipeline_timing.md
+        "correct": {"registration_rounds": 0},
     },
     "balanced": {
         "match": {"method": "sift", "resize_max": 320},

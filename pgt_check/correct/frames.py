@@ -12,11 +12,17 @@ first round fails). Writes into the run directory:
 * ``bad_frames.txt``: the FAIL frames, one id per line (``#`` comment lines say which of them
   the corrected trajectory fixes);
 * ``corrections.json``: every correction (``pgt-check report`` puts them back in the rows).
+
+The corrections together take at most ``correct.budget`` times the main pass's measuring time
+(issue #28: a run that fails pays only for what it reports): a frame is not started when the
+corrections so far plus one more (as long as their mean) would pass it; the frames left get
+reason ``time_limit`` and the summary's ``corrections.stopped`` says so.
 """
 
 from __future__ import annotations
 
 import logging
+import time
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -129,8 +135,10 @@ def correct_run(
     config: RunConfig,
     checker_factory: Callable[[], Any],
     out: str | Path,
+    clock: Callable[[], float] = time.perf_counter,
 ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Run the correction step; returns (rows with the correction columns, summary part)."""
+    from pgt_check.correct.registration import main_pass_seconds
     from pgt_check.files import atomic_write_text
     from pgt_check.io.writers import write_trajectory_file
 
@@ -140,13 +148,27 @@ def correct_run(
     m_by_id = {m.frame_id: m for m in measurements}
     thr = {str(r["frame_id"]): r.get("threshold_px") for r in rows}
     corrections: dict[str, Correction] = {}
+    budget = config.correct.budget * main_pass_seconds(measurements)
+    stopped = ""
     if ids:
-        logger.info("correcting %d frame(s) (%d rounds of render -> match -> PnP)", len(ids),
-                    config.correct.rounds)
+        logger.info("correcting %d frame(s) (%d rounds of render -> match -> PnP%s)", len(ids),
+                    config.correct.rounds, f", at most {budget:.0f} s" if budget > 0 else "")
         checker = checker_factory()
+        t0 = clock()
         try:
             for fid in ids:
                 if fid not in by_id:
+                    continue
+                n_done = len(corrections)
+                spent = clock() - t0
+                if stopped or (budget > 0 and n_done and spent + spent / n_done > budget):
+                    if not stopped:
+                        stopped = (f"time limit: {n_done} frame(s) took {spent:.1f} s of the "
+                                   f"{budget:.1f} s budget (correct.budget "
+                                   f"{config.correct.budget:g} x the main pass)")
+                        logger.warning("corrections: %s; %d frame(s) left uncorrected",
+                                       stopped, len(ids) - n_done)
+                    corrections[fid] = Correction(fid, False, "time_limit")
                     continue
                 try:
                     corrections[fid] = correct_frame(checker, by_id[fid], m_by_id.get(fid),
@@ -166,8 +188,10 @@ def correct_run(
     summary = {
         "corrections": {
             "mode": config.correct.frames,
-            "attempted": len(corrections),
+            "attempted": sum(c.reason != "time_limit" for c in corrections.values()),
             "succeeded": sum(c.success for c in corrections.values()),
+            "not_attempted": sum(c.reason == "time_limit" for c in corrections.values()),
+            "stopped": stopped or None,
             "applied": len(applied),
             "file": CORRECTED_NAME,
             "format": fmt,

@@ -15,7 +15,7 @@ Gauss-Newton iterations). The remaining motion shrinks every round, where the al
 unbiased: castle 4 % -> 27 % off after one round, 9 % after two.
 
 The rounds are bounded (issue #28: a run that fails pays only for what it reports): at most
-``correct.registration_rounds`` rounds, at most ``correct.registration_budget`` times the main
+``correct.registration_rounds`` rounds, at most ``correct.budget`` times the main
 pass's measuring time, and they stop when what is left grows from one round to the next (the
 estimate does not converge: the one before the update that made it grow is kept). Where the
 views cannot separate the registration from a calibration error each round may re-decide which
@@ -231,7 +231,7 @@ def refine_registration(
     ``summary``: the main pass's ``shared_errors`` section; ``measure(frames, config)``: the absolute
     evidence of the frames at their (moved) poses, in any order. None when there is nothing to
     refine (``needs_refinement`` false, rounds 0, or no frame to measure). Bounds: ``CorrectConfig.registration_rounds`` /
-    ``registration_budget`` and the growth rule (module docstring); ``clock`` for tests."""
+    ``budget`` and the growth rule (module docstring); ``clock`` for tests."""
     c = config.correct
     rounds = c.registration_rounds
     if rounds <= 0 or not needs_refinement(summary):
@@ -252,7 +252,7 @@ def refine_registration(
             frame_ids=tuple(f.frame_id for f in todo), kept=kept,
         )  # fmt: skip
 
-    budget = c.registration_budget * _main_pass_seconds(measurements)
+    budget = c.budget * main_pass_seconds(measurements)
     t_start = clock()
     c_rigid = start.copy()
     history = [start.copy()]  # history[k]: the correction after k rounds' updates
@@ -268,23 +268,27 @@ def refine_registration(
     for k in range(1, rounds + 1):
         if k > 1 and budget > 0 and clock() - t_start + done[-1].time_s > budget:
             stopped = (f"time limit: {k - 1} round(s) took {clock() - t_start:.1f} s of the "
-                       f"{budget:.1f} s budget (correct.registration_budget "
-                       f"{c.registration_budget:g} x the main pass)")
+                       f"{budget:.1f} s budget (correct.budget "
+                       f"{c.budget:g} x the main pass)")
             break
         rnd, res = _measure_round(k, todo, c_rigid, measure, ecfg, clock)
         reg = res["registration"]
         done.append(rnd)
-        prev = done[-2].effect_px if len(done) >= 2 else None
+        # round 1 against the main pass: the first estimate's poses against the checked ones
+        prev = done[-2].effect_px if len(done) >= 2 else _f(summary["registration"].get(
+            "effect_px"))
         if prev is not None and rnd.effect_px is not None and (
             rnd.effect_px > GROWTH_TOLERANCE * prev
         ):
             # the last update moved the poses further from what the evidence says: the
             # estimate does not converge (an ill-posed split); keep the one before it
-            kept = k - 2
+            kept = max(k - 2, 0)
             c_rigid = history[kept]
             stopped = (f"not converging: what is left grew from {prev:.1f} px to "
-                       f"{rnd.effect_px:.1f} px in round {k}; the estimate measured in round "
-                       f"{k - 1} is kept")
+                       f"{rnd.effect_px:.1f} px in round {k}; " + (
+                           f"the estimate measured in round {k - 1} is kept" if k > 1 else
+                           "the first estimate moved the poses further off than they were; "
+                           "it is reported unrefined"))
             break
         if reg.get("corrected_world_from_world") is None:
             stopped = f"round {k}: no residual fit ({reg.get('reason') or reg.get('status')})"
@@ -307,7 +311,7 @@ def refine_registration(
     return result(c_rigid, done, stopped, kept)
 
 
-def _main_pass_seconds(measurements: Sequence[FrameMeasurement]) -> float:
+def main_pass_seconds(measurements: Sequence[FrameMeasurement]) -> float:
     """The main pass's measuring time: the frames' summed ``timings.total`` (0 when not
     recorded)."""
     total = 0.0

@@ -93,7 +93,8 @@ def failure_headline(summary: Mapping[str, Any], out: str | Path) -> list[str]:
                 "or, if it is a misregistration: "
                 + (f"{_q(out / REGISTERED_TRAJECTORY)} holds the registered poses"
                    if (out / REGISTERED_TRAJECTORY).is_file()
-                   else "re-run with --registration-rounds 8 to write registered_trajectory.txt")
+                   else "re-run with --registration-rounds 8 --resume to write "
+                   "registered_trajectory.txt (only the rounds are measured)")
             )
         else:
             lines.append(
@@ -104,7 +105,8 @@ def failure_headline(summary: Mapping[str, Any], out: str | Path) -> list[str]:
             lines.append(
                 f"fix: pgt-check {_q(reg_file)} --mesh {_q(mesh)} --out "
                 f"{_q(str(out) + '-registered')}" if reg_file.is_file()
-                else "fix: re-run with --registration-rounds 8 (writes registered_trajectory.txt)"
+                else "fix: re-run with --registration-rounds 8 --resume (writes "
+                "registered_trajectory.txt; only the rounds are measured)"
             )
     elif cal_failed:
         cam, c = next(iter(cal_failed.items()))
