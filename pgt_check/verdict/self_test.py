@@ -19,8 +19,9 @@ by known amounts around those limits and reports how often the checker flags the
   the limit claims to hold whatever the axis; random sign, the same for every size; on the
   boxes scene a random axis is flagged at 0.5x already). The
   registration check is run on those measurements (``verdict.shared.run_shared_checks``);
-  flagged = it fails. One trial per size and kind: the curve is a step at the size where
-  the check starts failing. It needs ``SHARED_MIN_FRAMES`` (5) frames, better 10 or more:
+  flagged = it fails (the worse of its rigid and similarity fits, as the verdicts use it).
+  One trial per size and kind: the curve is a step at the size where the check starts
+  failing. It needs ``SHARED_MIN_FRAMES`` (5) frames, better 10 or more:
   the check's interval on ``N`` frames is wider than on the whole run, so a small ``N``
   flags later than the whole run would.
 
@@ -364,10 +365,14 @@ def run_self_test(
 
 def _shared_point(k: float, size: float, ms: Sequence[FrameMeasurement], config: RunConfig,
                   checks: Callable[[Sequence[FrameMeasurement], RunConfig], Any]) -> CurvePoint:
-    reg = checks(ms, config).registration
-    status = str(reg.get("status"))
+    # the worse of the rigid and the similarity check, as the verdicts use it (on alike views
+    # the rigid fit can trade a shift for a rotation and pass where the similarity fails)
+    res = checks(ms, config)
+    status = str(res.registration_status)
+    rigid = str(res.registration.get("status"))
     return CurvePoint(k, size, 1, int(status == FAILED), int(status == FAILED),
-                      int(status == "not_checked"), status)
+                      int(status == "not_checked"),
+                      status if rigid == status else f"{status} (rigid {rigid})")
 
 
 # -- what the CLI and the report say ------------------------------------------------------------
