@@ -262,6 +262,9 @@ def markdown(results: list[dict]) -> str:
              for s in r["shared"]],
         ))
         out.append("")
+    st = REPORTS / "accuracy_self_test.md"
+    if st.is_file():
+        out += ["## Self-test", "", st.read_text().strip(), ""]
     cal = REPORTS / "accuracy_calibration.txt"
     if cal.is_file():
         out += [

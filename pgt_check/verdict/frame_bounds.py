@@ -54,6 +54,29 @@ ACCURACY_COLUMNS: dict[str, str] = {
 
 _MAX_POINTS = 400  # per frame (evenly spaced): the fit's cost stays a few ms
 
+#: the bound rests on the feature paths' points alone (raw, enhanced) when they have at least
+#: this many: the geometric-edge points' photo positions come from a 2D alignment model and
+#: carry no parallax, so their fit turns a camera shift into a rotation (sample scene, 0.2
+#: units moved, reports/accuracy.md: edges alone 0.04-0.43 of the shift plus 2-5 deg of
+#: rotation; raw alone 0.98-1.04; pooled 0.65-0.96)
+FEATURE_ONLY_MIN_POINTS = 40
+
+
+def bound_points(evidence: Any) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+    """(pts2d (N, 2), pts_cam (N, 3), sources) of an ``AbsoluteEvidence`` that the per-frame
+    bound is fitted to: the feature paths' points alone when they have
+    ``FEATURE_ONLY_MIN_POINTS``, else every point (also when the split is unknown)."""
+    split = evidence.by_source()
+    feats = {k: v for k, v in split.items() if k != "edges"}
+    if split and len(feats) < len(split):
+        n = sum(len(v[0]) for v in feats.values())
+        if n >= FEATURE_ONLY_MIN_POINTS:
+            return (np.concatenate([v[0] for v in feats.values()]),
+                    np.concatenate([v[1] for v in feats.values()]), tuple(feats))
+    p2 = np.asarray(evidence.pts2d, np.float64).reshape(-1, 2)
+    pc = np.asarray(evidence.pts_cam, np.float64).reshape(-1, 3)
+    return p2, pc, tuple(evidence.sources)
+
 
 def frame_accuracy_columns(
     measurements: Sequence[FrameMeasurement],
@@ -71,8 +94,7 @@ def frame_accuracy_columns(
         out[m.frame_id] = row
         if m.evidence is None or not len(m.evidence) or m.world_from_cam is None or not m.intrinsics:
             continue
-        p2 = np.asarray(m.evidence.pts2d, np.float64).reshape(-1, 2)
-        pc = np.asarray(m.evidence.pts_cam, np.float64).reshape(-1, 3)
+        p2, pc, sources = bound_points(m.evidence)
         if len(p2) > _MAX_POINTS:
             keep = np.linspace(0, len(p2) - 1, _MAX_POINTS).round().astype(int)
             p2, pc = p2[keep], pc[keep]
@@ -88,7 +110,7 @@ def frame_accuracy_columns(
         fa = frame_accuracy(p2, pc, k, m.width, m.height)
         row.update(_columns(fa))
         if fa.success:
-            row["acc_evidence"] = "+".join(m.evidence.sources) + (
+            row["acc_evidence"] = "+".join(sources) + (
                 "+calibration removed" if cal is not None else ""
             )
     return out
