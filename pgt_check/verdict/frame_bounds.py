@@ -55,20 +55,24 @@ ACCURACY_COLUMNS: dict[str, str] = {
 _MAX_POINTS = 400  # per frame (evenly spaced): the fit's cost stays a few ms
 
 #: the bound rests on the feature paths' points alone (raw, enhanced) when they have at least
-#: this many: the geometric-edge points' photo positions come from a 2D alignment model and
+#: this many and give a bound (noisier but unbiased: the bootstrap sees noise, not bias): the
+#: geometric-edge points' photo positions come from a 2D alignment model and
 #: carry no parallax, so their fit turns a camera shift into a rotation (sample scene, 0.2
 #: units moved, reports/accuracy.md: edges alone 0.04-0.43 of the shift plus 2-5 deg of
 #: rotation; raw alone 0.98-1.04; pooled 0.65-0.96)
-FEATURE_ONLY_MIN_POINTS = 40
+FEATURE_ONLY_MIN_POINTS = 20
 
 
-def bound_points(evidence: Any) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
+def bound_points(
+    evidence: Any, features_only: bool = True
+) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
     """(pts2d (N, 2), pts_cam (N, 3), sources) of an ``AbsoluteEvidence`` that the per-frame
     bound is fitted to: the feature paths' points alone when they have
-    ``FEATURE_ONLY_MIN_POINTS``, else every point (also when the split is unknown)."""
+    ``FEATURE_ONLY_MIN_POINTS`` (and ``features_only``), else every point (also when the split
+    is unknown)."""
     split = evidence.by_source()
     feats = {k: v for k, v in split.items() if k != "edges"}
-    if split and len(feats) < len(split):
+    if features_only and split and len(feats) < len(split):
         n = sum(len(v[0]) for v in feats.values())
         if n >= FEATURE_ONLY_MIN_POINTS:
             return (np.concatenate([v[0] for v in feats.values()]),
@@ -85,8 +89,6 @@ def frame_accuracy_columns(
     """frame id -> the ``ACCURACY_COLUMNS`` of every measurement. ``calibrations``: camera id ->
     a calibration error to take out of the evidence first (``--remove-calibration``,
     ``--calibration-from``)."""
-    from pgt_check.geometry.shared_errors import FrameEvidence
-
     out: dict[str, dict[str, Any]] = {}
     for i, m in enumerate(measurements):
         row: dict[str, Any] = dict.fromkeys(ACCURACY_COLUMNS)
@@ -94,26 +96,42 @@ def frame_accuracy_columns(
         out[m.frame_id] = row
         if m.evidence is None or not len(m.evidence) or m.world_from_cam is None or not m.intrinsics:
             continue
-        p2, pc, sources = bound_points(m.evidence)
-        if len(p2) > _MAX_POINTS:
-            keep = np.linspace(0, len(p2) - 1, _MAX_POINTS).round().astype(int)
-            p2, pc = p2[keep], pc[keep]
         k = camera_matrix(m.intrinsics)
         cal = (calibrations or {}).get(m.camera_id)
-        if cal is not None:
-            wfc = np.asarray(m.world_from_cam, np.float64)
-            ev = FrameEvidence(
-                m.frame_id, i, m.camera_id, wfc, k, m.width, m.height, p2,
-                pc @ wfc[:3, :3].T + wfc[:3, 3],
-            )  # fmt: skip
-            p2 = cal.remove(ev).pts2d
-        fa = frame_accuracy(p2, pc, k, m.width, m.height)
+        fa, sources = _fit(m, i, k, cal, features_only=True)
+        if not fa.success and sources != tuple(m.evidence.sources):
+            # the feature points alone give no bound: every point (edges included)
+            fa, sources = _fit(m, i, k, cal, features_only=False)
         row.update(_columns(fa))
         if fa.success:
             row["acc_evidence"] = "+".join(sources) + (
                 "+calibration removed" if cal is not None else ""
             )
     return out
+
+
+def _fit(
+    m: FrameMeasurement, i: int, k: np.ndarray, cal: CameraCalibration | None,
+    features_only: bool,
+) -> tuple[FrameAccuracy, tuple[str, ...]]:
+    """The frame's bound from ``bound_points`` (at most ``_MAX_POINTS``, calibration taken
+    out when given) and the sources it rests on."""
+    p2, pc, sources = bound_points(m.evidence, features_only)
+    if len(p2) > _MAX_POINTS:
+        keep = np.linspace(0, len(p2) - 1, _MAX_POINTS).round().astype(int)
+        p2, pc = p2[keep], pc[keep]
+    if cal is not None:
+        p2 = cal.remove(_evidence(m, i, k, p2, pc)).pts2d
+    return frame_accuracy(p2, pc, k, m.width, m.height), sources
+
+
+def _evidence(m: FrameMeasurement, i: int, k: np.ndarray, p2: np.ndarray, pc: np.ndarray) -> Any:
+    """The frame's points as run-level ``FrameEvidence`` (to take a calibration out)."""
+    from pgt_check.geometry.shared_errors import FrameEvidence
+
+    wfc = np.asarray(m.world_from_cam, np.float64)
+    return FrameEvidence(m.frame_id, i, m.camera_id, wfc, k, m.width, m.height, p2,
+                         pc @ wfc[:3, :3].T + wfc[:3, 3])
 
 
 def _columns(fa: FrameAccuracy) -> dict[str, Any]:
