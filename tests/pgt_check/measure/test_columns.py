@@ -26,12 +26,21 @@ from pgt_check.types import Camera, Frame
 def _path(kind: str, err: float | None, inliers: int) -> PathMeasurement:
     ok = err is not None
     return PathMeasurement(
-        kind=kind, method="render" if kind == "raw" else "reproject",
-        evidence=Evidence.ABSOLUTE, n_kpts_render=900, n_kpts_photo=1000, n_matches=200,
-        n_inliers=inliers, inlier_ratio=inliers / 200, reason="" if ok else "too_few_inliers",
+        kind=kind,
+        method="render" if kind == "raw" else "reproject",
+        evidence=Evidence.ABSOLUTE,
+        n_kpts_render=900,
+        n_kpts_photo=1000,
+        n_matches=200,
+        n_inliers=inliers,
+        inlier_ratio=inliers / 200,
+        reason="" if ok else "too_few_inliers",
         photo_from_render=tuple(map(tuple, np.eye(3))) if ok else None,
-        corner_error_px=err, shift_dx_px=1.5 if ok else None, shift_dy_px=-0.5 if ok else None,
-        zoom=1.001 if ok else None, reference_id="f2" if kind == "enhanced" else None,
+        corner_error_px=err,
+        shift_dx_px=1.5 if ok else None,
+        shift_dy_px=-0.5 if ok else None,
+        zoom=1.001 if ok else None,
+        reference_id="f2" if kind == "enhanced" else None,
     )
 
 
@@ -42,9 +51,15 @@ def _frame() -> Frame:
 def _full(verdict_path: str = "enhanced") -> FrameMeasurement:
     return dataclasses.replace(
         failed_measurement(_frame(), MeasureReason.NONE),
-        coverage=0.8, shading="vertex", match_width=64, match_height=48,
-        raw=_path("raw", None, 8), enhanced=_path("enhanced", 3.0, 150),
-        enhance_ran=True, enhance_why=EnhanceWhy.RAW_FAILED, verdict_path=verdict_path,
+        coverage=0.8,
+        shading="vertex",
+        match_width=64,
+        match_height=48,
+        raw=_path("raw", None, 8),
+        enhanced=_path("enhanced", 3.0, 150),
+        enhance_ran=True,
+        enhance_why=EnhanceWhy.RAW_FAILED,
+        verdict_path=verdict_path,
         pose=PoseEstimate(80, "", 0.01, 0.5, tuple(map(tuple, np.eye(4)))),
         timings=Timings(load=0.1, render=0.2, total=1.0),
     )

@@ -25,11 +25,22 @@ from pgt_check.verdict.status import FAILED, FINDING, INCONCLUSIVE, NOT_CHECKED,
 
 def _registration(effect: float, ci=None, success: bool = True, **kw) -> SimpleNamespace:
     est = dict(
-        success=success, reason="" if success else "too_few_frames", angle_deg=1.5,
-        angle_deg_ci=(1.2, 1.8), translation=0.05, translation_ci=(0.03, 0.07),
-        translation_frac=0.02, translation_frac_ci=(0.01, 0.03), scale=1.0,
-        scale_ci=(1.0, 1.0), effect_px=effect, effect_px_ci=ci if ci is not None else (math.nan,) * 2,
-        n_frames=12, n_points=900, n_inliers=700, ambiguous_with_calibration=False,
+        success=success,
+        reason="" if success else "too_few_frames",
+        angle_deg=1.5,
+        angle_deg_ci=(1.2, 1.8),
+        translation=0.05,
+        translation_ci=(0.03, 0.07),
+        translation_frac=0.02,
+        translation_frac_ci=(0.01, 0.03),
+        scale=1.0,
+        scale_ci=(1.0, 1.0),
+        effect_px=effect,
+        effect_px_ci=ci if ci is not None else (math.nan,) * 2,
+        n_frames=12,
+        n_points=900,
+        n_inliers=700,
+        ambiguous_with_calibration=False,
         corrected_world_from_world=np.eye(4),
     )
     est.update(kw)
@@ -38,11 +49,22 @@ def _registration(effect: float, ci=None, success: bool = True, **kw) -> SimpleN
 
 def _calibration(effect: float, ci, success: bool = True, **kw) -> SimpleNamespace:
     est = dict(
-        success=success, reason="" if success else "too_few_points", effect_px=effect,
-        effect_px_ci=ci, principal_point_shift_px=(4.0, -1.0), equivalent_rotation_deg=0.4,
-        equivalent_rotation_deg_ci=(0.3, 0.5), roll_deg=0.1, focal_scale=1.001,
-        focal_scale_ci=(1.0, 1.002), n_frames=12, separable=True, rotation=np.eye(3),
-        translation=np.zeros(3), translation_fitted=False, translation_ci=np.zeros((3, 2)),
+        success=success,
+        reason="" if success else "too_few_points",
+        effect_px=effect,
+        effect_px_ci=ci,
+        principal_point_shift_px=(4.0, -1.0),
+        equivalent_rotation_deg=0.4,
+        equivalent_rotation_deg_ci=(0.3, 0.5),
+        roll_deg=0.1,
+        focal_scale=1.001,
+        focal_scale_ci=(1.0, 1.002),
+        n_frames=12,
+        separable=True,
+        rotation=np.eye(3),
+        translation=np.zeros(3),
+        translation_fitted=False,
+        translation_ci=np.zeros((3, 2)),
     )
     est.update(kw)
     return SimpleNamespace(**est)
@@ -86,7 +108,8 @@ def test_registration_entry_failed_and_its_message():
 def test_registration_entry_similarity_passed_and_ambiguous():
     e = registration_entry(
         _registration(1.0, (0.5, 1.5), scale=1.01, ambiguous_with_calibration=True),
-        3.0, "similarity",
+        3.0,
+        "similarity",
     )
     assert e["status"] == PASSED
     assert e["message"].startswith("similarity passed: below 3.0 px")
@@ -96,7 +119,8 @@ def test_registration_entry_similarity_passed_and_ambiguous():
 def test_registration_entry_not_checked_keeps_the_reason_and_no_numbers():
     e = registration_entry(
         _registration(math.nan, success=False, angle_deg=math.nan, corrected_world_from_world=None),
-        3.0, "rigid",
+        3.0,
+        "rigid",
     )
     assert e["status"] == NOT_CHECKED and e["reason"] == "too_few_frames"
     assert e["effect_px"] is None and e["angle_deg"] is None and e["effect_px_ci"] is None
@@ -118,9 +142,14 @@ def test_calibration_entry_failed_only_above_the_frame_threshold_else_finding():
 
 
 def test_calibration_entry_with_a_translation_and_not_separable():
-    est = _calibration(4.0, (3.0, 5.0), separable=False, translation_fitted=True,
-                       translation=np.array([0.05, 0.0, 0.0]),
-                       translation_ci=np.array([[0.04, 0.06], [-0.01, 0.01], [-0.01, 0.01]]))
+    est = _calibration(
+        4.0,
+        (3.0, 5.0),
+        separable=False,
+        translation_fitted=True,
+        translation=np.array([0.05, 0.0, 0.0]),
+        translation_ci=np.array([[0.04, 0.06], [-0.01, 0.01], [-0.01, 0.01]]),
+    )
     e = calibration_entry(est, 2.0, 8.0)
     assert e["translation"] == [0.05, 0.0, 0.0] and e["translation_ci"][0] == [0.04, 0.06]
     assert "camera-to-rig translation (+0.0500" in e["message"]
@@ -129,17 +158,24 @@ def test_calibration_entry_with_a_translation_and_not_separable():
 
 
 def test_drift_entry_not_checked():
-    entry, score, flagged = drift_entry(SimpleNamespace(success=False, reason="too_few_frames"),
-                                        ["a", "b"], 2.0)
+    entry, score, flagged = drift_entry(
+        SimpleNamespace(success=False, reason="too_few_frames"), ["a", "b"], 2.0
+    )
     assert entry["status"] == NOT_CHECKED and score == {} and flagged == frozenset()
 
 
 def test_drift_entry_interpolates_frames_without_evidence_and_grows_segments():
     ids = ["f0", "f1", "f2", "f3", "f4"]
     est = SimpleNamespace(
-        success=True, reason="", frame_ids=["f0", "f2", "f4"], frame_index=[0, 2, 4],
-        frame_score_px=np.array([0.5, 3.0, 5.0]), frame_score_low_px=np.array([0.2, 2.5, 4.0]),
-        frame_flagged=np.array([False, True, True]), segments=((2, 4),), windows=(1, 2),
+        success=True,
+        reason="",
+        frame_ids=["f0", "f2", "f4"],
+        frame_index=[0, 2, 4],
+        frame_score_px=np.array([0.5, 3.0, 5.0]),
+        frame_score_low_px=np.array([0.2, 2.5, 4.0]),
+        frame_flagged=np.array([False, True, True]),
+        segments=((2, 4),),
+        windows=(1, 2),
     )
     entry, score, flagged = drift_entry(est, ids, 2.0)
     assert entry["status"] == FAILED
