@@ -6,10 +6,13 @@
    needed: the share of frames it skips, and its time against --enhance always, at equal
    detection (the sample scene's perturbed frames are the labels).
 Writes reports/leave_out.md. Usage: python benchmarks/leave_out.py
+(``--limit N --out FILE``: a quick check on the first N frames, written elsewhere).
 """
 
 from __future__ import annotations
 
+import argparse
+import csv
 import json
 import subprocess
 import sys
@@ -50,9 +53,14 @@ def perturbed_ids() -> set[str]:
             if ln and not ln.startswith("#")}
 
 
-def main() -> None:
+def main(argv: list[str] | None = None) -> None:
     from pgt_eval import roc_auc
 
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--limit", type=int, default=None, help="first N frames only (a quick check)")
+    p.add_argument("--out", type=Path, default=REPORTS / "leave_out.md")
+    args = p.parse_args(argv)
+    limit = ["--limit", str(args.limit)] if args.limit else []
     rows = []
     bad = perturbed_ids()
     for name, extra in MODES:
@@ -60,13 +68,18 @@ def main() -> None:
             continue
         with tempfile.TemporaryDirectory() as tmp:
             argv = [str(SCENE / "trajectories.txt"), "--mesh", str(SCENE / "mesh.glb"),
-                    "--out", tmp, "-q", "--report-details", "0", *extra]
+                    "--out", tmp, "-q", "--report-details", "0", *limit, *extra]
             res = subprocess.run([sys.executable, "-c", PROBE, *argv], capture_output=True,
                                  text=True, cwd=REPO)
+            if res.returncode:
+                sys.exit(f"{name}: the probe failed: {res.stderr.strip()[-1000:]}")
             info = json.loads(res.stdout.strip().splitlines()[-1])
-            recs = [json.loads(ln) for ln in Path(tmp, "records.jsonl").read_text().splitlines()]
-        enhanced = sum(1 for r in recs if r.get("enhanced"))
-        errs = [float("inf") if r["corner_error_px"] is None else r["corner_error_px"] for r in recs]
+            # frames.csv: the flat per-frame columns (records.jsonl nests them per path)
+            with Path(tmp, "frames.csv").open(newline="") as fh:
+                recs = list(csv.DictReader(fh))
+        enhanced = sum(1 for r in recs if r["enhanced"] == "True")
+        errs = [float(r["corner_error_px"]) if r["corner_error_px"] else float("inf")
+                for r in recs]
         auc = roc_auc(errs, [r["frame_id"] in bad for r in recs])
         rows.append([name, f"{info['import_cli_s']:.2f}", f"{info['run_s']:.1f}",
                      f"{info['peak_rss_mib']:.0f}", str(info["torch_imported"]),
@@ -76,8 +89,8 @@ def main() -> None:
         "# Leaving out what a scene does not need",
         "",
         f"Machine: {machine()} (cores shared with other jobs). Command: `{command_line()}`.",
-        "Each row is one fresh subprocess running the CLI on `sample_data/scene` (24 frames, "
-        "320x240, a high-quality textured mesh; 6 frames have injected pose errors). "
+        "Each row is one fresh subprocess running the CLI on `sample_data/scene` ("
+        f"{'the first ' + str(args.limit) + ' of ' if args.limit else ''}24 frames, 320x240, a high-quality textured mesh; 6 frames have injected pose errors). "
         "'import' = `import pgt_check.cli`; run time includes building the renderer/matcher "
         "(and loading the model where used); peak RSS of the whole process.",
         "",
@@ -92,8 +105,8 @@ def main() -> None:
         "is in `reports/raw_vs_enhanced.md` (column 'frames auto enhanced').",
         "",
     ])
-    REPORTS.mkdir(exist_ok=True)
-    (REPORTS / "leave_out.md").write_text(text)
+    args.out.parent.mkdir(parents=True, exist_ok=True)
+    args.out.write_text(text)
     print(text)
 
 
