@@ -60,8 +60,9 @@ class MeshCounts:
 
 def read_mesh_counts(path: str | Path) -> MeshCounts:
     """Vertex and face counts of the mesh file at ``path`` without loading it: the PLY header,
-    the glTF / GLB accessors, a line count of an OBJ file (polygons count as one face);
-    otherwise (or for a header it cannot read) a guess from the file size."""
+    the glTF / GLB accessors, a line count of an OBJ file; otherwise (or for a header it
+    cannot read) a guess from the file size. A polygon counts as one face (a quad mesh needs
+    about twice the estimate once triangulated)."""
     path = Path(path)
     suffix = path.suffix.lower()
     counts: MeshCounts | None = None
