@@ -77,18 +77,14 @@ def _g(x, spec=".3g") -> str:
     return "-" if x is None else format(x, spec)
 
 
-def markdown(results: list[dict], settings: dict[str, str]) -> str:
-    out = [
-        "Command: `" + command_line() + "` (outputs in " + str(OUT) + ")",
-        "",
-        f"Machine: {machine()}.",
-        "",
-    ]
+def markdown(results: list[dict]) -> str:
+    out = []
     for r in results:
         st = r["self_test"] or {}
-        out += [f"### {r['dataset']} ({settings[r['dataset']]}; {r['n_frames']} frames: "
+        out += [f"### {r['dataset']} ({r['settings']}; {r['n_frames']} frames: "
                 f"{r['counts']['PASS']} PASS; registration {r['registration']}; "
-                f"{st.get('n_frames', 0)} frames self-tested; {r['seconds']:.0f} s)", ""]
+                f"{st.get('n_frames', 0)} frames self-tested; {r['seconds']:.0f} s)", "",
+                f"Command: `{r['command']}` (outputs in {OUT}). Machine: {r['machine']}.", ""]
         out += [st.get("sentence", "(no self-test)"), ""]
         ks = st.get("multiples") or []
         rows = []
@@ -117,16 +113,19 @@ def main() -> None:
     ap.add_argument("--self-test", type=int, default=20, help="N of --self-test")
     ap.add_argument("--datasets", default="boxes,castle,7s")
     args = ap.parse_args()
-    results, settings = [], {}
+    path = REPORTS / "accuracy_self_test.json"
+    # datasets measured before (another command) stay, each with its own command and commit
+    results = json.loads(path.read_text()) if path.is_file() else []
     for name, (traj, mesh, cfgd, words) in datasets(args.datasets.split(","),
                                                     args.frames).items():
         print(f"{name}: {len(traj.frames)} frames", flush=True)
-        settings[name] = words
-        results.append(run_dataset(name, traj, mesh, cfgd, args.self_test))
-        (REPORTS / "accuracy_self_test.json").write_text(
-            json.dumps(json_safe(results), indent=1))
-        (REPORTS / "accuracy_self_test.md").write_text(markdown(results, settings))
-        print(results[-1]["self_test"]["sentence"], flush=True)
+        r = run_dataset(name, traj, mesh, cfgd, args.self_test)
+        r.update(settings=words, command=command_line(), machine=machine())
+        results = [x for x in results if x["dataset"] != name] + [r]
+        results.sort(key=lambda x: ["7s", "castle", "boxes"].index(x["dataset"]))
+        path.write_text(json.dumps(json_safe(results), indent=1))
+        (REPORTS / "accuracy_self_test.md").write_text(markdown(results))
+        print(r["self_test"]["sentence"], flush=True)
 
 
 if __name__ == "__main__":
