@@ -43,6 +43,7 @@ __all__ = [
     "load_frame_cache",
     "reference_candidates",
     "split_frames",
+    "spread_pairs",
     "to_tensor",
 ]
 
@@ -137,6 +138,17 @@ def fixed_pairs(t: np.ndarray, positions: np.ndarray, offset: float) -> list[tup
         if j != i:
             out.append((int(i), int(j)))
     return out
+
+
+def spread_pairs(
+    t: np.ndarray, positions: np.ndarray, offset: float, n: int
+) -> list[tuple[int, int]]:
+    """At most ``n`` of the :func:`fixed_pairs`, spread evenly over ``positions``."""
+    if len(positions) <= 1:
+        return []
+    pairs = fixed_pairs(t, positions, offset)
+    sel = np.linspace(0, len(pairs) - 1, min(n, len(pairs))).round().astype(int)
+    return [pairs[k] for k in sorted(set(sel.tolist()))]
 
 
 @dataclass(frozen=True)

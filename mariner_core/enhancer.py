@@ -17,6 +17,7 @@ Checkpoint format (``save_checkpoint``): ``{"config": MarinerConfig.to_dict(), "
 
 from __future__ import annotations
 
+import json
 import logging
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,6 +39,7 @@ __all__ = [
     "EnhanceResult",
     "Enhancer",
     "build_model",
+    "export_weights",
     "load_checkpoint",
     "save_checkpoint",
 ]
@@ -244,3 +246,36 @@ class Enhancer:
             scale_x=w / xw.shape[-1],
             scale_y=h / xw.shape[-2],
         )
+
+
+def export_weights(
+    run_checkpoint: str | Path,
+    dst: str | Path,
+    iterations: int | None = None,
+    extra: dict[str, Any] | None = None,
+) -> Path:
+    """Turn a run's ``last.pt`` (resumable) or ``best.pt`` into a shipped fp16 checkpoint.
+
+    ``iterations`` overrides the stored default number of refinement iterations (it does not
+    change the weights).
+    """
+    st = torch.load(run_checkpoint, map_location="cpu", weights_only=True)
+    if "model" in st:  # resumable last.pt: the config comes from the run folder
+        run_cfg = json.loads((Path(run_checkpoint).parent / "config.json").read_text())
+        cfg = MarinerConfig.from_dict(run_cfg["model"])
+        state, meta = (
+            st["model"],
+            {"step": st["step"], "samples": st["samples"], "elapsed_s": st["elapsed_s"]},
+        )
+    else:
+        cfg = MarinerConfig.from_dict(dict(st["config"]))
+        state = st["state_dict"]
+        meta = {k: v for k, v in st["meta"].items() if k in ("step", "samples", "elapsed_s")}
+    if iterations is not None:
+        cfg = MarinerConfig.from_dict({**cfg.to_dict(), "iterations": int(iterations)})
+    model = Mariner(cfg)
+    model.load_state_dict(
+        {k: v.float() if v.is_floating_point() else v for k, v in state.items()}, strict=True
+    )
+    meta.update(extra or {})
+    return save_checkpoint(model, dst, extra=meta, fp16=True)

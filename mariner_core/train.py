@@ -27,11 +27,9 @@ import argparse
 import csv
 import json
 import logging
-import math
 import random
 import time
-from dataclasses import asdict, dataclass, fields
-from importlib import resources
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -44,9 +42,9 @@ from .data import (
     FrameCache,
     SamplerConfig,
     TripletSampler,
-    fixed_pairs,
     load_frame_cache,
     split_frames,
+    spread_pairs,
     to_tensor,
 )
 from .enhancer import save_checkpoint
@@ -59,10 +57,11 @@ from .losses import (
 )
 from .metrics import psnr_y
 from .model import Mariner
+from .train_config import TrainConfig, cosine_lr, load_run_config
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["TrainConfig", "load_run_config", "main", "train"]
+__all__ = ["TrainConfig", "cosine_lr", "load_run_config", "main", "train"]
 
 LOG_FIELDS = (
     "step",
@@ -79,75 +78,10 @@ LOG_FIELDS = (
 )
 
 
-@dataclass(frozen=True)
-class TrainConfig:
-    """Optimisation settings."""
-
-    batch_size: int = 9
-    steps: int = 100_000
-    lr: float = 1e-4
-    lr_min: float = 0.0
-    time_schedule: bool = False
-    train_iterations: int = 2
-    lambda_rec: float = 1.0
-    lambda_per: float = 0.1
-    lambda_adv: float = 0.001
-    gan_start: float | None = 0.75
-    disc_lr: float = 1e-4
-    val_fraction: float = 0.15
-    split_gap: float = 60.0
-    val_offset: float = 20.0
-    val_frames: int = 16
-    val_iterations: int = 1
-    val_every_minutes: float = 5.0
-    ckpt_every_minutes: float = 3.0
-    log_every: int = 10
-    seed: int = 42
-    num_threads: int = 0
-    device: str = "auto"
-    pretrained_perceptual: bool = True
-
-
-def _from_dict(cls: type, data: dict[str, Any]) -> Any:
-    allowed = {f.name for f in fields(cls)}
-    unknown = sorted(set(data) - allowed)
-    if unknown:
-        raise ValueError(f"unknown {cls.__name__} key(s) {unknown} (allowed: {sorted(allowed)})")
-    if cls is SamplerConfig and "ref_resize" in data:
-        data = {**data, "ref_resize": tuple(data["ref_resize"])}
-    return cls(**data)
-
-
-def load_run_config(name_or_path: str) -> tuple[MarinerConfig, SamplerConfig, TrainConfig]:
-    """A packaged config name (``cpu-small``, ``gpu``) or a JSON file path."""
-    p = Path(name_or_path)
-    if p.suffix == ".json" or p.is_file():
-        raw = json.loads(p.read_text())
-    else:
-        res = resources.files("mariner_core") / "configs" / f"{name_or_path}.json"
-        if not res.is_file():
-            raise ValueError(f"unknown config {name_or_path!r} (packaged: cpu-small, gpu)")
-        raw = json.loads(res.read_text())
-    unknown = sorted(set(raw) - {"model", "sampler", "train", "comment"})
-    if unknown:
-        raise ValueError(f"unknown config section(s) {unknown}")
-    return (
-        MarinerConfig.from_dict(raw.get("model", {})),
-        _from_dict(SamplerConfig, raw.get("sampler", {})),
-        _from_dict(TrainConfig, raw.get("train", {})),
-    )
-
-
 def _seed_all(seed: int) -> None:
     random.seed(seed)
     np.random.seed(seed)
     torch.manual_seed(seed)
-
-
-def cosine_lr(progress: float, lr: float, lr_min: float) -> float:
-    """Cosine annealing from ``lr`` (progress 0) to ``lr_min`` (progress 1)."""
-    p = min(max(progress, 0.0), 1.0)
-    return lr_min + 0.5 * (lr - lr_min) * (1.0 + math.cos(math.pi * p))
 
 
 @torch.no_grad()
@@ -186,15 +120,6 @@ def _resolve_device(name: str) -> torch.device:
     return torch.device(
         ("cuda" if torch.cuda.is_available() else "cpu") if name == "auto" else name
     )
-
-
-def _validation_pairs(cache: FrameCache, val_pos: np.ndarray, cfg: TrainConfig) -> list:
-    """At most ``cfg.val_frames`` fixed (frame, reference) pairs spread over the validation range."""
-    if len(val_pos) <= 1:
-        return []
-    pairs = fixed_pairs(cache.t, val_pos, cfg.val_offset)
-    sel = np.linspace(0, len(pairs) - 1, min(cfg.val_frames, len(pairs))).round().astype(int)
-    return [pairs[k] for k in sorted(set(sel.tolist()))]
 
 
 def _log_split(cache: FrameCache, train_pos: np.ndarray, val_pos: np.ndarray, n_pairs: int) -> None:
@@ -242,7 +167,7 @@ class _Trainer:
         self.cache = data if isinstance(data, FrameCache) else load_frame_cache(data)
         train_pos, val_pos = split_frames(self.cache.t, cfg.val_fraction, cfg.split_gap)
         self.sampler = TripletSampler(self.cache, train_pos, sampler_cfg)
-        self.val_pairs = _validation_pairs(self.cache, val_pos, cfg)
+        self.val_pairs = spread_pairs(self.cache.t, val_pos, cfg.val_offset, cfg.val_frames)
         _log_split(self.cache, train_pos, val_pos, len(self.val_pairs))
         self.model = Mariner(model_cfg).to(self.device).train()
         self.opt = torch.optim.Adam(self.model.parameters(), lr=cfg.lr)
@@ -491,39 +416,6 @@ def train(
     (out / "summary.json").write_text(json.dumps(summary, indent=1))
     logger.info("done: %s", summary)
     return summary
-
-
-def export_weights(
-    run_checkpoint: str | Path,
-    dst: str | Path,
-    iterations: int | None = None,
-    extra: dict[str, Any] | None = None,
-) -> Path:
-    """Turn a run's ``last.pt`` (resumable) or ``best.pt`` into a shipped fp16 checkpoint.
-
-    ``iterations`` overrides the stored default number of refinement iterations (it does not
-    change the weights).
-    """
-    st = torch.load(run_checkpoint, map_location="cpu", weights_only=True)
-    if "model" in st:  # resumable last.pt: the config comes from the run folder
-        run_cfg = json.loads((Path(run_checkpoint).parent / "config.json").read_text())
-        cfg = MarinerConfig.from_dict(run_cfg["model"])
-        state, meta = (
-            st["model"],
-            {"step": st["step"], "samples": st["samples"], "elapsed_s": st["elapsed_s"]},
-        )
-    else:
-        cfg = MarinerConfig.from_dict(dict(st["config"]))
-        state = st["state_dict"]
-        meta = {k: v for k, v in st["meta"].items() if k in ("step", "samples", "elapsed_s")}
-    if iterations is not None:
-        cfg = MarinerConfig.from_dict({**cfg.to_dict(), "iterations": int(iterations)})
-    model = Mariner(cfg)
-    model.load_state_dict(
-        {k: v.float() if v.is_floating_point() else v for k, v in state.items()}, strict=True
-    )
-    meta.update(extra or {})
-    return save_checkpoint(model, dst, extra=meta, fp16=True)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -22,7 +22,6 @@ import argparse
 import csv
 import json
 import logging
-import math
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -41,6 +40,7 @@ from .data import (
 )
 from .frozen import FrozenMariner, FrozenMarinerConfig
 from .metrics import psnr_y
+from .train_config import cosine_lr
 
 logger = logging.getLogger(__name__)
 
@@ -233,10 +233,6 @@ def _batch_inputs(
     return prep, target
 
 
-def _cosine(progress: float, lr: float, lr_min: float) -> float:
-    return lr_min + 0.5 * (lr - lr_min) * (1 + math.cos(math.pi * min(1.0, progress)))
-
-
 @torch.no_grad()
 def _validate(model: FrozenMariner, imgs, scores, k: int, jobs: list) -> dict[str, float]:
     model.eval()
@@ -355,7 +351,7 @@ def train(
         run_val()
     while time.perf_counter() - t_start < budget:
         prog = (time.perf_counter() - t_start) / budget
-        lr = _cosine(prog, settings.lr, settings.lr_min)
+        lr = cosine_lr(prog, settings.lr, settings.lr_min)
         for g in opt.param_groups:
             g["lr"] = lr
         idx = rng.integers(0, len(imgs), size=settings.batch_size)

@@ -22,7 +22,6 @@ errors every frame shares matter more.
 from __future__ import annotations
 
 import logging
-import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -37,7 +36,14 @@ from pgt_check.verdict.calibration import (
     frame_homographies,
     trusted_calibration,
 )
-from pgt_check.verdict.status import FAILED, FINDING, INCONCLUSIVE, NOT_CHECKED, PASSED
+from pgt_check.verdict.shared_entries import (
+    calibration_change_entry,
+    calibration_entry,
+    drift_entry,
+    registration_entry,
+    shared_or_not,
+)
+from pgt_check.verdict.status import FAILED, INCONCLUSIVE, NOT_CHECKED, PASSED
 from pgt_check.verdict.texture import texture_entry
 
 logger = logging.getLogger(__name__)
@@ -72,7 +78,7 @@ class SharedChecks:
     #: mesh colours against mesh geometry (``texture_entry``; empty when not run)
     texture: dict[str, Any] = field(default_factory=dict)
     #: with ``--calibration-from``, per camera id: what is left of the calibration after
-    #: removing the trusted run's (``_calibration_change_entry``); a FAILED camera's frames FAIL
+    #: removing the trusted run's (``calibration_change_entry``); a FAILED camera's frames FAIL
     calibration_change: dict[str, dict[str, Any]] = field(default_factory=dict)
 
     def calibration_homography(self, frame_id: str, camera_id: str) -> np.ndarray | None:
@@ -168,262 +174,6 @@ def frame_evidence(measurements: Sequence[FrameMeasurement]) -> list[Any]:
     return out
 
 
-def _ci(x: Any) -> list[float] | None:
-    if x is None:
-        return None
-    a = [float(v) for v in np.asarray(x, np.float64).reshape(-1)]
-    return a if all(math.isfinite(v) for v in a) else None
-
-
-def _f(x: Any) -> float | None:
-    x = float(x)
-    return x if math.isfinite(x) else None
-
-
-def _status(success: bool, effect_ci: Any, effect: float, threshold: float) -> str:
-    if not success:
-        return NOT_CHECKED
-    lo, hi = effect_ci if _ci(effect_ci) else (effect, effect)
-    if lo > threshold:
-        return FAILED
-    if hi <= threshold:
-        return PASSED
-    return INCONCLUSIVE
-
-
-def _registration_entry(est: Any, threshold: float, kind: str) -> dict[str, Any]:
-    status = _status(est.success, est.effect_px_ci, est.effect_px, threshold)
-    entry: dict[str, Any] = {
-        "status": status,
-        "reason": est.reason,
-        "kind": kind,
-        "angle_deg": _f(est.angle_deg),
-        "angle_deg_ci": _ci(est.angle_deg_ci),
-        "translation": _f(est.translation),
-        "translation_ci": _ci(est.translation_ci),
-        "translation_rel_depth": _f(est.translation_frac),
-        "translation_rel_depth_ci": _ci(est.translation_frac_ci),
-        "scale": _f(est.scale),
-        "scale_ci": _ci(est.scale_ci),
-        "effect_px": _f(est.effect_px),
-        "effect_px_ci": _ci(est.effect_px_ci),
-        "n_frames": est.n_frames,
-        "n_points": est.n_points,
-        "n_inliers": est.n_inliers,
-        "ambiguous_with_calibration": bool(est.ambiguous_with_calibration),
-        "corrected_world_from_world": (
-            None
-            if est.corrected_world_from_world is None
-            else np.asarray(est.corrected_world_from_world).tolist()
-        ),
-    }
-    entry["message"] = _registration_message(entry, threshold)
-    return entry
-
-
-def _registration_message(e: dict[str, Any], threshold: float) -> str:
-    what = "similarity" if e["kind"] == "similarity" else "rigid registration"
-    if e["status"] == NOT_CHECKED:
-        return (
-            f"{what} of the trajectory to the mesh not checked: too little absolute "
-            f"evidence ({e['reason'] or 'no frames'}; {e['n_frames']} frames)"
-        )
-    lo, hi = e["effect_px_ci"] or (e["effect_px"], e["effect_px"])
-    scale = f", scale {e['scale']:.4f}" if e["kind"] == "similarity" else ""
-    rel = e["translation_rel_depth"]
-    nums = (
-        f"{e['angle_deg']:.2f} deg, {e['translation']:.4g} scene units"
-        + (f" ({100 * rel:.1f} % of the scene depth)" if rel is not None else "")
-        + f"{scale}; moves the images by {e['effect_px']:.1f} px (95 % {lo:.1f}-{hi:.1f}) "
-        f"over {e['n_frames']} frames"
-    )
-    verdict = {
-        PASSED: f"passed: below {threshold:.1f} px",
-        FAILED: f"FAILED: the trajectory is misregistered to the mesh (above {threshold:.1f} px)",
-        INCONCLUSIVE: f"inconclusive: the interval straddles {threshold:.1f} px",
-    }[e["status"]]
-    amb = (
-        " (not separable from a calibration error with these views)"
-        if e["ambiguous_with_calibration"]
-        else ""
-    )
-    return f"{what} {verdict}: correction {nums}{amb}"
-
-
-def _calibration_entry(est: Any, shared_thr: float, frame_thr: float) -> dict[str, Any]:
-    status = _status(est.success, est.effect_px_ci, est.effect_px, shared_thr)
-    if status == FAILED:
-        lo = (_ci(est.effect_px_ci) or [est.effect_px])[0]
-        status = FAILED if lo > frame_thr else FINDING
-    entry = {
-        "status": status,
-        "reason": est.reason,
-        "effect_px": _f(est.effect_px),
-        "effect_px_ci": _ci(est.effect_px_ci),
-        "principal_point_shift_px": _ci(est.principal_point_shift_px),
-        "rotation_deg": _f(est.equivalent_rotation_deg),
-        "rotation_deg_ci": _ci(est.equivalent_rotation_deg_ci),
-        "roll_deg": _f(est.roll_deg),
-        "focal_scale": _f(est.focal_scale),
-        "focal_scale_ci": _ci(est.focal_scale_ci),
-        "n_frames": est.n_frames,
-        "separable_from_registration": bool(est.separable),
-        # true_cam_from_checked_cam: what --calibration-from applies to another run
-        "rotation": None if est.rotation is None else np.asarray(est.rotation).tolist(),
-        "translation": _ci(est.translation) if est.translation_fitted else None,
-        # (3, 2): the 95 % interval of each component
-        "translation_ci": (
-            [_ci(row) for row in np.asarray(est.translation_ci)] if est.translation_fitted else None
-        ),
-    }
-    if status == NOT_CHECKED:
-        entry["message"] = f"calibration not checked: no absolute evidence ({est.reason})"
-        return entry
-    pp = entry["principal_point_shift_px"] or [float("nan")] * 2
-    entry["message"] = (
-        f"calibration {status}: every frame of this camera is displaced by "
-        f"{est.effect_px:.1f} px: principal point off by ({pp[0]:+.1f}, {pp[1]:+.1f}) px or a "
-        f"camera-to-rig rotation of {est.equivalent_rotation_deg:.2f} deg "
-        f"(roll {est.roll_deg:+.2f} deg), focal length x{est.focal_scale:.4f}"
-        + (
-            ", camera-to-rig translation ({:+.4f}, {:+.4f}, {:+.4f}) scene units".format(
-                *est.translation
-            )
-            if est.translation_fitted
-            else ""
-        )
-        + ("" if est.separable else "; not separable from registration with these views")
-    )
-    return entry
-
-
-def _calibration_change_entry(est: Any, threshold: float) -> dict[str, Any]:
-    """This run's calibration against a trusted run's (``--calibration-from``): the estimate on
-    the evidence after removing the trusted calibration. FAILED when it moves the images by
-    more than the shared threshold with confidence: the camera changed (focal length,
-    principal point, mounting) since the trusted run, and its frames are not PASS."""
-    entry = _calibration_entry(est, threshold, threshold)
-    if entry["status"] == NOT_CHECKED:
-        entry["message"] = f"calibration change not checked: no absolute evidence ({est.reason})"
-        return entry
-    entry["status"] = _status(est.success, est.effect_px_ci, est.effect_px, threshold)
-    lo, hi = entry["effect_px_ci"] or (est.effect_px, est.effect_px)
-    what = {
-        FAILED: "calibration CHANGED since the trusted run",
-        PASSED: "calibration as in the trusted run",
-        INCONCLUSIVE: "calibration change since the trusted run inconclusive",
-    }[entry["status"]]
-    pp = entry["principal_point_shift_px"] or [float("nan")] * 2
-    entry["message"] = (
-        f"{what}: what is left moves the images by {est.effect_px:.1f} px (95 % {lo:.1f}-"
-        f"{hi:.1f}, threshold {threshold:.1f}): principal point ({pp[0]:+.1f}, {pp[1]:+.1f}) px, "
-        f"roll {est.roll_deg:+.2f} deg, focal length x{est.focal_scale:.4f}"
-    )
-    return entry
-
-
-def _drift_coverage(
-    est: Any, ids: list[str], threshold: float
-) -> tuple[dict, dict, list[tuple[int, int]], set]:
-    """Per trajectory frame (``ids``, trajectory order = ``FrameEvidence.index``): drift score
-    and lower bound, and the flagged segments as (first, last) positions.
-
-    Drift is a property of the trajectory segment, not of one frame's evidence: a frame without
-    evidence of its own between the first and last frame with evidence gets the score
-    interpolated along the trajectory; it is flagged when it lies in a flagged segment, and a
-    segment grows over adjacent such frames whose interpolated lower bound exceeds the
-    threshold. Returns (score, low, segments, ids with interpolated values)."""
-    index = np.asarray(est.frame_index, np.float64)
-    own = {fid: k for k, fid in enumerate(est.frame_ids)}
-    score, low, interpolated = {}, {}, set()
-    for i, fid in enumerate(ids):
-        if fid in own:
-            score[fid] = float(est.frame_score_px[own[fid]])
-            low[fid] = float(est.frame_score_low_px[own[fid]])
-        elif len(index) and index[0] <= i <= index[-1]:
-            score[fid] = float(np.interp(i, index, est.frame_score_px))
-            low[fid] = float(np.interp(i, index, est.frame_score_low_px))
-            interpolated.add(fid)
-
-    def grows(i: int) -> bool:
-        return 0 <= i < len(ids) and ids[i] in interpolated and low[ids[i]] > threshold
-
-    segments = []
-    for a, b in est.segments:
-        a, b = int(a), min(int(b), len(ids) - 1)
-        while grows(a - 1):
-            a -= 1
-        while grows(b + 1):
-            b += 1
-        segments.append((a, b))
-    return score, low, segments, interpolated
-
-
-def _drift_entry(est: Any, ids: list[str], threshold: float) -> tuple[dict, dict, frozenset]:
-    """The drift section of the summary, the per-frame scores and the flagged frame ids;
-    ``ids``: every frame of the run in trajectory order (with or without evidence)."""
-    if not est.success:
-        return (
-            {
-                "status": NOT_CHECKED,
-                "reason": est.reason,
-                "message": f"drift not checked ({est.reason})",
-            },
-            {},
-            frozenset(),
-        )
-    score, low, runs, interpolated = _drift_coverage(est, ids, threshold)
-    flagged = {fid for fid, f in zip(est.frame_ids, est.frame_flagged, strict=True) if f}
-    flagged = frozenset(flagged.union(*({ids[i] for i in range(a, b + 1)} for a, b in runs)))
-    segments = [[ids[a], ids[b]] for a, b in runs]
-    status = FAILED if flagged else PASSED
-    entry = {
-        "status": status,
-        "reason": est.reason,
-        "threshold_px": threshold,
-        "segments": segments,
-        "n_windows": len(est.windows),
-        "per_frame": [
-            {
-                "frame_id": fid,
-                "index": i,
-                "effect_px": _f(score[fid]),
-                "lo_px": _f(low[fid]),
-                "flagged": fid in flagged,
-                "own_evidence": fid not in interpolated,
-            }
-            for i, fid in enumerate(ids)
-            if fid in score
-        ],
-        "message": (
-            f"drift FAILED: {len(segments)} segment(s) move away from the mesh by more than "
-            f"{threshold:.1f} px: " + ", ".join(f"{a} .. {b}" for a, b in segments)
-            if flagged
-            else f"drift passed: no window moves by more than {threshold:.1f} px"
-        ),
-    }
-    return entry, score, flagged
-
-
-def _shared_or_not(entry: dict[str, Any], residuals: np.ndarray, tol_px: float) -> dict:
-    """A FAILED registration entry becomes INCONCLUSIVE when fewer than half of the frames
-    agree with the correction (residual within ``tol_px`` after it): the frames then carry
-    errors of their own, and one shared correction does not describe them (e.g. 3 frames, 2
-    with large pose errors, which leaving frames out cannot separate)."""
-    finite = residuals[np.isfinite(residuals)]
-    agree = float(np.mean(finite <= tol_px)) if len(finite) else 0.0
-    entry["frames_agreeing"] = agree
-    if entry.get("status") == FAILED and agree < 0.5:
-        entry["status"] = INCONCLUSIVE
-        what = entry["message"].split(" FAILED", 1)[0]
-        entry["message"] = (
-            f"{what} inconclusive: only {agree:.0%} of the frames agree with one shared "
-            f"correction (the others have errors of their own); the fitted one moves the "
-            f"images by {entry.get('effect_px') or float('nan'):.1f} px"
-        )
-    return entry
-
-
 def frame_residuals(ev: Sequence[Any], est: Any) -> np.ndarray:
     """Median reprojection residual (px) of each frame's evidence after the world correction
     ``est`` (a ``RegistrationEstimate``; identity when it failed)."""
@@ -472,13 +222,50 @@ def _without(cals: Mapping[str, CameraCalibration], e: Any) -> Any:
     return cals[e.camera_id].remove(e) if e.camera_id in cals else e
 
 
+def _calibration_checks(
+    ev: Sequence[Any], measurements: Sequence[FrameMeasurement], config: RunConfig,
+    thr: float, frame_thr: float,
+) -> tuple[dict[str, dict[str, Any]], dict[str, CameraCalibration], dict[str, dict[str, Any]]]:
+    """Per camera: the calibration entry, the calibration to remove (this run's estimate, or the
+    trusted run's with ``calibration_from``) and, with ``calibration_from``, the change entry."""
+    from pgt_check.geometry.shared_errors import estimate_calibration
+
+    v = config.verdict
+    trans = v.calibration_translation
+    calib, cals = {}, {}
+    for cam_id, est in estimate_calibration(ev, calibration_translation=trans).items():
+        calib[cam_id] = calibration_entry(est, thr, frame_thr)
+        cal = CameraCalibration.from_estimate(est)
+        if cal is not None:
+            cals[cam_id] = cal
+    for cam_id in sorted({m.camera_id for m in measurements} - set(calib)):
+        calib[cam_id] = {
+            "status": NOT_CHECKED,
+            "reason": "no_absolute_evidence",
+            "message": "calibration not checked: no absolute evidence",
+        }
+    change: dict[str, dict[str, Any]] = {}
+    if v.calibration_from:
+        # a calibration known from a trusted run (same cameras): removed before judging, so
+        # this run's own shared error cannot be taken for calibration; what is left of the
+        # calibration is this camera's change since that run
+        intrinsics = {m.camera_id: m.intrinsics for m in measurements if m.intrinsics}
+        cals = trusted_calibration(v.calibration_from, sorted(intrinsics))
+        rest = [_without(cals, e) for e in ev]
+        # calibration only: the change is what the trusted calibration leaves unexplained (a
+        # joint fit would trade part of it against a world correction, and re-split the same
+        # run's calibration differently)
+        for cam_id, est in estimate_calibration(
+            rest, registration="none", calibration_translation=trans
+        ).items():
+            if cam_id:
+                change[cam_id] = calibration_change_entry(est, thr)
+    return calib, cals, change
+
+
 def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfig) -> SharedChecks:
     """All run-level checks on the measurements (in trajectory order)."""
-    from pgt_check.geometry.shared_errors import (
-        estimate_calibration,
-        estimate_drift,
-        estimate_registration,
-    )
+    from pgt_check.geometry.shared_errors import estimate_drift, estimate_registration
 
     thr = shared_threshold(measurements, config)
     frame_thr = (
@@ -500,35 +287,9 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
         )
     v = config.verdict
     trans = v.calibration_translation
-    calib, cals = {}, {}
-    for cam_id, est in estimate_calibration(ev, calibration_translation=trans).items():
-        calib[cam_id] = _calibration_entry(est, thr, frame_thr)
-        cal = CameraCalibration.from_estimate(est)
-        if cal is not None:
-            cals[cam_id] = cal
-    for cam_id in sorted({m.camera_id for m in measurements} - set(calib)):
-        calib[cam_id] = {
-            "status": NOT_CHECKED,
-            "reason": "no_absolute_evidence",
-            "message": "calibration not checked: no absolute evidence",
-        }
-    mode = "auto"
     intrinsics = {m.camera_id: m.intrinsics for m in measurements if m.intrinsics}
-    change: dict[str, dict[str, Any]] = {}
-    if v.calibration_from:
-        # a calibration known from a trusted run (same cameras): removed before judging, so
-        # this run's own shared error cannot be taken for calibration; what is left of the
-        # calibration is this camera's change since that run
-        cals = trusted_calibration(v.calibration_from, sorted(intrinsics))
-        rest = [_without(cals, e) for e in ev]
-        # calibration only: the change is what the trusted calibration leaves unexplained (a
-        # joint fit would trade part of it against a world correction, and re-split the same
-        # run's calibration differently)
-        for cam_id, est in estimate_calibration(
-            rest, registration="none", calibration_translation=trans
-        ).items():
-            if cam_id:
-                change[cam_id] = _calibration_change_entry(est, thr)
+    calib, cals, change = _calibration_checks(ev, measurements, config, thr, frame_thr)
+    mode = "auto"
     homs, frame_homs = frame_homographies(
         cals, all_ev, intrinsics, {m.frame_id: m.camera_id for m in measurements}
     )
@@ -539,8 +300,8 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
         mode = "none"
     kw = {"calibration": mode, "calibration_translation": trans}
     reg, sim = (
-        _shared_or_not(
-            _registration_entry(est := estimate_registration(ev, similarity=s, **kw), thr, kind),
+        shared_or_not(
+            registration_entry(est := estimate_registration(ev, similarity=s, **kw), thr, kind),
             frame_residuals(ev, est),
             0.5 * frame_thr,
         )
@@ -550,7 +311,7 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
     # frames without evidence of their own are covered by the segment they lie in
     ids = [m.frame_id for m in measurements]
     drift_thr = DRIFT_THRESHOLD_FACTOR * thr
-    drift, drift_px, flagged = _drift_entry(
+    drift, drift_px, flagged = drift_entry(
         estimate_drift(all_ev, threshold_px=drift_thr, **kw), ids, drift_thr
     )
     for entry in (reg, sim):

@@ -329,7 +329,7 @@ def test_a_failed_registration_most_frames_disagree_with_is_inconclusive():
     separate them; measured: castle, 4 of 10 frames perturbed, the 320 px presets), fewer
     than half of the frames agree with the fitted correction: one shared correction does not
     describe them, and the check says so instead of failing every frame."""
-    from pgt_check.verdict.shared import _shared_or_not
+    from pgt_check.verdict.shared_entries import shared_or_not as _shared_or_not
 
     def entry():
         return {"status": "failed", "effect_px": 48.0,
