@@ -1,75 +1,319 @@
-"""Per-frame time split into load, render, match and homography on the shared real datasets.
+"""Where a pgt-check run spends its time: a per-stage profile of whole runs (issue #28, item 1),
+and the run timed against the bare render-and-match loop on the same frames.
 
-Writes reports/pipeline_timing.md. Usage: python benchmarks/pipeline_timing.py [--frames N]
+Each case runs ``pgt-check`` (the CLI's ``main``) in a fresh process with timers wrapped
+around the pipeline's functions (no change to what runs); the timers are exclusive (a render
+inside the enhancement counts as render, not enhancement) and split by phase: the main pass,
+the registration refinement, the per-frame corrections, the report. Then ``--pairs`` times
+each case against ``benchmarks/bare_loop.py`` as whole processes, A B A B (wall and CPU from
+the OS), and reports the median ratio per pair. Writes reports/pipeline_timing.{md,json}.
+
+    python benchmarks/pipeline_timing.py [--cases 7s,7s-fast,7s-cal,castle,boxes] [--pairs 3]
 """
 
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import resource
 import statistics
+import subprocess
+import sys
+import tempfile
 import time
+from collections import defaultdict
 from pathlib import Path
 
-import numpy as np
-from _common import REPORTS, command_line, machine, md_table, shared_data
+from _common import REPO, REPORTS, command_line, machine, md_table, shared_data
 
-from pgt_check.config import RunConfig
-from pgt_check.io import read_trajectory
-from pgt_check.measure import FrameChecker
-from pgt_check.verdict import apply_verdicts
+#: case -> (dataset, frames, extra CLI options, what it shows)
+CASES: dict[str, tuple[str, int | None, tuple[str, ...], str]] = {
+    "7s": ("7scenes", 30, (), "7-Scenes, 30 frames, default (fails on its calibration offset)"),
+    "7s-cal": ("7scenes", 30, ("--remove-calibration",),
+               "7-Scenes, 30 frames, default + --remove-calibration (passes)"),
+    "7s-fast": ("7scenes", 30, ("--preset", "fast"),
+                "7-Scenes, 30 frames, --preset fast (fails on its calibration offset)"),
+    "castle": ("castle", None, (), "castle, 10 frames, default"),
+    "boxes": ("boxes", None, (), "generated boxes (sample_data/boxes), 24 frames, default"),
+}
 
-STAGES = ("t_load_s", "t_render_s", "t_match_s", "t_homography_s", "time_s")
+#: stage name -> timed functions ("module:attr" or "module:Class.method")
+STAGES: dict[str, tuple[str, ...]] = {
+    "load trajectory": ("pgt_check.runner:load_trajectory",),
+    "references + side inputs": ("pgt_check.runner:pick_references",
+                                 "pgt_check.runner:check_side_inputs"),
+    "setup (mesh, renderer, matcher)": ("pgt_check.runner:preflight",
+                                        "pgt_check.measure.checker:build_frame_checker"),
+    "hash inputs": ("pgt_check.runner:mesh_content_hash", "pgt_check.runner:frame_input_keys"),
+    "load photos": ("pgt_check.io:load_image",),
+    "render": ("pgt_check.render.moderngl_backend:ModernGLRenderer.render",),
+    "features (per image)": ("pgt_check.match.opencv:OpenCVMatcher._detect",),
+    "matching": ("pgt_check.match.opencv:OpenCVMatcher.match",),
+    "homography": ("pgt_check.geometry.homography:estimate_homography",),
+    "edges": ("pgt_check.measure.checker:measure_edges",),
+    "enhancement": ("pgt_check.enhance.reproject:ReprojectEnhancer.enhance",),
+    "PnP": ("pgt_check.geometry.pnp:estimate_pose_correction",),
+    "panels": ("pgt_check.report.assets:PanelWriter.__call__",
+               "pgt_check.report.assets:write_frame_assets"),
+    "run-level checks + verdicts": ("pgt_check.runner:judge_run",),
+    "report files (csv, json, html, plots)": ("pgt_check.report.outputs:write_outputs",),
+}
+#: phase name -> function that runs it
+PHASES = {
+    "main pass": "pgt_check.runner:_measure_into_store",
+    "refinement": "pgt_check.correct.registration:refine_run",
+    "corrections": "pgt_check.correct.frames:correct_run",
+    "report": "pgt_check.runner:write_report_assets",
+}
+#: stages outside the phases above: setup, the run-level checks, the report files
+BASE = "setup, checks, files"
+PHASE_ORDER = (BASE, *PHASES)
 
 
-def bench(name: str, traj_path: Path, mesh: Path, n: int, matcher: str) -> list[object]:
-    traj = read_trajectory(traj_path)
-    frames = list(traj.frames)[:n]
-    cfg = RunConfig.from_dict({"input": {"trajectory": str(traj_path), "mesh": str(mesh)},
-                               "match": {"method": matcher}, "enhance": {"mode": "never"}})
-    checker = FrameChecker(cfg)
-    t = time.perf_counter()
-    _ = checker.renderer
-    _ = checker.matcher
-    setup = time.perf_counter() - t
-    checker.measure(frames[0])  # warm-up (shader compile, first allocation)
-    recs = apply_verdicts([checker.measure(f) for f in frames], cfg)
-    checker.close()
-    row: list[object] = [name, matcher, len(recs), f"{recs[0]['width']}x{recs[0]['height']}",
-                         f"{recs[0]['match_width']}x{recs[0]['match_height']}", round(setup, 2)]
-    for key in STAGES:
-        vals = [r[key] for r in recs if r.get(key) is not None]
-        row.append(f"{1000 * statistics.median(vals):.0f} / {1000 * np.percentile(vals, 90):.0f}")
-    return row
+# -- the child: one instrumented run ----------------------------------------------------------
+class Timers:
+    """Exclusive wall and CPU seconds (the process's, all threads) per (phase, stage): a
+    timer's time is taken off its parent's. CPU seconds hold better than wall seconds on a
+    loaded machine (another process's time slices do not count)."""
+
+    def __init__(self) -> None:
+        self.total: dict[tuple[str, str], float] = defaultdict(float)
+        self.cpu: dict[tuple[str, str], float] = defaultdict(float)
+        self.calls: dict[tuple[str, str], int] = defaultdict(int)
+        self.stack: list[list] = []  # [stage, start, cpu start, child wall, child cpu]
+        self.phase = [BASE]
+
+    def wrap(self, fn, stage: str):
+        def timed(*args, **kwargs):
+            self.stack.append([stage, time.perf_counter(), time.process_time(), 0.0, 0.0])
+            try:
+                return fn(*args, **kwargs)
+            finally:
+                name, t0, c0, inner, inner_cpu = self.stack.pop()
+                dt, dc = time.perf_counter() - t0, time.process_time() - c0
+                key = (self.phase[-1], name)
+                self.total[key] += dt - inner
+                self.cpu[key] += dc - inner_cpu
+                self.calls[key] += 1
+                if self.stack:
+                    self.stack[-1][3] += dt
+                    self.stack[-1][4] += dc
+
+        timed.__wrapped__ = fn
+        return timed
+
+    def phased(self, fn, phase: str):
+        def run_phase(*args, **kwargs):
+            self.phase.append(phase)
+            try:
+                return self.wrap(fn, "other")(*args, **kwargs)
+            finally:
+                self.phase.pop()
+
+        return run_phase
+
+
+def _patch(target: str, make) -> None:
+    import importlib
+
+    mod_name, attr = target.split(":")
+    obj = importlib.import_module(mod_name)
+    *owners, name = attr.split(".")
+    for o in owners:
+        obj = getattr(obj, o)
+    setattr(obj, name, make(getattr(obj, name)))
+
+
+def child(argv: list[str], out_json: str) -> None:
+    t_start = time.perf_counter()
+    from pgt_check.cli import main
+
+    t_import = time.perf_counter() - t_start
+    timers = Timers()
+    for stage, targets in STAGES.items():
+        for t in targets:
+            _patch(t, lambda fn, s=stage: timers.wrap(fn, s))
+    for phase, t in PHASES.items():
+        _patch(t, lambda fn, p=phase: timers.phased(fn, p))
+    t0 = time.perf_counter()
+    rc = main(argv)
+    wall = time.perf_counter() - t0
+    ru = resource.getrusage(resource.RUSAGE_SELF)
+    out = Path(argv[argv.index("--out") + 1])
+    summary = json.loads((out / "summary.json").read_text())
+    refinement = (summary.get("shared_errors", {}).get("registration", {}) or {}).get("refinement")
+    Path(out_json).write_text(json.dumps({
+        "rc": rc, "import_s": t_import, "run_s": wall, "cpu_s": ru.ru_utime + ru.ru_stime,
+        "n_frames": summary.get("n_frames"), "counts": summary.get("counts"),
+        "gate": summary.get("gate", {}).get("passed"),
+        "refinement": None if refinement is None else {
+            "stopped": refinement.get("stopped"), "rounds": len(refinement.get("rounds", [])),
+            "rounds_kept": refinement.get("rounds_kept")},
+        "corrections": summary.get("corrections", {}).get("attempted"),
+        "stages": [[p, s, v, timers.calls[(p, s)], timers.cpu[(p, s)]]
+                   for (p, s), v in timers.total.items()],
+    }))
+
+
+# -- the parent -------------------------------------------------------------------------------
+def _inputs(dataset: str) -> tuple[Path, Path]:
+    if dataset == "boxes":
+        root = REPO / "sample_data" / "boxes"
+        return root / "trajectories.txt", root / "boxes.ply"
+    root = shared_data() / {"7scenes": "7scenes_redkitchen", "castle": "sceaux_castle"}[dataset]
+    return root / "trajectories.txt", root / "mesh.ply"
+
+
+def _timed_process(cmd: list[str]) -> tuple[float, float]:
+    """(wall s, CPU s of the process and its children) of one whole process."""
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    subprocess.run(cmd, check=False, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                   cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)})
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
+
+
+def _commands(case: str, tmp: Path) -> tuple[list[str], list[str]]:
+    dataset, n, extra, _ = CASES[case]
+    traj, mesh = _inputs(dataset)
+    limit = ["--limit", str(n)] if n else []
+    run = [str(traj), "--mesh", str(mesh), "--out", str(tmp / case), "--overwrite", "-q",
+           *limit, *extra]
+    bare = [sys.executable, str(REPO / "benchmarks" / "bare_loop.py"), str(traj), "--mesh",
+            str(mesh), "-q", *limit]
+    return run, bare
+
+
+def _load() -> str:
+    la = os.getloadavg()
+    return f"{la[0]:.1f} / {la[1]:.1f} / {la[2]:.1f}"
 
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("--frames", type=int, default=30)
+    ap.add_argument("--cases", default=",".join(CASES))
+    ap.add_argument("--pairs", type=int, default=3, help="A B pairs per case (0 = none)")
+    ap.add_argument("--child", nargs=argparse.REMAINDER, help=argparse.SUPPRESS)
     args = ap.parse_args()
-    data = shared_data()
-    rows = []
-    for matcher in ("sift", "orb", "akaze"):
-        rows.append(bench("7scenes_redkitchen", data / "7scenes_redkitchen/trajectories.txt",
-                          data / "7scenes_redkitchen/mesh.ply", args.frames, matcher))
-        rows.append(bench("sceaux_castle", data / "sceaux_castle/trajectories.txt",
-                          data / "sceaux_castle/mesh.ply", args.frames, matcher))
-    header = ["dataset", "matcher", "frames", "photo", "match size", "setup s",
-              "load ms (median / p90)", "render ms", "match ms", "homography ms", "total ms"]
-    text = "\n".join([
-        "# Pipeline timing per frame (raw path, no enhancement)",
-        "",
-        f"Machine: {machine()}. Command: `{command_line()}`.",
-        "Medians and 90th percentiles over the frames after one warm-up frame; 'setup' is mesh "
-        "load + GL context + matcher construction, paid once per run (per worker).",
-        "Render and match run at the matching resolution (longest side 640 px by default); the "
-        "corner error is reported in original photo pixels.",
-        "",
-        md_table(header, rows),
-        "",
-    ])
+    if args.child:
+        child(args.child[1:], args.child[0])
+        return
+    cases = args.cases.split(",")
+    results: dict[str, dict] = {}
+    with tempfile.TemporaryDirectory() as tmpdir:
+        tmp = Path(tmpdir)
+        for case in cases:
+            run, bare = _commands(case, tmp)
+            js = tmp / f"{case}.json"
+            load0 = _load()
+            wall, cpu = _timed_process([sys.executable, __file__, "--child", str(js), *run])
+            res = json.loads(js.read_text())
+            res.update(process_wall_s=wall, process_cpu_s=cpu, load_before=load0,
+                       load_after=_load())
+            pairs = []
+            for _ in range(args.pairs):
+                b = _timed_process(bare)
+                a = _timed_process([sys.executable, "-m", "pgt_check", *run])
+                pairs.append({"bare_wall_s": b[0], "bare_cpu_s": b[1], "run_wall_s": a[0],
+                              "run_cpu_s": a[1]})
+            res["pairs"] = pairs
+            res["load_after_pairs"] = _load()
+            results[case] = res
+            print(case, json.dumps({k: v for k, v in res.items() if k != "stages"}), flush=True)
+    meta = {"machine": machine(), "command": command_line(), "cases": cases,
+            "cpu_count": os.cpu_count()}
     REPORTS.mkdir(exist_ok=True)
+    (REPORTS / "pipeline_timing.json").write_text(
+        json.dumps({"meta": meta, "results": results}, indent=1) + "\n")
+    text = render(meta, results)
     (REPORTS / "pipeline_timing.md").write_text(text)
     print(text)
+
+
+def render(meta: dict, results: dict[str, dict]) -> str:
+    stage_names = [*STAGES, "other"]
+    lines = [
+        "# Pipeline timing: the default run per stage, and against the bare loop",
+        "",
+        f"Machine: {meta['machine']}. Command: `{meta['command']}`.",
+        "",
+        "Each case is one whole `pgt-check` process with timers around the pipeline's "
+        "functions (exclusive: a render inside the enhancement counts as render); 'other' is "
+        "what no timer covers (per-frame bookkeeping, the record store, the refinement's "
+        "pooled fits). The machine is shared (2 cores, a training job and other sessions "
+        "beside it): the load average (1 / 5 / 15 min) is given per case, and the comparison "
+        "with the bare loop is paired (bare, run, bare, run ... as whole processes), so "
+        "read the ratios and CPU seconds rather than single wall times.",
+        "",
+        "## End to end, against the bare render + SIFT + homography loop",
+        "",
+        "`benchmarks/bare_loop.py` on the same frames (same renderer and working size, OpenCV "
+        "SIFT, ratio test, RANSAC homography). Medians over the pairs; ratio = run / bare, per "
+        "pair, then the median.",
+        "",
+    ]
+    rows = []
+    for case, r in results.items():
+        pairs = r.get("pairs") or []
+
+        def med(key: str, pairs=pairs) -> float:
+            return statistics.median(p[key] for p in pairs) if pairs else float("nan")
+
+        def ratio(a: str, b: str, pairs=pairs) -> str:
+            if not pairs:
+                return "-"
+            return f"{statistics.median(p[a] / p[b] for p in pairs):.2f}x"
+
+        ref = r.get("refinement")
+        rows.append([
+            CASES[case][3], r["n_frames"], len(pairs),
+            f"{med('bare_wall_s'):.1f} / {med('bare_cpu_s'):.1f}",
+            f"{med('run_wall_s'):.1f} / {med('run_cpu_s'):.1f}",
+            ratio("run_wall_s", "bare_wall_s"), ratio("run_cpu_s", "bare_cpu_s"),
+            "-" if ref is None else f"{ref['rounds']} ({ref['stopped'].split(':')[0]})",
+            r.get("corrections", 0), r["load_before"] + " -> " + r["load_after_pairs"],
+        ])
+    lines.append(md_table(["case", "frames", "pairs", "bare s (wall / CPU)", "run s (wall / CPU)",
+                           "ratio wall", "ratio CPU", "refinement rounds", "corrections",
+                           "load"], rows))
+    lines += ["", "## Per stage (the profiled run)", "",
+              "CPU seconds of the process (all its threads) per phase, then the stage's total "
+              "CPU and wall seconds, its share of the timed CPU and CPU ms per frame checked. "
+              "The profiled process's own wall / CPU are in the last row.", ""]
+    for case, r in results.items():
+        table: dict[str, dict[str, float]] = defaultdict(lambda: defaultdict(float))
+        walls: dict[str, float] = defaultdict(float)
+        for phase, stage, secs, _, cpu in r["stages"]:
+            table[stage][phase] += cpu
+            walls[stage] += secs
+        n = r["n_frames"] or 1
+        total = sum(st[4] for st in r["stages"])
+        rows = []
+        for stage in stage_names:
+            if stage not in table:
+                continue
+            vals = [table[stage].get(p, 0.0) for p in PHASE_ORDER]
+            rows.append([stage, *(f"{v:.2f}" if v else "" for v in vals),
+                         f"{sum(vals):.2f} / {walls[stage]:.2f}",
+                         f"{100 * sum(vals) / total:.0f} %", f"{1000 * sum(vals) / n:.0f}"])
+        rows.append(["**timed total**", *[""] * len(PHASE_ORDER),
+                     f"{total:.2f} / {sum(walls.values()):.2f}", "100 %",
+                     f"{1000 * total / n:.0f}"])
+        rows.append([f"**whole process** (load {r['load_before']})",
+                     *[""] * len(PHASE_ORDER),
+                     f"{r['process_cpu_s']:.1f} / {r['process_wall_s']:.1f}", "", ""])
+        ref = r.get("refinement")
+        lines += [f"### {CASES[case][3]}", "",
+                  f"{r['n_frames']} frames, counts {r['counts']}, gate "
+                  f"{'passed' if r['gate'] else 'failed'}"
+                  + ("" if ref is None else f"; refinement: {ref['rounds']} round(s), "
+                     f"{ref['rounds_kept']} kept, stopped: {ref['stopped']}") + ".", "",
+                  md_table(["stage", *PHASE_ORDER, "CPU / wall s", "share",
+                            "CPU ms per frame"], rows), ""]
+    return "\n".join(lines) + "\n"
 
 
 if __name__ == "__main__":
