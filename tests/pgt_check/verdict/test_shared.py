@@ -367,3 +367,21 @@ def test_each_frame_weighs_the_same_in_the_pooled_fits(truth):
     # the windows find the segment from its third frame on (3 deg about the trajectory
     # centroid moves these images by only ~4 px per frame)
     assert sum(r["verdict"] == "FAIL" for r in j.rows[18:]) >= 9
+
+
+def test_long_runs_pool_a_bounded_number_of_points(truth, monkeypatch):
+    """Past MAX_POOLED_POINTS / MAX_FRAME_EVIDENCE_POINTS frames each frame gives fewer points,
+    evenly, never fewer than the floor; a shared 2-deg misregistration is still found."""
+    import pgt_check.verdict.shared as shared
+
+    monkeypatch.setattr(shared, "MAX_POOLED_POINTS", 20 * 60)  # 30 frames of 60 points
+    moved = _move(truth, 2.0, 0.0)
+    ms = measurements(truth, moved, n_points=60)
+    ev = shared.frame_evidence(ms)
+    assert {len(e.pts2d) for e in ev} == {40}
+    assert sum(len(e.pts2d) for e in ev) <= shared.MAX_POOLED_POINTS
+    monkeypatch.setattr(shared, "MAX_POOLED_POINTS", 10)
+    assert {len(e.pts2d) for e in shared.frame_evidence(ms)} == {shared.MIN_FRAME_EVIDENCE_POINTS}
+    monkeypatch.setattr(shared, "MAX_POOLED_POINTS", 20 * 60)
+    se = judge_run(ms, RunConfig()).shared.summary()
+    assert se["registration"]["status"] == "failed", se["registration"]["message"]
