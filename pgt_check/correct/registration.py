@@ -230,8 +230,9 @@ def refine_registration(
 
     ``summary``: the main pass's ``shared_errors`` section; ``measure(frames, config)``: the absolute
     evidence of the frames at their (moved) poses, in any order. None when there is nothing to
-    refine (``needs_refinement`` false, rounds 0, or no frame to measure). Bounds: ``CorrectConfig.registration_rounds`` /
-    ``budget`` and the growth rule (module docstring); ``clock`` for tests."""
+    refine (``needs_refinement`` false, rounds 0, or no frame to measure). Bounded by
+    ``correct.registration_rounds``, ``correct.budget`` and the growth rule (module
+    docstring); ``clock`` (seconds) is replaceable for tests."""
     c = config.correct
     rounds = c.registration_rounds
     if rounds <= 0 or not needs_refinement(summary):
@@ -243,15 +244,6 @@ def refine_registration(
     start = np.asarray(summary["registration"]["corrected_world_from_world"], np.float64)
     centres = [np.asarray(m.world_from_cam)[:3, 3] for m in measurements if m.world_from_cam]
     origin = np.mean(centres, axis=0)
-
-    def result(rigid: np.ndarray, done: Sequence[RefineRound], stopped: str,
-               kept: int | None = None) -> RefinedRegistration:
-        return RefinedRegistration(
-            start=start.tolist(), rigid=rigid.tolist(), origin=origin.tolist(),
-            rounds=tuple(done), stopped=stopped, fingerprint=refine_fingerprint(config),
-            frame_ids=tuple(f.frame_id for f in todo), kept=kept,
-        )  # fmt: skip
-
     budget = c.budget * main_pass_seconds(measurements)
     t_start = clock()
     c_rigid = start.copy()
@@ -308,7 +300,16 @@ def refine_registration(
             break
     logger.info("registration refinement: %d round(s) in %.1f s, %s", len(done),
                 clock() - t_start, stopped)
-    return result(c_rigid, done, stopped, kept)
+    return RefinedRegistration(
+        start=start.tolist(),
+        rigid=c_rigid.tolist(),
+        origin=origin.tolist(),
+        rounds=tuple(done),
+        stopped=stopped,
+        fingerprint=refine_fingerprint(config),
+        frame_ids=tuple(f.frame_id for f in todo),
+        kept=kept,
+    )
 
 
 def main_pass_seconds(measurements: Sequence[FrameMeasurement]) -> float:
