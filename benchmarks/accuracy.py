@@ -265,6 +265,16 @@ def markdown(results: list[dict]) -> str:
     st = REPORTS / "accuracy_self_test.md"
     if st.is_file():
         out += ["## Self-test", "", st.read_text().strip(), ""]
+    eb = REPORTS / "accuracy_edge_bias.txt"
+    if eb.is_file():
+        out += ["## Where the translation bias comes from", "",
+                "`nice -n 10 python benchmarks/accuracy_edge_bias.py > "
+                "reports/accuracy_edge_bias.txt`", "", "```", eb.read_text().strip(), "```", ""]
+    rj = REPORTS / "accuracy_rejudged.txt"
+    if rj.is_file():
+        out += ["## Per-frame bounds of the injections above, judged again",
+                "", "`nice -n 10 python benchmarks/accuracy_rejudge.py > "
+                "reports/accuracy_rejudged.txt`", "", "```", rj.read_text().strip(), "```", ""]
     cal = REPORTS / "accuracy_calibration.txt"
     if cal.is_file():
         out += [
