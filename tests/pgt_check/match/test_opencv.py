@@ -60,3 +60,31 @@ def test_mutual_check_reduces_matches_on_repetitive_pattern():
     a = make_matcher("sift", mutual=False, ratio=1.0).match(img, img)
     b = make_matcher("sift", mutual=True, ratio=1.0).match(img, img)
     assert len(b) <= len(a)
+
+
+def test_photo_features_are_computed_once_per_content_and_settings(monkeypatch):
+    """The refinement rounds, corrections and re-measured panels match the same photos again:
+    their features come from the per-process cache (same content, same settings), and the
+    matches are those of a fresh detection (issue #28)."""
+    from pgt_check.match import opencv
+
+    opencv.clear_photo_cache()
+    photo, render = _textured(3), np.roll(_textured(3), shift=(2, 3), axis=(0, 1))
+    calls = []
+    real = opencv.OpenCVMatcher._detect
+
+    def counting(self, gray, mask):
+        calls.append(mask is None)  # True: a photo detection
+        return real(self, gray, mask)
+
+    monkeypatch.setattr(opencv.OpenCVMatcher, "_detect", counting)
+    mask = np.ones(render.shape[:2], bool)  # the render is detected under its coverage mask
+    first = opencv.OpenCVMatcher().match(render, photo, mask0=mask)
+    again = opencv.OpenCVMatcher().match(render, photo.copy(), mask0=mask)  # a new checker
+    assert calls.count(True) == 1 and calls.count(False) == 2
+    np.testing.assert_array_equal(first.kpts0, again.kpts0)
+    np.testing.assert_array_equal(first.kpts1, again.kpts1)
+    opencv.OpenCVMatcher(max_keypoints=500).match(render, photo, mask0=mask)  # other settings
+    opencv.OpenCVMatcher().match(render, np.clip(photo * 0.5, 0, 1), mask0=mask)  # content
+    assert calls.count(True) == 3
+    opencv.clear_photo_cache()
