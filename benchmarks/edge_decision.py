@@ -7,7 +7,7 @@ homography and on the motion model chosen per frame by cross-validation.
 Per dataset, every frame is aligned (``geometry.edges.align_edges``) at its given pose and at a
 perturbed copy of it (every frame of the copy perturbed, neighbours too: 2-5 deg about a random
 axis and a 2-8 % of the scene depth camera move), once with a fixed homography
-(``select_model=False``, before #29) and once with the cross-validated model (the default).
+(``select_model=False``, the default) and once with the cross-validated model (``select_model=True``).
 The rules decide on the same alignment:
 - support (the default): not ambiguous, well conditioned, support >= 0.3;
 - significance (alpha 0.01; 0.02 and 0.05 also reported): not ambiguous, well conditioned,

@@ -241,6 +241,13 @@ class EdgeConfig:
     #: reports/edge_evidence.md has both side by side
     decision: Literal["significance", "support"] = "support"
     alpha: float = 0.01
+    #: each frame's edges choose the motion model (shift, similarity, affine, up to ``model``)
+    #: by spatial cross-validation instead of always fitting ``model``: on a TSDF scan a fixed
+    #: homography bends to shrunk silhouettes and clutter (issue #29). Off by default: the
+    #: simpler models' edge evidence lost half of a castle misregistration's translation in
+    #: the pooled registration fit, and it costs about twice the edge path's time
+    #: (reports/edge_evidence.md)
+    select_model: bool = False
 
     def __post_init__(self) -> None:
         _check_range("edges.alpha", self.alpha, 0, 0.5, lo_open=True)

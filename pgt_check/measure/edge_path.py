@@ -62,6 +62,7 @@ def measure_edges(
             tile_grid=config.tile_grid,
             decision=config.decision,
             alpha=config.alpha,
+            select_model=config.select_model,
         ),
     )
     h = err = dx = dy = zoom = None

@@ -91,7 +91,7 @@ def test_edge_evidence_on_tsdf_scene(tsdf_scene):
 
     traj_path, mesh_path = tsdf_scene
     traj = read_trajectory(traj_path)
-    cfg = EdgeAlignConfig(decision="significance")
+    cfg = EdgeAlignConfig(decision="significance", select_model=True)
     rng = np.random.default_rng(1)
     r = make_renderer(load_mesh(mesh_path, shading="shaded"))
     good, bad, err_cv, err_fixed = [], [], [], []

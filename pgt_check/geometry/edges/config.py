@@ -82,7 +82,7 @@ class EdgeAlignConfig:
     #: the most general motion model; with ``select_model`` the frame's edges pick the model
     #: from shift up to this one by spatial cross-validation (``align.select_model``, issue #29)
     model: str = "homography"
-    select_model: bool = True
+    select_model: bool = False
     #: refinement iterations in all (split over the stages shift -> ... -> model)
     iterations: int = 30
     #: a stage stops when an update moves no image corner by more than this (px)

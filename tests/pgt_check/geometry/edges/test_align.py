@@ -179,7 +179,7 @@ def test_lines_through_one_point_leave_the_corners_where_they_are():
     assert free.corner_error > 5.0
     # the model chosen by cross-validation does not need the guard (a simpler model wins)
     cv = align_edges(re, photo_edges(load_image(frame.image_file)),
-                     EdgeAlignConfig(max_corner_gain=math.inf))
+                     EdgeAlignConfig(max_corner_gain=math.inf, select_model=True))
     assert cv.model != "homography" and cv.corner_error < 2.0
 
 
@@ -226,7 +226,8 @@ def test_select_model_keeps_a_real_perspective():
     """A keystone the photo really has: cross-validation keeps the homography."""
     warp = np.array([[1.0, 0.02, 2.0], [0.01, 1.0, -1.0], [1.5e-4, -1e-4, 1.0]])
     z = blocks_depth(seed=2, n=9)
-    al = align_edges(geometric_edges(z, K), photo_edges(photo_from_depth(z, warp)))
+    al = align_edges(geometric_edges(z, K), photo_edges(photo_from_depth(z, warp)),
+                     EdgeAlignConfig(select_model=True))
     assert corner_error(warp, W, H) > 6.0
     assert al.success and al.model == "homography"
     assert corner_distance(al.photo_from_render, warp) < 1.0
