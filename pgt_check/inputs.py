@@ -10,6 +10,7 @@ from __future__ import annotations
 import hashlib
 import json
 import logging
+import math
 import os
 from collections.abc import Sequence
 from pathlib import Path
@@ -97,13 +98,32 @@ def check_mesh_memory(config: RunConfig, frames: Sequence[Frame]) -> None:
         from pgt_check.executor.common import default_workers
 
         workers = config.workers or default_workers()
-    width = max(f.camera.width for f in frames)
-    height = max(f.camera.height for f in frames)
+    width, height = _largest_render(config, frames)
     counts, need, available = check_memory_fits(config.input.mesh, width, height, workers)
     logger.info(
         "mesh %s: %d faces%s; memory estimate %.2f GiB of %s available", config.input.mesh,
         counts.n_faces, "" if counts.exact else " (guessed from the file size)", need / 2**30,
         "unknown" if available is None else f"{available / 2**30:.1f} GiB")
+
+
+def _largest_render(config: RunConfig, frames: Sequence[Frame]) -> tuple[int, int]:
+    """The largest image the renderer draws: each camera scaled to the working size (the larger
+    of the matching and the edge path's longest side; None = the camera's own size), at most
+    ``input.max_image_pixels`` (a larger frame is UNVERIFIABLE before it is rendered)."""
+    sides = (config.match.resize_max, config.edges.resize_max)
+    longest = None if any(s is None for s in sides) else max(sides)
+    cap = config.input.max_image_pixels
+    width = height = 1
+    for f in frames:
+        w, h = f.camera.width, f.camera.height
+        if longest is not None and max(w, h) > longest:
+            k = longest / max(w, h)
+            w, h = math.ceil(w * k), math.ceil(h * k)
+        if cap is not None and w * h > cap:
+            k = math.sqrt(cap / (w * h))
+            w, h = max(1, int(w * k)), max(1, int(h * k))
+        width, height = max(width, w), max(height, h)
+    return width, height
 
 
 def preflight(config: RunConfig, references: Any = None, panel_sink: Any = None) -> Any:

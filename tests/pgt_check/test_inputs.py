@@ -47,3 +47,27 @@ def test_worker_processes_count_in_the_estimate(sample_scene, monkeypatch):
     # a remote Dask cluster's workers are on other machines: this process alone counts
     check_mesh_memory(RunConfig.from_dict({**cfg, "executor": "dask",
                                            "scheduler": "tcp://head:8786"}), frames)
+
+
+def test_memory_estimate_uses_the_working_size_not_the_camera_size():
+    """A camera 10,000x larger than its photos is rendered at the working size (its frames are
+    UNVERIFIABLE image_size_mismatch, not a refused run); without a working size, the pixel
+    cap bounds it."""
+    from types import SimpleNamespace
+
+    from pgt_check.config import RunConfig
+    from pgt_check.inputs import _largest_render
+
+    def frame(w, h):
+        return SimpleNamespace(camera=SimpleNamespace(width=w, height=h))
+
+    cfg = RunConfig()
+    huge = [frame(6_400_000, 4_800_000), frame(640, 480)]
+    w, h = _largest_render(cfg, huge)
+    longest = max(cfg.match.resize_max, cfg.edges.resize_max)
+    assert max(w, h) == longest and abs(w / h - 4 / 3) < 0.01
+    assert _largest_render(cfg, [frame(320, 240)]) == (320, 240)
+    free = RunConfig.from_dict({"match": {"resize_max": 0}, "edges": {"resize_max": 0},
+                                "input": {"max_image_pixels": 1_000_000}})
+    w, h = _largest_render(free, huge)
+    assert w * h <= 1_000_000 and w * h > 0.9e6
