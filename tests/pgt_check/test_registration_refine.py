@@ -360,13 +360,14 @@ class _Checks:
     step = np.eye(4)
     step[:3, 3] = (0.001, 0.0, 0.0)
 
-    def __init__(self, status, effect):
-        self.status, self.effect = status, effect
+    def __init__(self, status, effect, effect_ci=None):
+        self.status, self.effect, self.effect_ci = status, effect, effect_ci
 
     def summary(self):
         return {"threshold_px": 2.4, "registration": {
             "status": self.status, "reason": "", "angle_deg": 0.1, "translation": 0.001,
-            "effect_px": self.effect, "corrected_world_from_world": self.step.tolist()}}
+            "effect_px": self.effect, "effect_px_ci": self.effect_ci,
+            "corrected_world_from_world": self.step.tolist()}}
 
 
 def _scripted(monkeypatch, residuals):
@@ -450,3 +451,20 @@ def test_the_rounds_stop_at_their_time_budget(moved_case, monkeypatch):
                                   SlowMeasure(true), clock=lambda: now[0])
     assert len(refined.rounds) == config.correct.registration_rounds
     assert refined.stopped == "round limit"
+
+
+def test_growth_within_the_noise_does_not_stop_the_rounds(moved_case, monkeypatch):
+    """7-Scenes moved by 2 deg + 4 %: what was left went 4.4, 1.3 [1.2, 2.1], 2.4 [1.9, 3.1] px;
+    overlapping intervals are the evidence's noise, so the rounds go on (stopping there kept
+    1.37 of the 2 deg); a growth with disjoint intervals still stops them."""
+    true, checked, move, config, ms, judged = moved_case
+    _scripted(monkeypatch, [("failed", 4.4, [3.5, 5.0]), ("passed", 1.33, [1.19, 2.05]),
+                            ("inconclusive", 2.37, [1.89, 3.10]), ("passed", 0.3, [0.1, 0.6])])
+    refined = refine_registration(checked.frames, ms, judged.shared.summary(), config,
+                                  FakeMeasure(true))
+    assert refined.stopped == "converged" and len(refined.rounds) == 4, refined.stopped
+    _scripted(monkeypatch, [("failed", 4.4, [3.5, 5.0]), ("passed", 1.33, [1.19, 2.05]),
+                            ("failed", 8.0, [7.1, 9.0]), ("passed", 0.3, [0.1, 0.6])])
+    refined = refine_registration(checked.frames, ms, judged.shared.summary(), config,
+                                  FakeMeasure(true))
+    assert refined.stopped.startswith("not converging") and len(refined.rounds) == 3
