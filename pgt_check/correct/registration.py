@@ -35,28 +35,35 @@ report`` and ``--resume`` reuse it while the main pass's estimate is the one it 
 
 from __future__ import annotations
 
-import json
 import logging
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from pgt_check.config import RunConfig
-from pgt_check.files import atomic_write_text
-from pgt_check.geometry.transforms import move_pose, rotation_angle_deg
+from pgt_check.correct.registration_result import (  # noqa: F401  (re-exported)
+    REFINED_FILE,
+    REGISTERED_NAME,
+    SAME_START_ATOL,
+    RefinedRegistration,
+    RefineRound,
+    _summary_of,
+    apply_refinement,
+    load_refinement,
+    registered_trajectory,
+    save_refinement,
+)
+from pgt_check.geometry.transforms import move_pose
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.types import Frame, Trajectory
 from pgt_check.verdict.status import FAILED, PASSED
 
 logger = logging.getLogger(__name__)
-
-REFINED_FILE = "registration_refined.json"
-REGISTERED_NAME = "registered_trajectory.txt"
 
 #: rounds stop early once the correction left moves the images by less than this share of
 #: the shared threshold, or passes the shared threshold in two rounds in a row (further
@@ -66,10 +73,6 @@ CONVERGED_REL = 0.25
 #: a round's residual may be this much larger than the round before's and still count as
 #: converging (the evidence's noise); beyond it the rounds stop as "not converging"
 GROWTH_TOLERANCE = 1.0
-
-#: the start correction of a stored refinement must match the main pass's within this
-#: (elementwise, absolute) to be reused
-SAME_START_ATOL = 1e-6
 
 MeasureFn = Callable[[Sequence[Frame], RunConfig], list[FrameMeasurement]]
 
@@ -88,73 +91,6 @@ def _grew(
     except (TypeError, IndexError, ValueError):
         return True  # no intervals: the sizes decide
     return not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi
-
-
-@dataclass(frozen=True)
-class RefineRound:
-    """One round: the registration check on evidence measured at the poses corrected so far."""
-
-    round: int
-    n_frames: int  # frames measured
-    n_evidence: int  # of them with absolute evidence
-    status: str  # the residual rigid check (passed: the corrected poses agree with the mesh)
-    angle_deg: float | None
-    angle_deg_ci: list[float] | None
-    translation: float | None
-    translation_ci: list[float] | None
-    effect_px: float | None
-    effect_px_ci: list[float] | None
-    time_s: float
-    #: the composed correction after this round (None when its residual fit failed)
-    total_angle_deg: float | None = None
-    total_translation: float | None = None
-
-
-@dataclass(frozen=True)
-class RefinedRegistration:
-    """The refined corrections (corrected_world_from_world, nested lists) and their rounds.
-
-    ``start``: the main pass's rigid correction the rounds started from; ``origin``: the
-    centroid of the checked camera centres of every measured frame (the refined translation
-    is that point's displacement; the first pass's is about the centroid of the frames with
-    evidence, a difference of (R - I) times their offset: negligible for small angles);
-    ``stopped``: why the rounds ended ("converged", "round limit", "time limit", "not
-    converging", or the round whose residual fit did not succeed);
-    ``kept``: how many rounds' updates ``rigid`` composes (fewer than ``rounds`` where a later
-    update made what is left grow; None = all)."""
-
-    start: list[list[float]]
-    rigid: list[list[float]]
-    origin: list[float]
-    rounds: tuple[RefineRound, ...]
-    stopped: str
-    fingerprint: str = ""
-    frame_ids: tuple[str, ...] = field(default_factory=tuple)
-    kept: int | None = None
-
-    @property
-    def n_kept(self) -> int:
-        """Rounds whose updates ``rigid`` composes."""
-        return len(self.rounds) if self.kept is None else self.kept
-
-    def to_json(self) -> dict[str, Any]:
-        d = asdict(self)
-        d["rounds"] = [asdict(r) for r in self.rounds]
-        d["frame_ids"] = list(self.frame_ids)
-        return d
-
-    @classmethod
-    def from_json(cls, d: Mapping[str, Any]) -> RefinedRegistration:
-        return cls(
-            start=d["start"],
-            rigid=d["rigid"],
-            origin=list(d["origin"]),
-            rounds=tuple(RefineRound(**r) for r in d.get("rounds", ())),
-            stopped=str(d.get("stopped", "")),
-            fingerprint=str(d.get("fingerprint", "")),
-            frame_ids=tuple(d.get("frame_ids", ())),
-            kept=d.get("kept"),
-        )
 
 
 def needs_refinement(shared_summary: Mapping[str, Any]) -> bool:
@@ -191,14 +127,6 @@ def evidence_config(config: RunConfig) -> RunConfig:
 def refine_fingerprint(config: RunConfig) -> str:
     """What a stored refinement depends on: the measurement, verdict and correction settings."""
     return config.measurement_fingerprint(verdict=config.verdict, correct=config.correct)
-
-
-def _summary_of(c: np.ndarray, origin: np.ndarray) -> tuple[float, float, float]:
-    """(angle deg, translation of ``origin``, scale) of a rigid / similarity (4, 4)."""
-    s = float(np.cbrt(np.linalg.det(c[:3, :3])))
-    angle = rotation_angle_deg(c[:3, :3] / s)
-    t = float(np.linalg.norm(c[:3, :3] @ origin + c[:3, 3] - origin))
-    return angle, t, s
 
 
 def _f(x: Any) -> float | None:
@@ -338,144 +266,6 @@ def main_pass_seconds(measurements: Sequence[FrameMeasurement]) -> float:
         if t is not None and math.isfinite(float(t)):
             total += float(t)
     return total
-
-
-def _refined_entry(
-    entry: dict[str, Any],
-    c: np.ndarray,
-    origin: np.ndarray,
-    last: RefineRound,
-    refined: RefinedRegistration,
-) -> dict[str, Any]:
-    """The registration summary entry with the refined correction ``c``. The
-    intervals: the refined value +- half the width of the last round's interval (approximate:
-    the uncertainty of the last residual fit, the earlier rounds' being applied)."""
-    angle, t, _ = _summary_of(c, origin)
-    out = dict(entry)
-    t1, rel1 = entry.get("translation"), entry.get("translation_rel_depth")
-    depth = t1 / rel1 if t1 and rel1 else None
-
-    def around(value: float, ci: Any) -> list[float] | None:
-        if not ci or len(ci) != 2:
-            return None
-        w = 0.5 * (float(ci[1]) - float(ci[0]))
-        return [max(0.0, value - w), value + w]
-
-    t_ci = around(t, last.translation_ci)
-    out.update(
-        angle_deg=angle,
-        angle_deg_ci=around(angle, last.angle_deg_ci),
-        translation=t,
-        translation_ci=t_ci,
-        translation_rel_depth=None if depth is None else t / depth,
-        translation_rel_depth_ci=None
-        if depth is None or t_ci is None
-        else [v / depth for v in t_ci],
-        corrected_world_from_world=c.tolist(),
-    )
-    out["refinement"] = _refinement_record(entry, refined)
-    return out
-
-
-_FIRST_KEYS = (
-    "angle_deg", "angle_deg_ci", "translation", "translation_ci", "translation_rel_depth",
-    "translation_rel_depth_ci", "scale", "scale_ci", "corrected_world_from_world", "message",
-)
-
-
-def _refinement_record(entry: Mapping[str, Any], refined: RefinedRegistration) -> dict[str, Any]:
-    """The summary's ``refinement`` block: the first estimate, the rounds, why they stopped."""
-    return {
-        "first_pass": {k: entry.get(k) for k in _FIRST_KEYS},
-        "rounds": [asdict(r) for r in refined.rounds],
-        "rounds_kept": refined.n_kept,
-        "stopped": refined.stopped,
-        "n_frames": len(refined.frame_ids) if refined.rounds else 0,
-        "file": REFINED_FILE,
-        "trajectory_file": REGISTERED_NAME,
-    }
-
-
-def apply_refinement(
-    shared_summary: dict[str, Any], refined: RefinedRegistration | None
-) -> dict[str, Any]:
-    """The summary's ``shared_errors`` section with the refined rigid correction (a copy; the
-    statuses and image effects stay the main pass's, which decided the verdicts). The
-    similarity entry keeps its first estimate: its scale was already right (x1.03 recovered
-    within 0.1 % on the castle and the boxes) and rigid rounds cannot refine a scale."""
-    if refined is None:
-        return shared_summary
-    out = dict(shared_summary)
-    origin = np.asarray(refined.origin, np.float64)
-    n = len(refined.rounds)
-    entry = shared_summary.get("registration")
-    if not entry or entry.get("corrected_world_from_world") is None:
-        return out
-    if refined.n_kept == 0:  # every update undone: the first estimate stands
-        new = dict(entry)
-        new["refinement"] = _refinement_record(entry, refined)
-        did = (f"Refinement stopped after {n} round(s) ({refined.stopped}): the first "
-               f"estimate is reported")
-        new["message"] = f"{entry.get('message', '')}. {did}"
-        out["registration"] = new
-        return out
-    last = refined.rounds[refined.n_kept - 1]
-    new = _refined_entry(entry, np.asarray(refined.rigid, np.float64), origin, last, refined)
-    f = new["refinement"]["first_pass"]
-    rel = new["translation_rel_depth"]
-    new["message"] = (
-        f"{entry.get('message', '')}. Refined by measuring {len(refined.frame_ids)} frames "
-        f"again at the corrected poses ({n} round(s), {refined.stopped}): "
-        f"{new['angle_deg']:.2f} deg, {new['translation']:.4g} scene units"
-        + (f" ({100 * rel:.1f} % of the scene depth)" if rel is not None else "")
-        + f" (first estimate {f['angle_deg']:.2f} deg, {f['translation']:.4g}); "
-        + (f"the last round found {_px(last.effect_px)} px left ({last.status})"
-           if refined.n_kept == n else
-           f"round {refined.n_kept + 1} found {_px(refined.rounds[refined.n_kept].effect_px)} "
-           f"px left at it ({refined.rounds[refined.n_kept].status})")
-    )
-    out["registration"] = new
-    return out
-
-
-def _px(x: float | None) -> str:
-    return f"{x if x is not None else float('nan'):.1f}"
-
-
-def save_refinement(out_dir: str | Path, refined: RefinedRegistration) -> Path:
-    path = Path(out_dir) / REFINED_FILE
-    atomic_write_text(path, json.dumps(refined.to_json(), indent=1) + "\n")  # whole, renamed
-    return path
-
-
-def load_refinement(
-    out_dir: str | Path, shared_summary: Mapping[str, Any], fingerprint: str | None = None
-) -> RefinedRegistration | None:
-    """The stored refinement when it started from this run's rigid correction (and, if
-    given, was measured with the same settings); else None (stale or absent)."""
-    path = Path(out_dir) / REFINED_FILE
-    c = shared_summary.get("registration", {}).get("corrected_world_from_world")
-    if not path.is_file() or c is None:
-        return None
-    try:
-        refined = RefinedRegistration.from_json(json.loads(path.read_text()))
-    except (ValueError, KeyError, TypeError) as err:
-        logger.warning(
-            "%s unreadable, the registration refinement is measured again: %s", path, err
-        )
-        return None
-    if fingerprint is not None and refined.fingerprint != fingerprint:
-        return None
-    if not np.allclose(np.asarray(refined.start), np.asarray(c), atol=SAME_START_ATOL, rtol=0):
-        return None
-    return refined
-
-
-def registered_trajectory(trajectory: Trajectory, refined: RefinedRegistration) -> Trajectory:
-    """Every frame moved by the refined rigid correction."""
-    c = np.asarray(refined.rigid, np.float64)
-    frames = tuple(f.with_pose(move_pose(f.world_from_cam, c)) for f in trajectory.frames)
-    return Trajectory(frames, trajectory.source, trajectory.format, dict(trajectory.metadata))
 
 
 def refine_run(
