@@ -32,7 +32,6 @@ from pgt_check.measure.record import (
     EnhanceWhy,
     FrameMeasurement,
     MeasureReason,
-    PoseEstimate,
     failed_measurement,
 )
 from pgt_check.measure.steps import (  # format_exception, pick_references: re-exported
@@ -44,7 +43,9 @@ from pgt_check.measure.steps import (  # format_exception, pick_references: re-e
     edges_decisive,
     enhance_decision,
     format_exception,
+    match_path,
     pick_references,
+    pose_estimate,
     replace_measurement,
 )
 from pgt_check.types import Camera, Frame
@@ -207,7 +208,8 @@ class FrameChecker:
                 edges.measurement, threshold, self.config.enhance
             ):
                 return self._edges_only(m, w, edges, threshold)
-        raw = self._match_path(
+        raw = match_path(
+            self.matcher, self.config.homography,
             w.render.rgb, w.photo, w.render.coverage, w.size, w.scale, w.camera, clock
         )
         why, detail = self._enhance_decision(raw, threshold)
@@ -246,7 +248,9 @@ class FrameChecker:
                     keep.paths[name] = res.images(w.scale)
         pose = None
         if chosen.success and self.config.pose.enabled:
-            pose = self._pose_estimate(chosen, w.render.depth, w.cam_w, frame, clock)
+            pose = pose_estimate(
+                chosen, w.render.depth, w.cam_w, frame, self.config.pose, clock
+            )
         method = self.config.enhance.method
         absolute = [(raw, "raw")]
         if enh is not None and self.enhancer.evidence is Evidence.ABSOLUTE:
@@ -349,53 +353,6 @@ class FrameChecker:
             frame.camera,
         )
 
-    def _match_path(
-        self,
-        image: np.ndarray,
-        photo_w: np.ndarray,
-        mask: np.ndarray,
-        size: tuple[int, int],
-        scale: tuple[float, float],
-        camera: Camera,
-        clock: Clock,
-    ) -> PathResult:
-        from pgt_check.geometry.homography import (
-            corner_error,
-            estimate_homography,
-            scale_homography,
-        )
-
-        t = time.perf_counter()
-        matches = self.matcher.match(image, photo_w, mask0=mask)
-        t_match = time.perf_counter() - t
-        t = time.perf_counter()
-        res = estimate_homography(
-            matches.kpts0, matches.kpts1, size[0], size[1], self.config.homography
-        )
-        t_h = time.perf_counter() - t
-        clock.add("match", t_match)
-        clock.add("homography", t_h)
-        h = err = None
-        if res.success:
-            h = scale_homography(res.photo_from_render, *scale)
-            err = corner_error(h, camera.width, camera.height)
-        n = len(matches)
-        return PathResult(
-            n,
-            res.n_inliers,
-            res.n_inliers / n if n else 0.0,
-            "" if res.success else res.reason.value,
-            h,
-            err,
-            matches.kpts0,
-            matches.kpts1,
-            res.inliers,
-            matches.n_kpts0,
-            matches.n_kpts1,
-            t_match,
-            t_h,
-        )
-
     def _enhance_decision(self, raw: PathResult, threshold: float) -> tuple[EnhanceWhy, str]:
         return enhance_decision(raw, threshold, self.config.enhance)
 
@@ -446,7 +403,8 @@ class FrameChecker:
             clock.add("enhance", time.perf_counter() - t)
             # keypoints are detected where the mesh covers the render (the reference may
             # leave holes, which keep the render's own colour)
-            res = self._match_path(
+            res = match_path(
+                self.matcher, self.config.homography,
                 out.image, photo_w, view.render.coverage, size, scale, camera, clock
             )
             tried.append((ref.frame_id, res))
@@ -454,34 +412,6 @@ class FrameChecker:
                 best, best_id, best_img = res, ref.frame_id, out.image
         others = [(rid, r) for rid, r in tried if rid != best_id and r.success]
         return best, best_id, best_img, len(refs), others
-
-    def _pose_estimate(
-        self, path: PathResult, depth: np.ndarray, cam_w: Camera, frame: Frame, clock: Clock
-    ) -> PoseEstimate:
-        from pgt_check.geometry.pnp import estimate_pose_correction
-
-        t = time.perf_counter()
-        p = self.config.pose
-        corr = estimate_pose_correction(
-            path.kpts_render,
-            path.kpts_photo,
-            depth,
-            cam_w,
-            frame.world_from_cam,
-            max_error_px=p.max_error_px,
-            min_inliers=p.min_inliers,
-        )
-        clock.add("pose", time.perf_counter() - t)
-        if not corr.success:
-            return PoseEstimate(corr.n_inliers, corr.reason.value)
-        return PoseEstimate(
-            corr.n_inliers,
-            "",
-            corr.dt,
-            corr.drot_deg,
-            tuple(tuple(map(float, r)) for r in corr.world_from_cam),
-        )
-
 
 def _edge_extra(edges: EdgePath) -> list[tuple[np.ndarray, np.ndarray, str]]:
     """The edge path's matched points as the ``extra`` evidence source of ``absolute_evidence``."""

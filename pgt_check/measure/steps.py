@@ -7,6 +7,7 @@ reference choice per frame and the formatting of internal errors. Used by
 from __future__ import annotations
 
 import logging
+import time
 import traceback
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -14,10 +15,16 @@ from typing import Any
 
 import numpy as np
 
-from pgt_check.config import EnhanceConfig, RunConfig
+from pgt_check.config import EnhanceConfig, HomographyConfig, PoseConfig, RunConfig
 from pgt_check.errors import ImageSizeMismatchError, PixelCapError, ReferenceUnreadableError
 from pgt_check.measure.paths import PathResult
-from pgt_check.measure.record import EnhanceWhy, FrameMeasurement, MeasureReason, Timings
+from pgt_check.measure.record import (
+    EnhanceWhy,
+    FrameMeasurement,
+    MeasureReason,
+    PoseEstimate,
+    Timings,
+)
 from pgt_check.types import Camera, Frame, Trajectory
 
 logger = logging.getLogger(__name__)
@@ -138,3 +145,82 @@ def pick_references(
             len(frames),
         )
     return refs
+
+
+def match_path(
+    matcher: Any,
+    homography: HomographyConfig,
+    image: np.ndarray,
+    photo_w: np.ndarray,
+    mask: np.ndarray,
+    size: tuple[int, int],
+    scale: tuple[float, float],
+    camera: Camera,
+    clock: Clock,
+) -> PathResult:
+    """Match ``image`` (render or enhanced, working size) to the photo and fit the homography;
+    the homography and corner error in original photo pixels."""
+    from pgt_check.geometry.homography import (
+        corner_error,
+        estimate_homography,
+        scale_homography,
+    )
+
+    t = time.perf_counter()
+    matches = matcher.match(image, photo_w, mask0=mask)
+    t_match = time.perf_counter() - t
+    t = time.perf_counter()
+    res = estimate_homography(
+        matches.kpts0, matches.kpts1, size[0], size[1], homography
+    )
+    t_h = time.perf_counter() - t
+    clock.add("match", t_match)
+    clock.add("homography", t_h)
+    h = err = None
+    if res.success:
+        h = scale_homography(res.photo_from_render, *scale)
+        err = corner_error(h, camera.width, camera.height)
+    n = len(matches)
+    return PathResult(
+        n,
+        res.n_inliers,
+        res.n_inliers / n if n else 0.0,
+        "" if res.success else res.reason.value,
+        h,
+        err,
+        matches.kpts0,
+        matches.kpts1,
+        res.inliers,
+        matches.n_kpts0,
+        matches.n_kpts1,
+        t_match,
+        t_h,
+    )
+
+
+def pose_estimate(
+    path: PathResult, depth: np.ndarray, cam_w: Camera, frame: Frame, p: PoseConfig, clock: Clock
+) -> PoseEstimate:
+    """The PnP pose correction from a path's matches and the render depth (``pose`` settings)."""
+    from pgt_check.geometry.pnp import estimate_pose_correction
+
+    t = time.perf_counter()
+    corr = estimate_pose_correction(
+        path.kpts_render,
+        path.kpts_photo,
+        depth,
+        cam_w,
+        frame.world_from_cam,
+        max_error_px=p.max_error_px,
+        min_inliers=p.min_inliers,
+    )
+    clock.add("pose", time.perf_counter() - t)
+    if not corr.success:
+        return PoseEstimate(corr.n_inliers, corr.reason.value)
+    return PoseEstimate(
+        corr.n_inliers,
+        "",
+        corr.dt,
+        corr.drot_deg,
+        tuple(tuple(map(float, r)) for r in corr.world_from_cam),
+    )
