@@ -243,8 +243,8 @@ def render(meta: dict, results: dict[str, dict]) -> str:
         "Each case is one whole `pgt-check` process with timers around the pipeline's "
         "functions (exclusive: a render inside the enhancement counts as render); 'other' is "
         "what no timer covers (per-frame bookkeeping, the record store, the refinement's "
-        "pooled fits). The machine is shared (2 cores, a training job and other sessions "
-        "beside it): the load average (1 / 5 / 15 min) is given per case, and the comparison "
+        "pooled fits). The machine may be shared (2 cores): the load average (1 / 5 / 15 "
+        "min) is given per case, and the comparison "
         "with the bare loop is paired (bare, run, bare, run ... as whole processes), so "
         "read the ratios and CPU seconds rather than single wall times.",
         "",
