@@ -52,3 +52,11 @@ class PixelCapError(InputError):
 class ReferenceUnreadableError(InputError):
     """The reference photo of the enhanced path cannot be read (per-frame
     ``reference_unreadable``)."""
+
+
+class RunInterrupted(Exception):
+    """The run stopped on Ctrl-C or SIGTERM (not an input error); ``done`` of ``total`` frames are stored in ``out``."""
+
+    def __init__(self, done: int, total: int, out: str) -> None:
+        super().__init__(f"interrupted: {done}/{total} frames done")
+        self.done, self.total, self.out = done, total, out

@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from pgt_check.config import RunConfig
-from pgt_check.errors import InputError
+from pgt_check.errors import InputError, RunInterrupted
 from pgt_check.inputs import (  # re-exported: tests and callers patch / import them here
     check_side_inputs,
     content_hash,
@@ -36,7 +36,8 @@ from pgt_check.measure import (
     build_frame_checker,
     pick_references,
 )
-from pgt_check.measure.steps import format_exception
+from pgt_check.progress import frame_progress, log_progress
+from pgt_check.remeasure import PlainMeasure, correct_stage, self_test_stage
 from pgt_check.store import mesh_content_hash
 from pgt_check.types import Frame, Trajectory
 from pgt_check.verdict import judge_run
@@ -49,48 +50,6 @@ __all__ = [
     "PlainMeasure", "panel_writer", "preflight", "run", "run_trajectory", "stored_measurements",
     "write_report_assets",
 ]
-
-
-#: seconds between progress lines when stderr is not a terminal (CI logs)
-PROGRESS_INTERVAL_S = 5.0
-
-
-def _progress(iterable, total: int, desc: str):
-    """A tqdm bar on a terminal; otherwise a log line every ``PROGRESS_INTERVAL_S``."""
-    import sys
-
-    if not sys.stderr.isatty():
-        return log_progress(iterable, total, desc)
-    try:
-        from tqdm import tqdm
-    except ImportError:  # pragma: no cover - tqdm is a core dependency
-        return iterable
-    return tqdm(iterable, total=total, desc=desc, unit="frame")
-
-
-def log_progress(iterable, total: int, desc: str, interval_s: float | None = None,
-                 clock: Callable[[], float] = time.monotonic):
-    """Yield from ``iterable``, logging ``desc: done/total frames (..%), rate, time left`` at
-    INFO every ``interval_s`` seconds (default ``PROGRESS_INTERVAL_S``) and once at the end."""
-    interval = PROGRESS_INTERVAL_S if interval_s is None else interval_s
-    t0 = last = clock()
-    done = logged = 0
-
-    def line(now: float) -> None:
-        rate = done / max(now - t0, 1e-9)
-        left = f", about {(total - done) / rate:.0f} s left" if 0 < rate and done < total else ""
-        pct = f" ({100.0 * done / total:.0f} %)" if total else ""
-        logger.info("%s: %d/%d frames%s, %.2f frames/s%s", desc, done, total, pct, rate, left)
-
-    for item in iterable:
-        yield item
-        done += 1
-        now = clock()
-        if now - last >= interval:
-            last, logged = now, done
-            line(now)
-    if done and logged != done:
-        line(clock())
 
 
 def run(config: RunConfig) -> dict[str, Any]:
@@ -180,14 +139,6 @@ class _ReuseFirst:
             self._checker = None
 
 
-class RunInterrupted(Exception):
-    """The run stopped on Ctrl-C; ``done`` of ``total`` frames are stored in ``out``."""
-
-    def __init__(self, done: int, total: int, out: str) -> None:
-        super().__init__(f"interrupted: {done}/{total} frames done")
-        self.done, self.total, self.out = done, total, out
-
-
 def panel_writer(config: RunConfig, fingerprint: str):
     """The checker's panel sink: report panels of likely detail frames from the main pass."""
     if config.report_details <= 0:
@@ -260,10 +211,10 @@ def _check_frames_locked(
     judged = judge_run(measurements, config)
     traj = trajectory if trajectory is not None else Trajectory(tuple(frames))
     shared_extra = judged.summary_extra()
-    rows, corrections = _correct(traj, measurements, judged, shared_extra, config,
-                                 checker_factory)
+    rows, corrections = correct_stage(traj, measurements, judged, shared_extra, config,
+                                      checker_factory)
     if config.self_test > 0:  # the stated detection limits tested (``verdict.self_test``)
-        shared_extra["self_test"] = _self_test(traj, rows, judged, shared_extra, config)
+        shared_extra["self_test"] = self_test_stage(traj, rows, judged, shared_extra, config)
     assets = write_report_assets(
         frames, rows, config, checker_factory, measurement_fingerprint(config, inputs)
     )
@@ -283,110 +234,6 @@ def _check_frames_locked(
         "wall_time_s": time.perf_counter() - t0,
     }
     return write_outputs(out, rows, config, extra=summary_extra, assets=assets)
-
-
-def _correct(
-    traj: Trajectory,
-    measurements: list[FrameMeasurement],
-    judged: Any,
-    shared_extra: dict[str, Any],
-    config: RunConfig,
-    checker_factory: Callable[[], Any],
-) -> tuple[list[dict[str, Any]], dict[str, Any]]:
-    """The correction stage (``pgt_check.correct``) after the verdicts: a failed registration
-    check's estimate refined (in ``shared_extra["shared_errors"]``), then the corrected poses
-    of the chosen frames; the rows (with correction columns) and the corrections' summary."""
-    out = Path(config.out)
-    rows = judged.rows
-    if judged.shared is not None:  # a failed registration check: its estimate refined
-        from pgt_check.correct.registration import refine_run
-
-        measure = PlainMeasure()
-        try:
-            shared_extra["shared_errors"] = refine_run(
-                traj, measurements, shared_extra["shared_errors"], config, measure, out
-            )
-        except RunInterrupted:
-            raise
-        except Exception as err:  # the verdicts and the first estimate stand without it
-            if config.fail_fast:
-                raise
-            logger.error("the registration refinement failed (%s); the first estimate is "
-                         "reported", format_exception(err))
-        finally:
-            measure.close()
-    corrections: dict[str, Any] = {}
-    if config.correct.frames != "none":  # corrected poses (pgt_check.correct.frames)
-        from pgt_check.correct.frames import correct_run
-
-        rows, corrections = correct_run(traj, measurements, rows, config, checker_factory, out)
-    return rows, corrections
-
-
-def _self_test(traj: Trajectory, rows: list[dict[str, Any]], judged: Any,
-               shared_extra: dict[str, Any], config: RunConfig) -> dict[str, Any]:
-    """summary.json ``self_test``: ``config.self_test`` frames measured again at poses moved
-    around this run's stated detection limits (``pgt_check.verdict.self_test``)."""
-    from pgt_check.verdict.accuracy import run_accuracy
-    from pgt_check.verdict.decide import resolve_threshold_px
-    from pgt_check.verdict.self_test import run_self_test
-
-    w, h = (int(rows[0]["width"]), int(rows[0]["height"])) if rows else (0, 0)
-    acc = run_accuracy(rows, shared_extra.get("shared_errors"), config.verdict,
-                       resolve_threshold_px(config.verdict, w, h))
-    measure = PlainMeasure("pgt-check self-test")
-    try:
-        st = run_self_test(traj.frames, rows, judged.shared, acc.limits, config, measure,
-                           config.self_test)
-    finally:
-        measure.close()
-    logger.info("%s", st.sentence)
-    return st.to_json()
-
-
-class PlainMeasure:
-    """``measure(frames, config)`` for the registration refinement's rounds and the
-    self-test: the absolute paths only (no store, no references), with ``config``'s executor,
-    in any order. In serial mode one checker is kept over all rounds (the mesh and renderer
-    are built once); call ``close`` at the end. Raises RunInterrupted after a Ctrl-C / SIGTERM
-    (the main pass's frames stay stored)."""
-
-    def __init__(self, desc: str = "pgt-check registration") -> None:
-        self._checker: Any = None
-        self._desc = desc
-
-    def __call__(self, frames: Sequence[Frame], config: RunConfig) -> list[FrameMeasurement]:
-        from pgt_check.executor import iter_results, stop_on_sigint
-
-        factory: Callable[[], Any] = functools.partial(build_frame_checker, config, None)
-        if config.executor == "serial":
-            if self._checker is None:
-                self._checker = factory()
-            factory = functools.partial(_Borrowed, self._checker)
-        with stop_on_sigint() as stop:
-            results = iter_results(frames, factory, config, stop=stop)
-            ms = list(_progress(results, len(frames), self._desc))
-            if stop.is_set() and len(ms) < len(frames):
-                raise RunInterrupted(len(ms), len(frames), str(config.out))
-        return ms
-
-    def close(self) -> None:
-        if self._checker is not None:
-            self._checker.close()
-            self._checker = None
-
-
-class _Borrowed:
-    """A checker lent to one executor pass: closing it is left to its owner."""
-
-    def __init__(self, checker: Any) -> None:
-        self._checker = checker
-
-    def measure(self, frame: Frame, keep: Any = None) -> FrameMeasurement:
-        return self._checker.measure(frame, keep)
-
-    def close(self) -> None:
-        pass
 
 
 def _open_store(config: RunConfig, ids: list[str], inputs: dict[str, str]) -> Any:
@@ -442,7 +289,7 @@ def _measure_into_store(
     todo = (f for f in frames if f.frame_id not in done)
     with stop_on_sigint() as stop:
         results = iter_results(todo, checker_factory, config, stop=stop, stats=stats)
-        for m in _progress(results, len(frames) - len(done), "pgt-check"):
+        for m in frame_progress(results, len(frames) - len(done), "pgt-check"):
             rec = m.to_json()
             rec["input_key"] = input_keys.get(m.frame_id, "")
             store.append(rec)

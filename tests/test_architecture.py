@@ -11,13 +11,14 @@ PKG = Path(__file__).resolve().parents[1] / "pgt_check"
 #: layer of each top-level part; a module may import only its own layer or lower ones
 LAYERS = {
     "errors": 0, "_checks": 0, "files": 0, "types": 0, "config": 0, "config_load": 0, "registry": 0, "_cli": 0,
+    "progress": 0,
     "io": 1, "render": 1, "match": 1, "geometry": 1, "enhance": 1,
     "measure": 2,
     "verdict": 3,
     "store": 3,
     "correct": 4,
     "report": 5,
-    "executor": 6, "inputs": 6, "runner": 6, "compare": 6,
+    "executor": 6, "inputs": 6, "runner": 6, "remeasure": 6, "compare": 6,
     "enhance_folder": 6, "enhance_refs": 6,
     "cli": 7, "commands": 7, "__main__": 7, "api": 7,
 }

@@ -251,10 +251,10 @@ def test_config_and_cli_reach_the_rounds():
 
 
 def test_the_runners_measure_keeps_one_serial_checker_over_the_rounds(monkeypatch):
-    """``runner.PlainMeasure`` (what a run hands the refinement): in serial mode the checker
+    """``remeasure.PlainMeasure`` (what a run hands the refinement): in serial mode the checker
     (mesh, renderer) is built once for all rounds, closed once at the end, and each round's
     frames come back measured."""
-    from pgt_check import runner
+    from pgt_check import remeasure
 
     built, closed = [], []
 
@@ -269,10 +269,10 @@ def test_the_runners_measure_keeps_one_serial_checker_over_the_rounds(monkeypatc
         built.append(config)
         return Checker()
 
-    monkeypatch.setattr(runner, "build_frame_checker", factory)
+    monkeypatch.setattr(remeasure, "build_frame_checker", factory)
     config = RunConfig.from_dict({"input": {"trajectory": "t", "mesh": "m"}})
     frames = _trajectory(6).frames
-    measure = runner.PlainMeasure()
+    measure = remeasure.PlainMeasure()
     for _ in range(3):
         assert sorted(measure(frames, config)) == [f.frame_id for f in frames]
     assert len(built) == 1 and closed == []

@@ -1,0 +1,128 @@
+"""The stages after the verdicts that measure frames again: the correction stage
+(``pgt_check.correct``: a failed registration check's estimate refined, corrected poses of the
+chosen frames) and the self-test of the stated detection limits (``verdict.self_test``), with
+``PlainMeasure``, the measure function both hand frames to.
+"""
+
+from __future__ import annotations
+
+import functools
+import logging
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
+
+from pgt_check.config import RunConfig
+from pgt_check.errors import RunInterrupted
+from pgt_check.measure import FrameMeasurement, build_frame_checker
+from pgt_check.measure.steps import format_exception
+from pgt_check.progress import frame_progress
+from pgt_check.types import Frame, Trajectory
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["PlainMeasure", "correct_stage", "self_test_stage"]
+
+
+def correct_stage(
+    traj: Trajectory,
+    measurements: list[FrameMeasurement],
+    judged: Any,
+    shared_extra: dict[str, Any],
+    config: RunConfig,
+    checker_factory: Callable[[], Any],
+) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+    """The correction stage (``pgt_check.correct``) after the verdicts: a failed registration
+    check's estimate refined (in ``shared_extra["shared_errors"]``), then the corrected poses
+    of the chosen frames; the rows (with correction columns) and the corrections' summary."""
+    out = Path(config.out)
+    rows = judged.rows
+    if judged.shared is not None:  # a failed registration check: its estimate refined
+        from pgt_check.correct.registration import refine_run
+
+        measure = PlainMeasure()
+        try:
+            shared_extra["shared_errors"] = refine_run(
+                traj, measurements, shared_extra["shared_errors"], config, measure, out
+            )
+        except RunInterrupted:
+            raise
+        except Exception as err:  # the verdicts and the first estimate stand without it
+            if config.fail_fast:
+                raise
+            logger.error("the registration refinement failed (%s); the first estimate is "
+                         "reported", format_exception(err))
+        finally:
+            measure.close()
+    corrections: dict[str, Any] = {}
+    if config.correct.frames != "none":  # corrected poses (pgt_check.correct.frames)
+        from pgt_check.correct.frames import correct_run
+
+        rows, corrections = correct_run(traj, measurements, rows, config, checker_factory, out)
+    return rows, corrections
+
+
+def self_test_stage(traj: Trajectory, rows: list[dict[str, Any]], judged: Any,
+               shared_extra: dict[str, Any], config: RunConfig) -> dict[str, Any]:
+    """summary.json ``self_test``: ``config.self_test`` frames measured again at poses moved
+    around this run's stated detection limits (``pgt_check.verdict.self_test``)."""
+    from pgt_check.verdict.accuracy import run_accuracy
+    from pgt_check.verdict.decide import resolve_threshold_px
+    from pgt_check.verdict.self_test import run_self_test
+
+    w, h = (int(rows[0]["width"]), int(rows[0]["height"])) if rows else (0, 0)
+    acc = run_accuracy(rows, shared_extra.get("shared_errors"), config.verdict,
+                       resolve_threshold_px(config.verdict, w, h))
+    measure = PlainMeasure("pgt-check self-test")
+    try:
+        st = run_self_test(traj.frames, rows, judged.shared, acc.limits, config, measure,
+                           config.self_test)
+    finally:
+        measure.close()
+    logger.info("%s", st.sentence)
+    return st.to_json()
+
+
+class PlainMeasure:
+    """``measure(frames, config)`` for the registration refinement's rounds and the
+    self-test: the absolute paths only (no store, no references), with ``config``'s executor,
+    in any order. In serial mode one checker is kept over all rounds (the mesh and renderer
+    are built once); call ``close`` at the end. Raises RunInterrupted after a Ctrl-C / SIGTERM
+    (the main pass's frames stay stored)."""
+
+    def __init__(self, desc: str = "pgt-check registration") -> None:
+        self._checker: Any = None
+        self._desc = desc
+
+    def __call__(self, frames: Sequence[Frame], config: RunConfig) -> list[FrameMeasurement]:
+        from pgt_check.executor import iter_results, stop_on_sigint
+
+        factory: Callable[[], Any] = functools.partial(build_frame_checker, config, None)
+        if config.executor == "serial":
+            if self._checker is None:
+                self._checker = factory()
+            factory = functools.partial(_Borrowed, self._checker)
+        with stop_on_sigint() as stop:
+            results = iter_results(frames, factory, config, stop=stop)
+            ms = list(frame_progress(results, len(frames), self._desc))
+            if stop.is_set() and len(ms) < len(frames):
+                raise RunInterrupted(len(ms), len(frames), str(config.out))
+        return ms
+
+    def close(self) -> None:
+        if self._checker is not None:
+            self._checker.close()
+            self._checker = None
+
+
+class _Borrowed:
+    """A checker lent to one executor pass: closing it is left to its owner."""
+
+    def __init__(self, checker: Any) -> None:
+        self._checker = checker
+
+    def measure(self, frame: Frame, keep: Any = None) -> FrameMeasurement:
+        return self._checker.measure(frame, keep)
+
+    def close(self) -> None:
+        pass
