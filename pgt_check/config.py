@@ -212,27 +212,20 @@ class EdgeConfig:
     model: Literal["homography", "similarity"] = "homography"
     #: mesh borders (holes, scan limits) count as edges
     include_borders: bool = True
-    #: longest image side of the edge path (render and photo edges); where it is larger than
-    #: ``match.resize_max`` the frame is rendered again at this size for the edges. Edges
-    #: localise to about a working pixel, so on large photos the finer size is what resolves
-    #: a shared error of a few pixels (castle, 1416 px photos, 1 deg misregistration: the
-    #: evidence carried 38-97 % of the true displacement at 640 px, 77-90 % at 1024 px;
-    #: reports/shared_errors.md). None / 0 = the original size
+    #: longest image side of the edge path; where it is larger than ``match.resize_max`` the
+    #: frame is rendered again at this size for the edges: edges localise to about a working
+    #: pixel, so on large photos the finer size resolves a shared error of a few pixels
+    #: (reports/shared_errors.md). None / 0 = the original size
     resize_max: int | None = 1024
     #: on renders without colours (``shaded``: colourless meshes) the edge path runs first and
-    #: a clear edge PASS leaves out the raw and enhanced paths (raw feature matching of
-    #: shading found no homography in 300 frames of the shared colourless meshes and cost
-    #: ~0.4 s/frame on the castle)
+    #: a clear edge PASS leaves out the raw and enhanced paths, which rarely find a homography
+    #: on shading (reports/colourless_evidence.md)
     lead_on_shaded: bool = True
     #: the refinement also starts from the affine map of the best shifts of tile_grid x
-    #: tile_grid image tiles (0 = off, the default; 3 = on): a motion that varies across the
-    #: image by more than one shift can start (a zoom from a camera moved along its view) is
-    #: then aligned, and with it the pooled registration tells a translation from a rotation
-    #: (castle moved by 4 % of the depth: translation estimated 0.10 for 0.36 units without,
-    #: 0.25 with). Off by default: on near, cluttered views with a real camera offset (the
-    #: 100 given 7-Scenes frames) it fitted clutter on a few frames (88 PASS / 1 FAIL / 11
-    #: UNVERIFIABLE instead of 95 / 0 / 5) and it costs ~0.1 s/frame
-    #: (reports/shared_errors_tiles.md, README)
+    #: tile_grid image tiles (0 = off; 3 = on): a motion no single shift fits (a zoom) is then
+    #: aligned, which helps the pooled registration tell a translation from a rotation. Off by
+    #: default: on near, cluttered views it fits clutter on some correct frames, and it costs
+    #: time (reports/shared_errors_tiles.md)
     tile_grid: int = 0
     #: how an edge alignment is accepted: "significance" (its score against the frame's own
     #: wrong alignments, false-accept rate about ``alpha`` whatever the scene) or "support"
@@ -242,11 +235,10 @@ class EdgeConfig:
     decision: Literal["significance", "support"] = "support"
     alpha: float = 0.01
     #: each frame's edges choose the motion model (shift, similarity, affine, up to ``model``)
-    #: by spatial cross-validation instead of always fitting ``model``: on a TSDF scan a fixed
-    #: homography bends to shrunk silhouettes and clutter (issue #29). Off by default: the
-    #: simpler models' edge evidence lost half of a castle misregistration's translation in
-    #: the pooled registration fit, and it costs about twice the edge path's time
-    #: (reports/edge_evidence.md)
+    #: by spatial cross-validation instead of always fitting ``model`` (for TSDF scans, where a
+    #: fixed homography bends to shrunk silhouettes and clutter). Off by default: the simpler
+    #: models' evidence biases the pooled registration fit, and it doubles the edge path's
+    #: time (reports/edge_evidence.md)
     select_model: bool = False
 
     def __post_init__(self) -> None:
@@ -270,10 +262,9 @@ class PoseConfig:
         _check_range("pose.min_inliers", self.min_inliers, 4)
 
 
-#: default gate limit on the UNVERIFIABLE share, chosen from the shared real datasets with
-#: default settings (README "CI gate"): 7-Scenes redkitchen (coloured mesh, 100 frames) 0 %
-#: UNVERIFIABLE, Sceaux castle (colourless mesh, 10 photos) 0 %; 0.5 passes them with a wide
-#: margin and fails a run where most frames cannot be checked (a zero-verified run always fails)
+#: default gate limit on the UNVERIFIABLE share: wide of what the shared real datasets give
+#: with default settings, and it fails a run where most frames cannot be checked (a run with no
+#: verified frame always fails; README "CI gate")
 MAX_UNVERIFIABLE_DEFAULT = 0.5
 
 
@@ -359,9 +350,9 @@ class CorrectConfig:
     bootstrap: int = 12
     #: when the registration check fails: at most this many rounds of measuring frames again
     #: at the poses the estimate corrects and fitting what is left, stopping once what is left
-    #: is below the shared threshold twice (``pgt_check.correct.registration``; 0 = off). The
-    #: first estimate's rotation / translation split is off by up to 70-90 % where the
-    #: misregistration zooms the images; measured: castle 1-3 rounds, 7-Scenes (noisier) 2-5
+    #: is below the shared threshold twice (``pgt_check.correct.registration``; 0 = off): the
+    #: first estimate's rotation / translation split is far off where the misregistration zooms
+    #: the images (reports/shared_errors.md)
     registration_rounds: int = 8
     #: frames measured per round (evenly spaced; the pooled fit needs a few dozen)
     registration_frames: int = 30
