@@ -110,15 +110,14 @@ def _largest_render(config: RunConfig, frames: Sequence[Frame]) -> tuple[int, in
     """The largest image the renderer draws: each camera scaled to the working size (the larger
     of the matching and the edge path's longest side; None = the camera's own size), at most
     ``input.max_image_pixels`` (a larger frame is UNVERIFIABLE before it is rendered)."""
+    from pgt_check.io.photo import working_scale
+
     sides = (config.match.resize_max, config.edges.resize_max)
     longest = None if any(s is None for s in sides) else max(sides)
     cap = config.input.max_image_pixels
     width = height = 1
     for f in frames:
-        w, h = f.camera.width, f.camera.height
-        if longest is not None and max(w, h) > longest:
-            k = longest / max(w, h)
-            w, h = math.ceil(w * k), math.ceil(h * k)
+        w, h = working_scale(f.camera.width, f.camera.height, longest)
         if cap is not None and w * h > cap:
             k = math.sqrt(cap / (w * h))
             w, h = max(1, int(w * k)), max(1, int(h * k))

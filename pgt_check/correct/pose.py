@@ -174,8 +174,8 @@ def _round(
     size: tuple[int, int],
 ) -> _Round:
     """Render at ``pose``, match raw render vs photo, homography corner error, PnP."""
-    from pgt_check.geometry.homography import corner_error, estimate_homography, scale_homography
     from pgt_check.geometry.pnp import estimate_pose_correction
+    from pgt_check.measure.steps import Clock, match_path
 
     cfg = checker.config
     scale = (size[0] / camera.width, size[1] / camera.height)
@@ -184,16 +184,11 @@ def _round(
     empty = np.zeros((0, 2))
     if render.coverage_fraction < cfg.verdict.min_coverage:
         return _Round(None, None, "low_coverage", 0, empty, empty, render.depth, cam_w)
-    matches = checker.matcher.match(render.rgb, photo_w, mask0=render.coverage)
-    h = estimate_homography(matches.kpts0, matches.kpts1, size[0], size[1], cfg.homography)
-    err = (
-        corner_error(scale_homography(h.photo_from_render, *scale), camera.width, camera.height)
-        if h.success
-        else None
-    )
+    path = match_path(checker.matcher, cfg.homography, render.rgb, photo_w, render.coverage,
+                      size, scale, camera, Clock())
     corr = estimate_pose_correction(
-        matches.kpts0,
-        matches.kpts1,
+        path.kpts_render,
+        path.kpts_photo,
         render.depth,
         cam_w,
         pose,
@@ -201,12 +196,12 @@ def _round(
         min_inliers=cfg.pose.min_inliers,
     )
     return _Round(
-        err,
+        path.corner_error_px,
         corr.world_from_cam if corr.success else None,
         "" if corr.success else corr.reason.value,
         corr.n_inliers,
-        np.asarray(matches.kpts0),
-        np.asarray(matches.kpts1),
+        np.asarray(path.kpts_render),
+        np.asarray(path.kpts_photo),
         render.depth,
         cam_w,
     )
