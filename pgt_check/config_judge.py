@@ -1,0 +1,123 @@
+"""The judging sections of the run config: the per-frame verdict and the gate (``verdict``) and
+the corrections after the verdicts (``correct``). Re-exported by ``pgt_check.config``, where
+``RunConfig`` composes them with the measurement sections.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+from pgt_check.config_load import check_range as _check_range
+
+__all__ = ["MAX_UNVERIFIABLE_DEFAULT", "CorrectConfig", "VerdictConfig"]
+
+
+#: default gate limit on the UNVERIFIABLE share: wide of what the shared real datasets give
+#: with default settings, and it fails a run where most frames cannot be checked (a run with no
+#: verified frame always fails; README "CI gate")
+MAX_UNVERIFIABLE_DEFAULT = 0.5
+
+
+@dataclass(frozen=True)
+class VerdictConfig:
+    #: PASS threshold on the corner error in original photo pixels; None = rel_diag * diagonal
+    threshold_px: float | None = None
+    threshold_rel_diag: float = 0.02
+    #: render coverage below this fraction -> UNVERIFIABLE(low_coverage), or FAIL(off_mesh) when
+    #: it is also at most a quarter of what its neighbouring frames' renders cover and they see
+    #: the mesh well (``verdict/off_mesh.py``: a gross pose error, not missing evidence)
+    min_coverage: float = 0.05
+    min_inliers: int = 15
+    min_inlier_ratio: float = 0.0
+    #: the gate passes while FAIL frames / all frames <= this
+    max_fail_fraction: float = 0.0
+    #: and while UNVERIFIABLE frames / all frames <= this (1.0 = never gate on them). The
+    #: default was chosen from the shared real datasets (see README "CI gate")
+    max_unverifiable_fraction: float = MAX_UNVERIFIABLE_DEFAULT
+    #: and while frames with internal_error / worker_crashed <= this (a crash is never "fine")
+    max_internal_errors: int = 0
+
+    #: a FAIL of any path with at least this many homography inliers is a FAIL, whichever path
+    #: has more inliers (a confident FAIL is never overruled)
+    confident_inliers: int = 40
+    #: run-level checks of shared errors (registration, drift, calibration); see README
+    shared_checks: bool = True
+    #: threshold of the shared checks in photo px; None = shared_threshold_rel x the per-frame
+    #: threshold (pooled evidence is precise, and an error all frames share matters more)
+    shared_threshold_px: float | None = None
+    shared_threshold_rel: float = 0.15
+    #: judge frames after removing the estimated per-camera calibration error (absolute paths)
+    remove_calibration: bool = False
+    #: the calibration error also has a camera-frame translation (the photos come from a
+    #: camera beside the sensor whose poses are given, e.g. RGB beside depth); fitted where the
+    #: points' depths differ enough. Off by default: for cameras circling the scene it can
+    #: mimic a world rotation, which would then be taken for calibration
+    calibration_translation: bool = False
+    #: a trusted run's summary.json: its per-camera calibration estimate is removed instead of
+    #: one estimated on this run (which views that cannot separate calibration from
+    #: registration would let absorb a misregistration)
+    calibration_from: str | None = None
+    #: ``--require-accuracy DEG,UNITS``: the gate also fails when more than
+    #: ``max_fail_fraction`` of the frames, or a shared error, are not verified to within this
+    #: rotation (deg) / camera-centre distance (scene units) at 95 % (``verdict.accuracy``);
+    #: None = not required
+    require_accuracy_deg: float | None = None
+    require_accuracy_units: float | None = None
+
+    def __post_init__(self) -> None:
+        _check_range("verdict.require_accuracy_deg", self.require_accuracy_deg, 0, 180,
+                     lo_open=True)
+        _check_range("verdict.require_accuracy_units", self.require_accuracy_units, 0,
+                     lo_open=True)
+        _check_range("verdict.threshold_px", self.threshold_px, 0, lo_open=True)
+        _check_range("verdict.threshold_rel_diag", self.threshold_rel_diag, 0, lo_open=True)
+        _check_range("verdict.min_coverage", self.min_coverage, 0, 1)
+        _check_range("verdict.min_inliers", self.min_inliers, 0)
+        _check_range("verdict.min_inlier_ratio", self.min_inlier_ratio, 0, 1)
+        _check_range("verdict.max_fail_fraction", self.max_fail_fraction, 0, 1)
+        _check_range("verdict.max_unverifiable_fraction", self.max_unverifiable_fraction, 0, 1)
+        _check_range("verdict.max_internal_errors", self.max_internal_errors, 0)
+        _check_range("verdict.confident_inliers", self.confident_inliers, 0)
+        _check_range("verdict.shared_threshold_px", self.shared_threshold_px, 0, lo_open=True)
+        _check_range("verdict.shared_threshold_rel", self.shared_threshold_rel, 0, lo_open=True)
+
+    def threshold_for(self, width: int, height: int) -> float:
+        """The PASS threshold in original photo pixels for an image of this size."""
+        if self.threshold_px is not None:
+            return float(self.threshold_px)
+        return float(self.threshold_rel_diag * math.hypot(width, height))
+
+
+@dataclass(frozen=True)
+class CorrectConfig:
+    """Pose corrections after the verdicts (``pgt_check.correct.frames``): iterate render -> raw
+    match -> PnP from each frame's PnP estimate; writes corrected_trajectory.txt."""
+
+    #: which frames: "fail" (FAIL verdicts), "all" (every measured frame) or "none"
+    frames: Literal["none", "fail", "all"] = "fail"
+    rounds: int = 3
+    #: PnP bootstrap resamples for the uncertainty (0 = the last update only)
+    bootstrap: int = 12
+    #: when the registration check fails: at most this many rounds of measuring frames again
+    #: at the poses the estimate corrects and fitting what is left, stopping once what is left
+    #: is below the shared threshold twice (``pgt_check.correct.registration``; 0 = off): the
+    #: first estimate's rotation / translation split is far off where the misregistration zooms
+    #: the images (reports/shared_errors.md)
+    registration_rounds: int = 8
+    #: frames measured per round (evenly spaced; the pooled fit needs a few dozen)
+    registration_frames: int = 30
+    #: the registration rounds together, and the per-frame corrections together, may each
+    #: take at most this multiple of the main pass's measuring time (the frames' summed
+    #: ``timings.total``): a round / frame is not started when those so far plus one more
+    #: (as long as the mean so far) would exceed it; the first always runs (0 = no bound).
+    #: The rounds also stop when what is left grows (the estimate oscillates)
+    budget: float = 2.0
+
+    def __post_init__(self) -> None:
+        _check_range("correct.rounds", self.rounds, 1, 1000)
+        _check_range("correct.bootstrap", self.bootstrap, 0, 10_000)
+        _check_range("correct.registration_rounds", self.registration_rounds, 0, 1000)
+        _check_range("correct.registration_frames", self.registration_frames, 3, 100_000)
+        _check_range("correct.budget", self.budget, 0, 1e6)
