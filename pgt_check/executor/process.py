@@ -13,6 +13,7 @@ import multiprocessing
 import os
 import signal
 import threading
+import time
 from collections.abc import Iterable, Iterator
 from typing import Any
 
@@ -38,6 +39,7 @@ logger = logging.getLogger(__name__)
 
 _WORKER_CHECKER: Any = None
 _WORKER_SETUP_ERROR: CheckerSetupError | None = None
+_EXIT_WAIT_S = 5.0  # longest wait for dead workers' exit codes after a crash
 
 
 def _watch_parent() -> None:
@@ -80,9 +82,12 @@ def _exit_codes(procs: Iterable[Any]) -> list[int]:
     """Exit codes of dead worker processes. The pool SIGTERMs its other workers once one has
     died; those are left out."""
     codes = set()
+    deadline = time.monotonic() + _EXIT_WAIT_S
     for p in procs:
-        if p.exitcode is None:
-            p.join(timeout=1.0)
+        # The pool's manager thread reaps dead workers too: between its waitpid and its storing
+        # the status, ours sees neither a live child nor a code. Poll until one appears.
+        while p.exitcode is None and time.monotonic() < deadline:
+            p.join(timeout=0.1)
         if p.exitcode not in (None, 0):
             codes.add(p.exitcode)
     return sorted(codes - {-signal.SIGTERM} or codes)
