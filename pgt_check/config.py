@@ -231,11 +231,11 @@ class EdgeConfig:
     #: time (reports/shared_errors_tiles.md)
     tile_grid: int = 0
     #: how an edge alignment is accepted: "significance" (its score against the frame's own
-    #: wrong alignments, false-accept rate about ``alpha`` whatever the scene) or "support"
-    #: (the rule before issue #29: a fixed share of render edges on photo edges; still the
-    #: default, as the significance rule verified fewer colourless 7-Scenes frames);
-    #: reports/edge_evidence.md has both side by side
-    decision: Literal["significance", "support"] = "support"
+    #: wrong alignments, false-accept rate about ``alpha`` whatever the scene), "support" (the
+    #: rule before issue #29: a fixed share of render edges on photo edges) or "either" (one of
+    #: the two; the default: a TSDF scan's correct alignments often lack the support, a
+    #: cluttered near view's the significance); reports/edge_evidence.md has them side by side
+    decision: Literal["either", "significance", "support"] = "either"
     alpha: float = 0.01
     #: each frame's edges choose the motion model (shift, similarity, affine, up to ``model``)
     #: by spatial cross-validation instead of always fitting ``model`` (for TSDF scans, where a

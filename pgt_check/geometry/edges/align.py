@@ -243,6 +243,15 @@ def _measured(
     )
 
 
+def _accepted(decision: str, supported: bool, significant: bool) -> bool:
+    """Whether an unambiguous, well-conditioned alignment is accepted under ``decision``."""
+    if decision == "support":
+        return supported
+    if decision == "significance":
+        return significant
+    return supported or significant  # "either"
+
+
 def align_edges(
     render_edges: RenderEdges,
     photo_edges: PhotoEdges,
@@ -302,10 +311,12 @@ def align_edges(
         reason = EdgeReason.ILL_CONDITIONED
     elif found.ambiguous:
         reason = EdgeReason.AMBIGUOUS
-    elif config.decision == "support" and support < config.min_support:
-        reason = EdgeReason.LOW_SUPPORT
-    elif config.decision == "significance" and not found.p_value <= config.alpha:
-        reason = EdgeReason.NOT_SIGNIFICANT
+    elif not _accepted(config.decision, support >= config.min_support,
+                       found.p_value <= config.alpha):
+        reason = (
+            EdgeReason.NOT_SIGNIFICANT if config.decision == "significance"
+            else EdgeReason.LOW_SUPPORT
+        )
     if reason is not None:
         return _failure(reason, re, pe, tau, config, timings, **out)
     logger.debug(

@@ -11,7 +11,7 @@ KIND_BORDER = 1  # mesh / background border
 KIND_CREASE = 2  # normal discontinuity on one surface
 
 #: decision rules of ``align_edges`` (``EdgeAlignConfig.decision``)
-DECISIONS = ("significance", "support")
+DECISIONS = ("either", "significance", "support")
 MODELS = ("shift", "similarity", "affine", "homography")
 #: parameters of each model (refinement needs at least 3 matches per parameter)
 N_PARAMS = {"shift": 2, "similarity": 4, "affine": 6, "homography": 8}
@@ -115,9 +115,12 @@ class EdgeAlignConfig:
     #: "significance": its shift score is significant at level ``alpha`` against the frame's own
     #: wrong alignments (``search.null_p_value``): the false-accept rate of a frame with no true
     #: alignment in the search range is about ``alpha`` whatever the scene; "support" (the rule
-    #: before issue #29, still the default: reports/edge_evidence.md): at least
-    #: ``min_support`` of the render edges lie on a photo edge
-    decision: str = "support"
+    #: before issue #29): at least ``min_support`` of the render edges lie on a photo edge;
+    #: "either" (the default): one of the two suffices. A scan's rounded, incomplete edges
+    #: lower the support of a correct alignment but not its standing against the frame's own
+    #: chance alignments; a cluttered near view is the other way round
+    #: (reports/edge_evidence.md)
+    decision: str = "either"
     alpha: float = 0.01
     min_support: float = 0.3
 

@@ -17,7 +17,7 @@ class _Captured(Exception):
 
 @pytest.mark.parametrize(
     ("settings", "expected"),
-    [({}, {"select_model": False, "decision": "support", "model": "homography"}),
+    [({}, {"select_model": False, "decision": "either", "model": "homography"}),
      (PRESETS["fast"], {"select_model": False}),
      ({"edges": {"select_model": True}}, {"select_model": True}),
      ({"edges": {"decision": "significance", "alpha": 0.02, "tile_grid": 3}},

@@ -216,6 +216,16 @@ def test_decision_rules_are_selectable():
     assert sig.success and not old.success and old.reason is EdgeReason.LOW_SUPPORT
     strict = align_edges(re, pe, EdgeAlignConfig(decision="significance", alpha=sig.p_value / 2))
     assert not strict.success and strict.reason is EdgeReason.NOT_SIGNIFICANT
+    # "either" (the default) accepts on one of the two and refuses only when both refuse
+    assert EdgeAlignConfig().decision == "either"
+    one = align_edges(re, pe, EdgeAlignConfig(min_support=sig.support + 0.01))
+    assert one.success and one.corner_error == pytest.approx(sig.corner_error)
+    other = align_edges(re, pe, EdgeAlignConfig(alpha=sig.p_value / 2, min_support=0.0))
+    assert other.success
+    neither = align_edges(
+        re, pe, EdgeAlignConfig(alpha=sig.p_value / 2, min_support=sig.support + 0.01)
+    )
+    assert not neither.success and neither.reason is EdgeReason.LOW_SUPPORT
     with pytest.raises(ValueError, match="decision"):
         EdgeAlignConfig(decision="votes")
     with pytest.raises(ValueError, match="alpha"):
