@@ -25,6 +25,7 @@ from pgt_check.config_load import check_name as _check_name
 from pgt_check.config_load import check_range as _check_range
 from pgt_check.config_load import from_dict, merge  # re-exported
 from pgt_check.config_load import load_config_file as _read_config_file
+from pgt_check.errors import ConfigError
 
 #: upper bounds of the size options (beyond them a run would allocate without bound or hang):
 #: keypoints per image, image sides in px, edge tiles per side, RANSAC iterations
@@ -237,12 +238,14 @@ class EdgeConfig:
     #: cluttered near view's the significance); reports/edge_evidence.md has them side by side
     decision: Literal["either", "significance", "support"] = "either"
     alpha: float = 0.01
-    #: each frame's edges choose the motion model (shift, similarity, affine, up to ``model``)
-    #: by spatial cross-validation instead of always fitting ``model`` (for TSDF scans, where a
-    #: fixed homography bends to shrunk silhouettes and clutter). Off by default: the simpler
-    #: models' evidence biases the pooled registration fit, and it doubles the edge path's
-    #: time (reports/edge_evidence.md)
-    select_model: bool = False
+    #: the frame's edges choose the motion model (shift, similarity, affine, up to ``model``)
+    #: by spatial cross-validation instead of fitting ``model`` (for TSDF scans, where a fixed
+    #: homography bends to shrunk silhouettes and clutter): "always", "never", or "fallback"
+    #: (the default): only where the fixed model's alignment does not pass (refused, or its
+    #: corner error above the frame's threshold). The fixed alignment's points stay the
+    #: run-level evidence wherever it was accepted: the simpler models' points bias the pooled
+    #: registration fit. ``true`` / ``false`` mean always / never (reports/edge_evidence.md)
+    select_model: Literal["never", "fallback", "always"] | bool = "fallback"
 
     def __post_init__(self) -> None:
         _check_range("edges.alpha", self.alpha, 0, 0.5, lo_open=True)
@@ -250,6 +253,13 @@ class EdgeConfig:
             object.__setattr__(self, "resize_max", None)
         _check_range("edges.resize_max", self.resize_max, 16, MAX_IMAGE_SIDE)
         _check_range("edges.tile_grid", self.tile_grid, 0, MAX_TILE_GRID)
+        if isinstance(self.select_model, bool):
+            object.__setattr__(self, "select_model", "always" if self.select_model else "never")
+        elif self.select_model not in ("never", "fallback", "always"):
+            raise ConfigError(
+                f"edges.select_model: {self.select_model!r} is not one of never, fallback, "
+                "always (or true / false)"
+            )
 
 
 @dataclass(frozen=True)

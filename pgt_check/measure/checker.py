@@ -323,7 +323,7 @@ class FrameChecker:
                 return None
         render, photo, cam, scale = self._edge_images(w, clock)
         t = time.perf_counter()
-        out = measure_edges(render, photo, cam, scale, w.camera, e)
+        out = measure_edges(render, photo, cam, scale, w.camera, e, threshold)
         clock.add("edges", time.perf_counter() - t)
         return out
 

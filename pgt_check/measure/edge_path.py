@@ -9,6 +9,7 @@ nothing, and it adds 2D-3D evidence to the run-level checks.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -39,22 +40,37 @@ def measure_edges(
     scale: tuple[float, float],
     camera: Camera,
     config: EdgeConfig,
+    threshold_px: float | None = None,
 ) -> EdgePath:
-    """Align the render's geometric edges with the photo's (both at working size)."""
-    from pgt_check.geometry.edges import (
-        EdgeAlignConfig,
-        RenderEdgeConfig,
-        align_edges,
-        geometric_edges,
-        photo_edges,
-    )
-    from pgt_check.geometry.homography import corner_error, corner_shift_and_zoom, scale_homography
+    """Align the render's geometric edges with the photo's (both at working size).
+
+    ``config.select_model`` "fallback": the fixed model first; where its alignment does not
+    pass (refused, or its corner error above ``threshold_px``, original pixels), the frame's
+    edges choose the model by cross-validation and that alignment is the measurement
+    (``method`` "edges:<model>"). The fixed alignment's matched points stay the evidence
+    wherever it was accepted (a simpler model's points bias the pooled registration fit)."""
+    from pgt_check.geometry.edges import RenderEdgeConfig, geometric_edges, photo_edges
 
     redges = geometric_edges(
         render.depth, cam_w.K, RenderEdgeConfig(include_borders=config.include_borders)
     )
     pedges = photo_edges(photo_w)
-    al = align_edges(
+    mode = config.select_model
+    al = _align(redges, pedges, config, select=mode == "always")
+    first = _measurement(al, scale, camera, "edges" if mode != "always" else f"edges:{al.model}")
+    if mode != "fallback" or _passes(first, threshold_px):
+        return _edge_path(first, al, cam_w, scale)
+    cv = _align(redges, pedges, config, select=True)
+    if not cv.success:
+        return _edge_path(first, al, cam_w, scale)
+    chosen = _measurement(cv, scale, camera, f"edges:{cv.model}")
+    return _edge_path(chosen, al if al.success else cv, cam_w, scale)
+
+
+def _align(redges: Any, pedges: Any, config: EdgeConfig, select: bool) -> Any:
+    from pgt_check.geometry.edges import EdgeAlignConfig, align_edges
+
+    return align_edges(
         redges,
         pedges,
         EdgeAlignConfig(
@@ -62,9 +78,31 @@ def measure_edges(
             tile_grid=config.tile_grid,
             decision=config.decision,
             alpha=config.alpha,
-            select_model=config.select_model,
+            select_model=select,
         ),
     )
+
+
+#: refusals a different motion model can change (the support and the p-value are measured
+#: after the refinement; the edge counts, the overlap and the shift search's ambiguity are not)
+_REFIT_CAN_CHANGE = ("low_support", "not_significant", "ill_conditioned_homography")
+
+
+def _passes(m: PathMeasurement, threshold_px: float | None) -> bool:
+    """Whether the cross-validated model has nothing to add: accepted and (with a threshold)
+    within it, or refused for a reason no other model changes."""
+    if m.reason:
+        return m.reason not in _REFIT_CAN_CHANGE
+    if m.corner_error_px is None:
+        return False
+    return threshold_px is None or m.corner_error_px <= threshold_px
+
+
+def _measurement(al: Any, scale: tuple[float, float], camera: Camera, method: str
+                 ) -> PathMeasurement:
+    """The stored result of one alignment (homography in original pixels)."""
+    from pgt_check.geometry.homography import corner_error, corner_shift_and_zoom, scale_homography
+
     h = err = dx = dy = zoom = None
     if al.success and al.photo_from_render is not None:
         h_orig = scale_homography(al.photo_from_render, *scale)
@@ -73,9 +111,9 @@ def measure_edges(
         h = tuple(tuple(map(float, r)) for r in h_orig)
     n = int(al.n_edges)
     support = float(al.support) if np.isfinite(al.support) else 0.0
-    m = PathMeasurement(
+    return PathMeasurement(
         kind="edges",
-        method="edges",
+        method=method,
         evidence=Evidence.ABSOLUTE,
         n_kpts_render=n,
         n_kpts_photo=int(al.n_photo_edges),
@@ -89,8 +127,13 @@ def measure_edges(
         shift_dy_px=dy,
         zoom=zoom,
     )
-    mt = al.matches
-    if not al.success:
+
+
+def _edge_path(m: PathMeasurement, points_from: Any, cam_w: Camera, scale: tuple[float, float]
+               ) -> EdgePath:
+    """The path result ``m`` with the matched points of the alignment ``points_from``."""
+    mt = points_from.matches
+    if not points_from.success or mt is None:
         empty = np.zeros((0, 2))
         return EdgePath(m, empty, empty, np.zeros(0), cam_w, scale)
     return EdgePath(m, mt.render_points, mt.photo_points, mt.depth, cam_w, scale)

@@ -31,7 +31,8 @@ Steps of ``align_edges``:
     Tukey scale annealed from tau to ``final_scale`` x tau. With ``tile_grid``, where the
     shift search reads the result as ambiguous, the ambiguity is judged again around the
     refined alignment (a zoom spreads the shift scores over several peaks).
-    With ``select_model`` (off by default) the model is not fixed: each model from shift up to
+    With ``select_model`` (the run setting ``edges.select_model`` turns it on where the fixed
+    model's alignment does not pass) the model is not fixed: each model from shift up to
     ``model`` is refined on the edges of two opposite image quadrants and tested on the other
     two (``align.select_model``); the lowest held-out robust cost wins (issue #29: on a
     TSDF-fused scan a fixed homography bends to the rounded silhouettes and clutter).
