@@ -5,10 +5,9 @@ come from ``verdict.frame_bounds``.
 Per run (``run_accuracy``): how many frames are verified to within X deg / Y units, percentiles
 of the bounds, the shared errors as sizes with their 95 % intervals, and the detection limits of
 this run. The limits come from this run's own noise, not from constants: the single-frame limit
-is the per-frame threshold plus the median of the frames' bootstrap noise (an error that large
-is measured above the threshold in about 95 % of frames), turned into degrees / units with the
-run's median sensitivities (px per degree, px per scene unit) about the axis that moves the
-image corners least (so the limit holds whatever the error's axis); the shared limit is the
+is the error flagged in 95 % of (frame, error axis) pairs, each frame at its threshold plus its
+bootstrap noise and with its own sensitivities over error axes (``pooled_detection_size``;
+px per degree / per scene unit as the check's homography measures them); the shared limit is the
 shared threshold plus the half-width of the registration fit's own 95 % interval, turned with
 the image effect of a world rotation / translation as the registration check measures it
 (``world_sensitivity``).
@@ -190,6 +189,48 @@ def shared_sizes(
     return tuple(out)
 
 
+#: one-sided 95 % point of the standard normal (a frame's lognormal spread over error axes)
+_Z95 = 1.6448536269514722
+
+
+def pooled_detection_size(
+    rows: Sequence[Mapping[str, Any]], threshold_px: float, noise_px: float | None,
+    mid_key: str, low_key: str, q: float = 0.95,
+) -> float | None:
+    """The error size (deg or units) flagged in a share ``q`` of (frame, error axis) pairs.
+
+    Each frame flags an error once its corner error exceeds its threshold plus its bootstrap
+    noise (``acc_noise_px``; ``noise_px`` where missing): at ``e / g`` for an axis of
+    sensitivity ``g``. Over error axes the frame's size is taken as lognormal through its
+    median (``mid_key`` sensitivity) and 95 % point (``low_key``, the 5 % quantile of the
+    sensitivities); the frames' distributions are pooled with equal weight and the pooled
+    ``q`` point is found by bisection. None without a frame that has both sensitivities."""
+    mus, sigmas = [], []
+    for r in rows:
+        mid, low = _num(r.get(mid_key)), _num(r.get(low_key))
+        if not mid or not low or mid <= 0 or low <= 0:
+            continue
+        thr = _num(r.get("threshold_px")) or threshold_px
+        noise = _num(r.get("acc_noise_px"))
+        e = thr + (noise if noise is not None else (noise_px or 0.0))
+        mus.append(math.log(e / mid))
+        sigmas.append(max(math.log(mid / low), 0.0) / _Z95)
+    if not mus:
+        return None
+    mu, sg = np.asarray(mus), np.asarray(sigmas)
+
+    def share(log_size: float) -> float:
+        z = np.where(sg > 0, (log_size - mu) / np.where(sg > 0, sg, 1.0),
+                     np.where(log_size >= mu, np.inf, -np.inf))
+        return float(np.mean([0.5 * math.erfc(-zi / math.sqrt(2)) for zi in z]))
+
+    lo, hi = float(np.min(mu - 6 * sg)) - 1.0, float(np.max(mu + 6 * sg)) + 1.0
+    for _ in range(60):
+        mid_log = 0.5 * (lo + hi)
+        lo, hi = (mid_log, hi) if share(mid_log) < q else (lo, mid_log)
+    return math.exp(hi)
+
+
 def detection_limits(
     rows: Sequence[Mapping[str, Any]],
     threshold_px: float,
@@ -197,11 +238,13 @@ def detection_limits(
 ) -> DetectionLimits:
     """This run's detection limits from its own noise (module docstring)."""
     noise_px = _median([r.get("acc_noise_px") for r in rows])
-    # a single frame's limit holds whatever the axis or direction of its error: the axis
-    # that moves the image corners least (on the sample scene the mean over the axes flagged
-    # 1 of 3 rotations at the limit, random axes)
-    ppd = _median([r.get("acc_min_px_per_deg") for r in rows])
-    ppu = _median([r.get("acc_min_px_per_unit") for r in rows])
+    # a single frame's limit: flagged in 95 % of (frame, error axis) pairs, each frame at its
+    # own threshold + noise and sensitivities (a limit at the median frame and one axis was
+    # met at 1.3-1.8x instead of 1x by the self-test: reports/accuracy.md)
+    frame_deg = pooled_detection_size(rows, threshold_px, noise_px, "acc_px_per_deg",
+                                      "acc_low_px_per_deg")
+    frame_units = pooled_detection_size(rows, threshold_px, noise_px, "acc_px_per_unit",
+                                        "acc_low_px_per_unit")
     # the shared limit: the registration check's own sensitivity to a world rotation /
     # translation (``world_sensitivity``, stored with the registration entry by judge_run);
     # else the frames' camera-frame sensitivity at their points
@@ -220,15 +263,20 @@ def detection_limits(
     def conv(px: float | None, per: float | None) -> float | None:
         return None if px is None or not per else px / per
 
+    def per(size: float | None) -> float | None:  # the sensitivity the limit amounts to
+        return None if frame_px is None or not size else frame_px / size
+
     return DetectionLimits(
-        frame_px, conv(frame_px, ppd), conv(frame_px, ppu),
+        frame_px, frame_deg, frame_units,
         shared_px, conv(shared_px, pts_ppd), conv(shared_px, pts_ppu),
         noise_px, _median([r.get("acc_noise_deg") for r in rows]),
-        _median([r.get("acc_noise_t") for r in rows]), ppd, ppu, pts_ppd, pts_ppu,
-        "single frame: per-frame threshold + median per-frame bootstrap noise (px), turned "
-        "into a rotation alone or a translation alone with the run's median sensitivities at "
-        "the image corners (where the corner error is measured) about / along the camera axis "
-        "that moves them least, so it holds whatever the axis; shared: shared threshold + "
+        _median([r.get("acc_noise_t") for r in rows]), per(frame_deg), per(frame_units),
+        pts_ppd, pts_ppu,
+        "single frame: the rotation alone / translation alone flagged in 95 % of (frame, "
+        "error axis) pairs: each frame flags an error once its corner error (its points' "
+        "image motion fitted by a homography, as the check measures it) exceeds its "
+        "threshold + its bootstrap noise; per frame lognormal over error axes through its "
+        "median and 5 % sensitivities, pooled over the frames; shared: shared threshold + "
         "half-width of the registration fit's 95 % interval (px), turned with the image "
         "effect of a world rotation about the camera centroid / a world translation as the "
         "registration check measures it, about / along the world axis where it is smallest",

@@ -35,16 +35,16 @@ ACCURACY_COLUMNS: dict[str, str] = {
     "acc_noise_deg": "rotation the frame cannot tell from zero (bootstrap noise, 95 %), deg",
     "acc_noise_t": "camera-centre shift it cannot tell from zero, scene units",
     "acc_noise_px": "image displacement it cannot tell from zero, px",
-    "acc_px_per_deg": "sensitivity: image corners moved per degree of rotation, px (mean "
-    "over the camera axes)",
-    "acc_px_per_unit": "sensitivity: image corners moved per scene unit of camera translation "
-    "at the evidence's median depth, px (mean over the camera axes)",
-    "acc_min_px_per_deg": "the same about the camera axis that moves the corners least "
-    "(usually the roll), px per degree",
-    "acc_min_px_per_unit": "the same along the camera axis that moves the corners least "
-    "(usually forward), px per scene unit",
-    "acc_pts_px_per_deg": "the same at the frame's evidence points, px per degree",
-    "acc_pts_px_per_unit": "the same at the frame's evidence points, px per scene unit",
+    "acc_px_per_deg": "sensitivity: corner error per degree of rotation as the check measures "
+    "it (the points' image motion fitted by a homography), px (median over error axes)",
+    "acc_px_per_unit": "the same per scene unit of camera translation, px (median over error "
+    "axes; depends on the points' depths)",
+    "acc_low_px_per_deg": "the same at the 5 % quantile over error axes (95 % of axes move the "
+    "corners more), px per degree",
+    "acc_low_px_per_unit": "the same at the 5 % quantile over error axes, px per scene unit",
+    "acc_pts_px_per_deg": "image motion at the frame's evidence points per degree of rotation, "
+    "px (mean over the camera axes)",
+    "acc_pts_px_per_unit": "the same per scene unit of camera translation, px",
     "acc_depth": "median depth of the fit's points, scene units",
     "acc_points": "2D-3D points of the fit (inliers / all)",
     "acc_evidence": "what the bound rests on: absolute sources (raw, enhanced, edges), "
@@ -150,8 +150,8 @@ def _columns(fa: FrameAccuracy) -> dict[str, Any]:
         "acc_noise_px": fa.effect_noise_px,
         "acc_px_per_deg": fa.px_per_deg,
         "acc_px_per_unit": fa.px_per_unit,
-        "acc_min_px_per_deg": fa.min_px_per_deg,
-        "acc_min_px_per_unit": fa.min_px_per_unit,
+        "acc_low_px_per_deg": fa.low_px_per_deg,
+        "acc_low_px_per_unit": fa.low_px_per_unit,
         "acc_pts_px_per_deg": fa.points_px_per_deg,
         "acc_pts_px_per_unit": fa.points_px_per_unit,
         "acc_depth": fa.depth,

@@ -19,7 +19,7 @@ def _row(fid: str, verdict: str, rot: float | None, t: float | None, noise_px: f
             acc_rot_deg=rot / 2, acc_rot_bound_deg=rot, acc_t=t / 2, acc_t_bound=t,
             acc_px=1.0, acc_px_bound=2.0, acc_noise_px=noise_px, acc_noise_deg=0.05,
             acc_noise_t=0.002, acc_px_per_deg=12.0, acc_px_per_unit=250.0,
-            acc_min_px_per_deg=10.0, acc_min_px_per_unit=200.0,
+            acc_low_px_per_deg=10.0, acc_low_px_per_unit=200.0,
             acc_pts_px_per_deg=8.0, acc_pts_px_per_unit=160.0,
         )
     return r
@@ -52,7 +52,8 @@ def test_statement_counts_percentiles_and_limits():
     assert acc.within_deg == pytest.approx(0.172, abs=1e-3)
     assert acc.n_within == 8  # the PASS frames at or below their own 90th percentile
     assert acc.rotation_bound_deg.max == 3.0
-    # single frame: threshold + median noise, over the weakest axis' corner sensitivity
+    # single frame: threshold + noise over the 5 % axis sensitivity (identical frames: the
+    # pooled 95 % point is every frame's own)
     assert acc.limits.frame_px == pytest.approx(8.5)
     assert acc.limits.frame_deg == pytest.approx(0.85)
     assert acc.limits.frame_units == pytest.approx(8.5 / 200)
@@ -101,3 +102,32 @@ def test_require_accuracy_config_is_typed_and_range_checked():
 def test_no_bounds_is_said_plainly():
     acc = run_accuracy([_row("a", "PASS", None, None)], None, VerdictConfig(), 8.0)
     assert acc.n_bounded == 0 and acc.sentences[0].startswith("None of the 1 frames")
+
+
+def test_pooled_detection_size_is_the_95_percent_point_of_the_pooled_frames():
+    import math
+
+    from pgt_check.verdict.accuracy import pooled_detection_size
+
+    # two kinds of frames: sensitive ones (median 20 px/deg, 5 % axis 10) and weak ones
+    # (median 5, 5 % axis 4); threshold 8 + noise 1 -> sizes lognormal per frame
+    frames = [dict(acc_px_per_deg=20.0, acc_low_px_per_deg=10.0, acc_noise_px=1.0)] * 3
+    frames += [dict(acc_px_per_deg=5.0, acc_low_px_per_deg=4.0, acc_noise_px=1.0)]
+    size = pooled_detection_size(frames, 8.0, None, "acc_px_per_deg", "acc_low_px_per_deg")
+    # Monte Carlo of the stated model: the share of (frame, axis) sizes at or below it is 95 %
+    import numpy as np
+
+    rng = np.random.default_rng(0)
+    draws = []
+    for f in frames:
+        mu = math.log(9.0 / f["acc_px_per_deg"])
+        sg = math.log(f["acc_px_per_deg"] / f["acc_low_px_per_deg"]) / 1.6448536
+        draws.append(np.exp(rng.normal(mu, sg, 200_000)))
+    assert np.mean(np.concatenate(draws) <= size) == pytest.approx(0.95, abs=0.003)
+    # the weak frame alone decides more than its share: above the sensitive frames' own 95 %
+    assert size > 9.0 / 10.0
+    # threshold per row wins over the run's; frames without sensitivities are left out
+    rows_thr = [dict(f, threshold_px=16.0) for f in frames] + [dict(acc_px_per_deg=None)]
+    assert pooled_detection_size(rows_thr, 8.0, None, "acc_px_per_deg",
+                                 "acc_low_px_per_deg") == pytest.approx(size * 17 / 9, rel=1e-6)
+    assert pooled_detection_size([{}], 8.0, None, "acc_px_per_deg", "acc_low_px_per_deg") is None
