@@ -223,38 +223,71 @@ def read_lamar(
     files = find_lamar_files(path, sensors=sensors, images=images)
     cameras, sensor_ids = read_sensors(files.sensors)
     rigs, poses = _rigs_and_poses(files, sensor_ids)
-    rigs_of: dict[str, list[str]] = {}
-    for rig, sensor in rigs:
-        rigs_of.setdefault(sensor, []).append(rig)
-
     image_rows = data_lines(files.images)
     if images is not None and Path(images).is_dir():
         root = Path(images)
     else:
         root = default_image_root(files.images, _first_image_path(image_rows))
+    frames = _imaged_frames(files, image_rows, root, cameras, sensor_ids, rigs, poses)
+    frames += _frames_without_image(files, poses, rigs, cameras, frames)
+    frames.sort(key=lambda item: (item[0], item[1]))
+    logger.info(
+        "read %d frames from %s (sensors: %s)", len(frames), files.trajectories, files.sensors.name
+    )
+    return Trajectory(
+        tuple(f for _, _, f in frames),
+        source=str(files.trajectories),
+        format="lamar",
+        metadata=_metadata(files, root),
+    )
+
+
+def _image_row(
+    files: LamarFiles, line: int, text: str, cameras: dict[str, Camera], sensor_ids: set[str]
+) -> tuple[str, str, str, float]:
+    """``(timestamp text, sensor id, image path, timestamp)`` of one images-file row, checked."""
+    fields = split_row(
+        files.images, line, text, count=3, sep=",", layout="timestamp, sensor_id, image_path"
+    )
+    stamp_text, sensor_id, image_path = fields
+    timestamp = parse_timestamp(files.images, line, stamp_text)
+    if sensor_id not in cameras:
+        known = ", ".join(sorted(cameras)) or "none"
+        what = "a camera" if sensor_id in sensor_ids else "a sensor id"
+        raise FormatError(
+            files.images,
+            line,
+            f"expected {what} from {files.sensors.name} ({known}); got {sensor_id!r}",
+        )
+    if not image_path:
+        raise FormatError(files.images, line, "expected an image path; got an empty field")
+    return stamp_text, sensor_id, image_path, timestamp
+
+
+def _imaged_frames(
+    files: LamarFiles,
+    image_rows: list[tuple[int, str]],
+    root: Path,
+    cameras: dict[str, Camera],
+    sensor_ids: set[str],
+    rigs: dict,
+    poses: dict,
+) -> list[tuple[float, str, Frame]]:
+    """``(timestamp, sensor id, Frame)`` of every image row with a pose, in file order; the
+    rows without one are skipped with one WARNING."""
+    rigs_of: dict[str, list[str]] = {}
+    for rig, sensor in rigs:
+        rigs_of.setdefault(sensor, []).append(rig)
     frames: list[tuple[float, str, Frame]] = []
     seen = UniqueKeys(files.images, "one image per (timestamp, sensor)")
     unposed: list[str] = []
     for line, text in image_rows:
-        fields = split_row(
-            files.images, line, text, count=3, sep=",", layout="timestamp, sensor_id, image_path"
+        stamp_text, sensor_id, image_path, timestamp = _image_row(
+            files, line, text, cameras, sensor_ids
         )
-        stamp_text, sensor_id, image_path = fields
-        timestamp = parse_timestamp(files.images, line, stamp_text)
-        if sensor_id not in cameras:
-            known = ", ".join(sorted(cameras)) or "none"
-            what = "a camera" if sensor_id in sensor_ids else "a sensor id"
-            raise FormatError(
-                files.images,
-                line,
-                f"expected {what} from {files.sensors.name} ({known}); got {sensor_id!r}",
-            )
-        if not image_path:
-            raise FormatError(files.images, line, "expected an image path; got an empty field")
         frame_id = f"{stamp_text}/{sensor_id}"
         seen.add(frame_id, frame_id, line)
-        world_from_cam = _camera_pose(poses, rigs, rigs_of.get(sensor_id, ()), timestamp,
-                                      sensor_id)
+        world_from_cam = _camera_pose(poses, rigs, rigs_of.get(sensor_id, ()), timestamp, sensor_id)
         if world_from_cam is None:
             unposed.append(frame_id)
             continue
@@ -275,13 +308,27 @@ def read_lamar(
             files.trajectories.name,
             unposed[0],
         )
+    return frames
+
+
+def _frames_without_image(
+    files: LamarFiles,
+    poses: dict,
+    rigs: dict,
+    cameras: dict[str, Camera],
+    frames: list[tuple[float, str, Frame]],
+) -> list[tuple[float, str, Frame]]:
+    """``(timestamp, camera id, Frame)`` without an image for every pose no image row uses
+    (see ``_poses_without_image``), with one WARNING if there are any."""
     imaged = {(stamp, sensor) for stamp, sensor, _ in frames}
     no_image = _poses_without_image(poses, rigs, cameras, imaged)
+    out: list[tuple[float, str, Frame]] = []
     for (stamp, sensor), world_from_cam in no_image.items():
         # kept: checked as UNVERIFIABLE image_missing (and counted by the gate), never dropped
         frame_id = f"{_stamp_text(stamp)}/{sensor}"
-        frames.append((stamp, sensor, Frame(frame_id, cameras[sensor], world_from_cam, "", None,
-                                            stamp)))
+        out.append(
+            (stamp, sensor, Frame(frame_id, cameras[sensor], world_from_cam, "", None, stamp))
+        )
     if no_image:
         logger.warning(
             "%s: %d camera or rig pose(s) have no image in %s (first: %s); they are "
@@ -291,16 +338,7 @@ def read_lamar(
             files.images.name,
             "/".join(map(str, next(iter(no_image)))),
         )
-    frames.sort(key=lambda item: (item[0], item[1]))
-    logger.info(
-        "read %d frames from %s (sensors: %s)", len(frames), files.trajectories, files.sensors.name
-    )
-    return Trajectory(
-        tuple(f for _, _, f in frames),
-        source=str(files.trajectories),
-        format="lamar",
-        metadata=_metadata(files, root),
-    )
+    return out
 
 
 def _rigs_and_poses(files: LamarFiles, sensor_ids: set[str]) -> tuple[dict, dict]:
@@ -390,38 +428,13 @@ def write_lamar(trajectory: Trajectory, directory: str | Path, suffix: str = "")
     camera_ids: dict[Camera, str] = {}
     for frame in trajectory:
         camera_ids.setdefault(frame.camera, f"cam{len(camera_ids)}")
-    stamps = [f.timestamp for f in trajectory]
-    keys = {(s, camera_ids[f.camera]) for s, f in zip(stamps, trajectory, strict=True)}
-    if any(s is None or float(s) != int(s) for s in stamps) or len(keys) != len(trajectory):
-        if trajectory.frames:
-            logger.info(
-                "%s: timestamps are missing, non-integer or repeated; writing frame indices",
-                directory,
-            )
-        stamps = list(range(len(trajectory)))
-    stamp_text = [str(int(s)) for s in stamps]
-
-    sensors_rows = ["# sensor_id, name, sensor_type, [sensor_params]+"]
-    for camera, cam_id in camera_ids.items():
-        values = ", ".join(_fmt(p) for p in opencv_to_colmap_params(camera.model, camera.params))
-        sensors_rows.append(
-            f"{cam_id}, {cam_id}, camera, {camera.model}, {camera.width}, {camera.height}, {values}"
-        )
+    stamp_text = _stamp_texts(trajectory, camera_ids, directory)
+    sensors_rows = _sensors_rows(camera_ids)
     images_rows = ["# timestamp, sensor_id, image_path"]
     traj_rows = [f"# timestamp, device_id, {POSE_LAYOUT}"]
     for stamp, frame in zip(stamp_text, trajectory, strict=True):
         cam_id = camera_ids[frame.camera]
-        if frame.image_file is not None:
-            image = Path(
-                os.path.relpath(Path(frame.image_file).absolute(), directory.absolute())
-            ).as_posix()
-        else:
-            image = frame.image_path
-        if "," in image or not image:
-            raise InputError(
-                f"frame {frame.frame_id}: image path {image!r} cannot be written to a LaMAR file"
-            )
-        images_rows.append(f"{stamp}, {cam_id}, {image}")
+        images_rows.append(f"{stamp}, {cam_id}, {_image_text(frame, directory)}")
         q = rotmat_to_quat(frame.world_from_cam[:3, :3])
         t = frame.world_from_cam[:3, 3]
         traj_rows.append(f"{stamp}, {cam_id}, " + ", ".join(_fmt(v) for v in (*q, *t)))
@@ -437,3 +450,47 @@ def write_lamar(trajectory: Trajectory, directory: str | Path, suffix: str = "")
     ):
         out[kind].write_text("\n".join(rows) + "\n", encoding="utf-8")
     return out
+
+
+def _stamp_texts(
+    trajectory: Trajectory, camera_ids: dict[Camera, str], directory: Path
+) -> list[str]:
+    """The timestamp column of each frame: its timestamp if all are integers and unique per
+    camera, else the frame indices (logged at INFO)."""
+    stamps = [f.timestamp for f in trajectory]
+    keys = {(s, camera_ids[f.camera]) for s, f in zip(stamps, trajectory, strict=True)}
+    if any(s is None or float(s) != int(s) for s in stamps) or len(keys) != len(trajectory):
+        if trajectory.frames:
+            logger.info(
+                "%s: timestamps are missing, non-integer or repeated; writing frame indices",
+                directory,
+            )
+        stamps = list(range(len(trajectory)))
+    return [str(int(s)) for s in stamps]
+
+
+def _sensors_rows(camera_ids: dict[Camera, str]) -> list[str]:
+    """The lines of the sensors file (header first), one camera row per camera id."""
+    sensors_rows = ["# sensor_id, name, sensor_type, [sensor_params]+"]
+    for camera, cam_id in camera_ids.items():
+        values = ", ".join(_fmt(p) for p in opencv_to_colmap_params(camera.model, camera.params))
+        sensors_rows.append(
+            f"{cam_id}, {cam_id}, camera, {camera.model}, {camera.width}, {camera.height}, {values}"
+        )
+    return sensors_rows
+
+
+def _image_text(frame: Frame, directory: Path) -> str:
+    """A frame's image path as written in the images file: relative to ``directory`` when the
+    frame has an ``image_file``, else its ``image_path``; raises InputError if unwritable."""
+    if frame.image_file is not None:
+        image = Path(
+            os.path.relpath(Path(frame.image_file).absolute(), directory.absolute())
+        ).as_posix()
+    else:
+        image = frame.image_path
+    if "," in image or not image:
+        raise InputError(
+            f"frame {frame.frame_id}: image path {image!r} cannot be written to a LaMAR file"
+        )
+    return image
