@@ -37,6 +37,17 @@ def read_pgt(path: str | Path, *, images: str | Path | None = None) -> Trajector
     root = Path(images) if images is not None else path.parent
     if not root.is_dir():
         raise InputError(f"{root}: images folder not found")
+    rows = _pose_rows(path)
+    sizes = _image_sizes(path, rows, root)
+    frames = _frames_with_cameras(path, rows, sizes, root)
+    logger.info("read %d frames from %s", len(frames), path)
+    return Trajectory(
+        tuple(frames), source=str(path), format="pgt", metadata={"images_dir": str(root)}
+    )
+
+
+def _pose_rows(path: Path) -> list[tuple[int, str, float, np.ndarray]]:
+    """``(line, rgb_file, f, world_from_cam (4, 4))`` of each row of a pGT file."""
     quats = QuaternionCounter(path)
     rows: list[tuple[int, str, float, np.ndarray]] = []
     seen = UniqueKeys(path, "unique image names")
@@ -53,7 +64,13 @@ def read_pgt(path: str | Path, *, images: str | Path | None = None) -> Trajector
             raise FormatError(path, line, f"expected a positive focal length f; got {fields[8]}")
         rows.append((line, name, v[7], invert_rigid(cam_from_world)))
     quats.report()
+    return rows
 
+
+def _image_sizes(
+    path: Path, rows: list[tuple[int, str, float, np.ndarray]], root: Path
+) -> dict[str, tuple[int, int]]:
+    """(width, height) by rgb_file of the images found under ``root``; InputError if none is."""
     sizes: dict[str, tuple[int, int]] = {}
     for _line, name, _f, _pose in rows:
         try:
@@ -64,6 +81,17 @@ def read_pgt(path: str | Path, *, images: str | Path | None = None) -> Trajector
         raise InputError(
             f"{path}: none of its {len(rows)} images found under {root} (needed for their size; use --images)"
         )
+    return sizes
+
+
+def _frames_with_cameras(
+    path: Path,
+    rows: list[tuple[int, str, float, np.ndarray]],
+    sizes: dict[str, tuple[int, int]],
+    root: Path,
+) -> list[Frame]:
+    """One Frame per row, in file order, with a SIMPLE_PINHOLE camera of its image's size (one
+    WARNING giving the count of missing images)."""
     distinct = set(sizes.values())
     shared = next(iter(distinct)) if len(distinct) == 1 else None
     # a missing image's frame keeps the most common size (it is UNVERIFIABLE image_missing
@@ -90,7 +118,4 @@ def read_pgt(path: str | Path, *, images: str | Path | None = None) -> Trajector
             how,
             missing[0],
         )
-    logger.info("read %d frames from %s", len(frames), path)
-    return Trajectory(
-        tuple(frames), source=str(path), format="pgt", metadata={"images_dir": str(root)}
-    )
+    return frames

@@ -137,6 +137,29 @@ def read_tum(
         )
     if isinstance(camera, str):
         camera = parse_camera_spec(camera)
+    rows = _pose_rows(path)
+    images = _images_source(path, images)
+    if images.is_dir():
+        timed = images_from_folder(images)
+    elif images.is_file():
+        timed = images_from_list(images)
+    else:
+        raise InputError(f"{images}: images folder or list file not found")
+    matched = match_images([(s, is_integer_token(t)) for _, t, s, _ in rows], timed, max_time_diff)
+    if not any(image is not None for image in matched):
+        raise InputError(
+            f"{path}: no pose matched an image in {images} (tolerance {max_time_diff} s)"
+        )
+    frames = _frames_with_images(path, camera, rows, matched, images)
+    frames.sort(key=lambda f: f.timestamp)
+    logger.info("read %d frames from %s", len(frames), path)
+    return Trajectory(
+        tuple(frames), source=str(path), format="tum", metadata={"images": str(images)}
+    )
+
+
+def _pose_rows(path: Path) -> list[tuple[int, str, float, np.ndarray]]:
+    """``(line, timestamp text, timestamp, world_from_cam (4, 4))`` of each row of a TUM file."""
     quats = QuaternionCounter(path)
     rows: list[tuple[int, str, float, np.ndarray]] = []
     seen = UniqueKeys(path, "unique timestamps")
@@ -152,7 +175,12 @@ def read_tum(
         ]
         rows.append((line, fields[0], stamp, quats.rigid(line, (v[6], v[3], v[4], v[5]), v[:3])))
     quats.report()
+    return rows
 
+
+def _images_source(path: Path, images: str | Path | None) -> Path:
+    """The images folder or list file: ``images`` if given, else ``rgb.txt`` or ``images/``
+    beside the trajectory (InputError if neither exists)."""
     if images is None:
         beside = [path.parent / "rgb.txt", path.parent / "images"]
         found = next((p for p in beside if p.exists()), None)
@@ -161,18 +189,18 @@ def read_tum(
                 f"{path}: no images given (--images) and no rgb.txt or images/ beside it"
             )
         images = found
-    images = Path(images)
-    if images.is_dir():
-        timed = images_from_folder(images)
-    elif images.is_file():
-        timed = images_from_list(images)
-    else:
-        raise InputError(f"{images}: images folder or list file not found")
-    matched = match_images([(s, is_integer_token(t)) for _, t, s, _ in rows], timed, max_time_diff)
-    if not any(image is not None for image in matched):
-        raise InputError(
-            f"{path}: no pose matched an image in {images} (tolerance {max_time_diff} s)"
-        )
+    return Path(images)
+
+
+def _frames_with_images(
+    path: Path,
+    camera: Camera,
+    rows: list[tuple[int, str, float, np.ndarray]],
+    matched: list[TimedImage | None],
+    images: Path,
+) -> list[Frame]:
+    """One Frame per pose row, in file order, with its matched image or none (one WARNING
+    giving the count of poses without one)."""
     frames: list[Frame] = []
     unmatched: list[str] = []
     for (_line, token, stamp, world_from_cam), image in zip(rows, matched, strict=True):
@@ -191,8 +219,4 @@ def read_tum(
             images,
             unmatched[0],
         )
-    frames.sort(key=lambda f: f.timestamp)
-    logger.info("read %d frames from %s", len(frames), path)
-    return Trajectory(
-        tuple(frames), source=str(path), format="tum", metadata={"images": str(images)}
-    )
+    return frames
