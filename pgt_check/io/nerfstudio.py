@@ -88,6 +88,24 @@ def _camera(path: Path, where: str, values: dict[str, Any], image: Path) -> Came
         for k in (*INTRINSIC_KEYS, *DISTORTION_KEYS)
         if k in values
     }
+    width, height = _camera_size(path, where, num, image)
+    fx, fy = _focal_lengths(path, where, num, width, height)
+    cx = num.get("cx", width / 2.0) - COLMAP_PIXEL_OFFSET
+    cy = num.get("cy", height / 2.0) - COLMAP_PIXEL_OFFSET
+    dist = {k: num.get(k, 0.0) for k in DISTORTION_KEYS}
+    if dist["k4"]:
+        raise FormatError(
+            path, None, f"{where}: expected no k4 for a perspective camera; got {dist['k4']}"
+        )
+    try:
+        return _camera_from_intrinsics(width, height, fx, fy, cx, cy, dist)
+    except ValueError as err:
+        raise FormatError(path, None, f"{where}: expected a valid camera; got {err}") from None
+
+
+def _camera_size(path: Path, where: str, num: dict[str, float], image: Path) -> tuple[float, float]:
+    """(width, height): ``w`` and ``h`` if both are given, else the image's size; checked to be
+    positive integers."""
     if "w" in num and "h" in num:
         width, height = num["w"], num["h"]
     else:
@@ -103,6 +121,13 @@ def _camera(path: Path, where: str, values: dict[str, Any], image: Path) -> Came
         raise FormatError(
             path, None, f"{where}: expected positive integer 'w' and 'h'; got {width}x{height}"
         )
+    return width, height
+
+
+def _focal_lengths(
+    path: Path, where: str, num: dict[str, float], width: float, height: float
+) -> tuple[float, float]:
+    """(fx, fy) in pixels from ``fl_x`` / ``fl_y`` or the fields of view; fy defaults to fx."""
     if "fl_x" in num:
         fx = num["fl_x"]
     elif "camera_angle_x" in num:
@@ -115,36 +140,40 @@ def _camera(path: Path, where: str, values: dict[str, Any], image: Path) -> Came
         fy = 0.5 * height / math.tan(0.5 * _field_of_view(path, where, "camera_angle_y", num))
     else:
         fy = fx
-    cx = num.get("cx", width / 2.0) - COLMAP_PIXEL_OFFSET
-    cy = num.get("cy", height / 2.0) - COLMAP_PIXEL_OFFSET
-    dist = {k: num.get(k, 0.0) for k in DISTORTION_KEYS}
-    if dist["k4"]:
-        raise FormatError(
-            path, None, f"{where}: expected no k4 for a perspective camera; got {dist['k4']}"
+    return fx, fy
+
+
+def _camera_from_intrinsics(
+    width: float,
+    height: float,
+    fx: float,
+    fy: float,
+    cx: float,
+    cy: float,
+    dist: dict[str, float],
+) -> Camera:
+    """The simplest Camera that holds the distortion: FULL_OPENCV with k3, OPENCV with k1, k2,
+    p1 or p2, else a pinhole; ValueError for an invalid camera."""
+    if dist["k3"]:
+        params = (
+            fx,
+            fy,
+            cx,
+            cy,
+            dist["k1"],
+            dist["k2"],
+            dist["p1"],
+            dist["p2"],
+            dist["k3"],
+            0.0,
+            0.0,
+            0.0,
         )
-    try:
-        if dist["k3"]:
-            params = (
-                fx,
-                fy,
-                cx,
-                cy,
-                dist["k1"],
-                dist["k2"],
-                dist["p1"],
-                dist["p2"],
-                dist["k3"],
-                0.0,
-                0.0,
-                0.0,
-            )
-            return Camera("FULL_OPENCV", int(width), int(height), params)
-        if any(dist[k] for k in ("k1", "k2", "p1", "p2")):
-            params = (fx, fy, cx, cy, dist["k1"], dist["k2"], dist["p1"], dist["p2"])
-            return Camera("OPENCV", int(width), int(height), params)
-        return Camera.pinhole(int(width), int(height), fx, fy, cx, cy)
-    except ValueError as err:
-        raise FormatError(path, None, f"{where}: expected a valid camera; got {err}") from None
+        return Camera("FULL_OPENCV", int(width), int(height), params)
+    if any(dist[k] for k in ("k1", "k2", "p1", "p2")):
+        params = (fx, fy, cx, cy, dist["k1"], dist["k2"], dist["p1"], dist["p2"])
+        return Camera("OPENCV", int(width), int(height), params)
+    return Camera.pinhole(int(width), int(height), fx, fy, cx, cy)
 
 
 def read_dataparser_transforms(path: str | Path) -> tuple[np.ndarray, float]:
@@ -209,42 +238,11 @@ def read_nerfstudio(
         raise FormatError(path, None, "expected at least one entry in 'frames'; got an empty list")
     root = Path(images) if images is not None else path.parent
     shared = {k: v for k, v in data.items() if k != "frames"}
-    frames: list[Frame] = []
     seen = UniqueKeys(path, "unique 'file_path'")
-    for i, entry in enumerate(data["frames"]):
-        where = f"frames[{i}]"
-        if not isinstance(entry, dict):
-            raise FormatError(
-                path, None, f"{where}: expected an object; got {type(entry).__name__}"
-            )
-        file_path = entry.get("file_path")
-        if not isinstance(file_path, str) or not file_path:
-            raise FormatError(
-                path, None, f"{where}: expected a 'file_path' string; got {file_path!r}"
-            )
-        image = _resolve_image(root, file_path)
-        camera = _camera(path, where, {**shared, **entry}, image)
-        try:
-            matrix = np.asarray(entry.get("transform_matrix"), dtype=np.float64)
-        except (TypeError, ValueError):
-            matrix = np.zeros(0)
-        if matrix.shape == (3, 4):
-            matrix = np.vstack([matrix, [0.0, 0.0, 0.0, 1.0]])
-        if matrix.shape != (4, 4):
-            raise FormatError(
-                path,
-                None,
-                f"{where}: expected a 4x4 'transform_matrix'; got {entry.get('transform_matrix')!r:.80}",
-            )
-        if undo is not None:
-            matrix = undo_dataparser_transform(matrix, *undo)
-        seen.add(file_path, repr(file_path), None, where)
-        try:
-            frames.append(Frame(file_path, camera, matrix @ GL_FROM_CV, file_path, image))
-        except ValueError as err:
-            raise FormatError(
-                path, None, f"{where}: expected a rigid cam-to-world 'transform_matrix'; got {err}"
-            ) from None
+    frames = [
+        _frame(path, f"frames[{i}]", entry, shared, root, undo, seen)
+        for i, entry in enumerate(data["frames"])
+    ]
     metadata = {"images_dir": str(root)}
     if dataparser_transforms is not None:
         metadata["dataparser_transforms"] = str(dataparser_transforms)
@@ -253,3 +251,49 @@ def read_nerfstudio(
         logger.info("%s: has an applied_transform; poses are kept in the file's world frame", path)
     logger.info("read %d frames from %s", len(frames), path)
     return Trajectory(tuple(frames), source=str(path), format="nerfstudio", metadata=metadata)
+
+
+def _frame(
+    path: Path,
+    where: str,
+    entry: Any,
+    shared: dict[str, Any],
+    root: Path,
+    undo: tuple[np.ndarray, float] | None,
+    seen: UniqueKeys,
+) -> Frame:
+    """The Frame of one ``frames[]`` entry (world_from_cam in OpenCV axes), checked."""
+    if not isinstance(entry, dict):
+        raise FormatError(path, None, f"{where}: expected an object; got {type(entry).__name__}")
+    file_path = entry.get("file_path")
+    if not isinstance(file_path, str) or not file_path:
+        raise FormatError(path, None, f"{where}: expected a 'file_path' string; got {file_path!r}")
+    image = _resolve_image(root, file_path)
+    camera = _camera(path, where, {**shared, **entry}, image)
+    matrix = _transform_matrix(path, where, entry)
+    if undo is not None:
+        matrix = undo_dataparser_transform(matrix, *undo)
+    seen.add(file_path, repr(file_path), None, where)
+    try:
+        return Frame(file_path, camera, matrix @ GL_FROM_CV, file_path, image)
+    except ValueError as err:
+        raise FormatError(
+            path, None, f"{where}: expected a rigid cam-to-world 'transform_matrix'; got {err}"
+        ) from None
+
+
+def _transform_matrix(path: Path, where: str, entry: dict[str, Any]) -> np.ndarray:
+    """An entry's ``transform_matrix`` as a (4, 4) float array (a 3x4 gets the row 0 0 0 1)."""
+    try:
+        matrix = np.asarray(entry.get("transform_matrix"), dtype=np.float64)
+    except (TypeError, ValueError):
+        matrix = np.zeros(0)
+    if matrix.shape == (3, 4):
+        matrix = np.vstack([matrix, [0.0, 0.0, 0.0, 1.0]])
+    if matrix.shape != (4, 4):
+        raise FormatError(
+            path,
+            None,
+            f"{where}: expected a 4x4 'transform_matrix'; got {entry.get('transform_matrix')!r:.80}",
+        )
+    return matrix
