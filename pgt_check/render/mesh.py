@@ -298,6 +298,22 @@ def mesh_from_trimesh(loaded: Any, shading: str = "auto", source: str = "") -> M
     parts = [_part_from_trimesh(g) for g in _flatten(loaded)]
     if not parts:
         raise ValueError(f"{source or 'mesh'}: no triangles")
+    resolved = _resolve_shading(parts, shading, source)
+    mesh = _with_shading(_merge_parts(parts), resolved)
+    logger.debug(
+        "loaded %s: %d vertices, %d faces, shading %s, offset %s",
+        source,
+        len(mesh.vertices),
+        mesh.num_faces,
+        mesh.shading,
+        mesh.offset.tolist(),
+    )
+    return mesh
+
+
+def _resolve_shading(parts: list[_Part], shading: str, source: str) -> str:
+    """The shading to use ("auto" picks texture, else vertex, else shaded); ValueError when the
+    parts lack the colour source asked for."""
     has_texture = any(p.texture is not None for p in parts)
     has_colour = any(p.colors is not None for p in parts)
     if shading == "auto":
@@ -308,7 +324,14 @@ def mesh_from_trimesh(loaded: Any, shading: str = "auto", source: str = "") -> M
         raise ValueError(f"{source or 'mesh'}: shading='texture' but the mesh has no texture")
     if resolved == "vertex" and not (has_colour or has_texture):
         raise ValueError(f"{source or 'mesh'}: shading='vertex' but the mesh has no colours")
+    return resolved
 
+
+def _merge_parts(parts: list[_Part]) -> MeshData:
+    """One MeshData holding every part, with the richest colour source any part has and the
+    bounds centre as offset."""
+    has_texture = any(p.texture is not None for p in parts)
+    has_colour = any(p.colors is not None for p in parts)
     vertices, faces, colors, uvs, face_tex, textures = [], [], [], [], [], []
     base = 0
     for p in parts:
@@ -329,7 +352,7 @@ def mesh_from_trimesh(loaded: Any, shading: str = "auto", source: str = "") -> M
             )
     v = np.concatenate(vertices)
     offset = 0.5 * (v.min(axis=0) + v.max(axis=0))
-    mesh = MeshData(
+    return MeshData(
         vertices=v,
         faces=np.concatenate(faces),
         shading="texture" if has_texture else ("vertex" if has_colour else "shaded"),
@@ -339,10 +362,15 @@ def mesh_from_trimesh(loaded: Any, shading: str = "auto", source: str = "") -> M
         face_texture=np.concatenate(face_tex) if has_texture else None,
         offset=offset,
     )
+
+
+def _with_shading(mesh: MeshData, resolved: str) -> MeshData:
+    """``mesh`` reduced to the resolved shading: colours dropped for "shaded", textures baked
+    into vertex colours for "vertex"; else ``mesh`` itself."""
     if resolved == "shaded":
-        mesh = mesh.without_colour()
-    elif resolved == "vertex" and mesh.shading == "texture":
-        mesh = replace(
+        return mesh.without_colour()
+    if resolved == "vertex" and mesh.shading == "texture":
+        return replace(
             mesh,
             colors=mesh.vertex_colours_from_texture(),
             uv=None,
@@ -350,14 +378,6 @@ def mesh_from_trimesh(loaded: Any, shading: str = "auto", source: str = "") -> M
             face_texture=None,
             shading="vertex",
         )
-    logger.debug(
-        "loaded %s: %d vertices, %d faces, shading %s, offset %s",
-        source,
-        len(mesh.vertices),
-        mesh.num_faces,
-        mesh.shading,
-        mesh.offset.tolist(),
-    )
     return mesh
 
 
