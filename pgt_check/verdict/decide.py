@@ -197,6 +197,14 @@ def own_outcomes(
     return out
 
 
+#: a frame's judgement while ``judge`` applies its rules: (verdict, reason, evidence, the path
+#: it rests on)
+_Decision = tuple[Verdict, str, str, str]
+
+#: what each path alone says (``path_outcomes``)
+_Outcomes = Mapping[str, tuple[Verdict, str] | None]
+
+
 def judge(
     m: FrameMeasurement,
     config: VerdictConfig,
@@ -227,63 +235,118 @@ def judge(
     out = outcomes if outcomes is not None else path_outcomes(m, config, shared)
     raw_v = "" if out["raw"] is None else out["raw"][0].value
     enh_v = "" if out["enhanced"] is None else out["enhanced"][0].value
-    edge_v = None if out["edges"] is None else out["edges"][0]
-    path = m.verdict_path or ""
-
-    def j(verdict: Verdict, reason: str, evidence: str) -> Judgement:
-        return Judgement(verdict, reason, evidence, raw_v, enh_v, path)
-
     ref_off = _reference_off(m, own)
+    (verdict, reason, evidence, path), final = _paths_decision(
+        m, config, shared, out, ref_off, (base, why)
+    )
+    if final or verdict is not Verdict.PASS:
+        return Judgement(verdict, reason, evidence, raw_v, enh_v, path)
+    run_level = _run_level(m.frame_id, shared, evidence, _absolute_pass(out), m.camera_id)
+    return Judgement(*run_level, raw_v, enh_v, path)
+
+
+def _paths_decision(
+    m: FrameMeasurement,
+    config: VerdictConfig,
+    shared: Any,
+    out: _Outcomes,
+    ref_off: str,
+    base: tuple[Verdict, str],
+) -> tuple[_Decision, bool]:
+    """(decision, final) from the frame's paths, before the run-level checks (``judge``);
+    final: no run-level check applies. ``base``: what ``decide`` says."""
+    confident = _confident_fail(m, config, out, ref_off)
+    if confident is not None:
+        return confident, True
+    d = _deciding_path(m, out, base)
+    if ref_off and d[2] == Evidence.RELATIVE.value:
+        d, final = _without_reference(m, config, shared, out, ref_off, d)
+        if final:
+            return d, True
+    d = _edges_if_unverifiable(out, d)
+    return _settle_disagreement(m, config, shared, out, d)
+
+
+def _confident_fail(
+    m: FrameMeasurement, config: VerdictConfig, out: _Outcomes, ref_off: str
+) -> _Decision | None:
+    """A FAIL of a feature path with ``confident_inliers`` (None when there is none)."""
     for name in ("raw", "enhanced"):
         p = getattr(m, name)
         if out[name] and out[name][0] is Verdict.FAIL and p.n_inliers >= config.confident_inliers:
             if ref_off and p.evidence is Evidence.RELATIVE:
                 continue  # the reference's own error explains it
-            path = name
-            return j(Verdict.FAIL, out[name][1], p.evidence.value)
+            return Verdict.FAIL, out[name][1], p.evidence.value, name
+    return None
+
+
+def _deciding_path(m: FrameMeasurement, out: _Outcomes, base: tuple[Verdict, str]) -> _Decision:
+    """What the deciding path says (``base`` when it has no outcome)."""
     chosen = m.chosen
     evidence = "none" if chosen is None else chosen.evidence.value
-    base, why = out.get(m.verdict_path) or (base, why)
-    if ref_off and evidence == Evidence.RELATIVE.value:
-        # a reference that its own render shows off cannot vouch for or against this frame:
-        # what this frame's own render says decides; a PASS of it only when clear (a large
-        # relative error may still be this frame's own)
-        base, why, own_path = own_outcome(m, out, config)
-        off = f"reference {ref_off} fails on its own render"
-        if base is Verdict.UNVERIFIABLE:
-            return j(base, f"reference_off ({off})", evidence)
-        path = own_path
-        clear = _error_ratio(m, own_path, config, shared) <= 1.0 - CLEAR_MARGIN
-        if base is Verdict.PASS and not clear:
-            return j(
-                Verdict.UNVERIFIABLE,
-                f"paths_disagree ({off}; the {own_path} path passes, not clearly)",
-                evidence,
-            )
-        evidence = Evidence.ABSOLUTE.value
-    if base is Verdict.UNVERIFIABLE and edge_v in (Verdict.PASS, Verdict.FAIL):
+    verdict, reason = out.get(m.verdict_path) or base
+    return verdict, reason, evidence, m.verdict_path or ""
+
+
+def _without_reference(
+    m: FrameMeasurement,
+    config: VerdictConfig,
+    shared: Any,
+    out: _Outcomes,
+    ref_off: str,
+    d: _Decision,
+) -> tuple[_Decision, bool]:
+    """(decision, final) where the reference that decided is clearly off on its own render."""
+    # a reference that its own render shows off cannot vouch for or against this frame:
+    # what this frame's own render says decides; a PASS of it only when clear (a large
+    # relative error may still be this frame's own)
+    evidence, path = d[2], d[3]
+    base, why, own_path = own_outcome(m, out, config)
+    off = f"reference {ref_off} fails on its own render"
+    if base is Verdict.UNVERIFIABLE:
+        return (base, f"reference_off ({off})", evidence, path), True
+    clear = _error_ratio(m, own_path, config, shared) <= 1.0 - CLEAR_MARGIN
+    if base is Verdict.PASS and not clear:
+        reason = f"paths_disagree ({off}; the {own_path} path passes, not clearly)"
+        return (Verdict.UNVERIFIABLE, reason, evidence, own_path), True
+    return (base, why, Evidence.ABSOLUTE.value, own_path), False
+
+
+def _edges_if_unverifiable(out: _Outcomes, d: _Decision) -> _Decision:
+    """The geometric-edge path's PASS or FAIL where the decision so far is UNVERIFIABLE."""
+    edge_v = None if out["edges"] is None else out["edges"][0]
+    if d[0] is Verdict.UNVERIFIABLE and edge_v in (Verdict.PASS, Verdict.FAIL):
         base, why = out["edges"]
-        evidence, path = Evidence.ABSOLUTE.value, "edges"
-    absolute_pass = Verdict.PASS.value in (raw_v, edge_v and edge_v.value)
+        return base, why, Evidence.ABSOLUTE.value, "edges"
+    return d
+
+
+def _settle_disagreement(
+    m: FrameMeasurement, config: VerdictConfig, shared: Any, out: _Outcomes, d: _Decision
+) -> tuple[_Decision, bool]:
+    """(decision, final) of a FAIL that another absolute path's PASS contradicts."""
+    base, why, evidence, path = d
     passing = [
         n for n in ("raw", "edges") if n != path and out[n] is not None and out[n][0] is Verdict.PASS
     ]
-    if base is Verdict.FAIL and passing:
-        # a FAIL that is not confident (reprojected references, whose poses may be the wrong
-        # ones, or a render with few inliers) against a PASS of another absolute path: a
-        # clear PASS (within half the threshold) decides, otherwise the paths disagree
-        clear = [n for n in passing if _error_ratio(m, n, config, shared) <= 1.0 - CLEAR_MARGIN]
-        if not clear:
-            return j(
-                Verdict.UNVERIFIABLE,
-                f"paths_disagree ({why} on the {path} path; an absolute path passes)",
-                evidence,
-            )
-        base, why = out[clear[0]]
-        evidence, path = Evidence.ABSOLUTE.value, clear[0]
-    if base is not Verdict.PASS:
-        return j(base, why, evidence)
-    return j(*_run_level(m.frame_id, shared, evidence, absolute_pass, m.camera_id))
+    if base is not Verdict.FAIL or not passing:
+        return d, False
+    # a FAIL that is not confident (reprojected references, whose poses may be the wrong
+    # ones, or a render with few inliers) against a PASS of another absolute path: a
+    # clear PASS (within half the threshold) decides, otherwise the paths disagree
+    clear = [n for n in passing if _error_ratio(m, n, config, shared) <= 1.0 - CLEAR_MARGIN]
+    if not clear:
+        reason = f"paths_disagree ({why} on the {path} path; an absolute path passes)"
+        return (Verdict.UNVERIFIABLE, reason, evidence, path), True
+    base, why = out[clear[0]]
+    return (base, why, Evidence.ABSOLUTE.value, clear[0]), False
+
+
+def _absolute_pass(out: _Outcomes) -> bool:
+    """The raw or the geometric-edge path passes on its own."""
+    raw_v = "" if out["raw"] is None else out["raw"][0].value
+    edge_v = None if out["edges"] is None else out["edges"][0]
+    return Verdict.PASS.value in (raw_v, edge_v and edge_v.value)
 
 
 def vouched_reference(

@@ -83,13 +83,7 @@ def systematic_offset(
     med = np.median(s, axis=0)
     mag = float(np.hypot(*med))
     zoom = float(np.median(z)) if len(z) else 1.0
-    if mag > 1e-9:
-        u = med / mag
-        n = np.linalg.norm(s, axis=1)
-        cosang = (s @ u) / np.maximum(n, 1e-12)
-        consistency = float(np.mean(cosang >= math.cos(math.radians(45))))
-    else:
-        consistency = 0.0
+    consistency = _consistency(s, med, mag)
     direction = float(math.degrees(math.atan2(med[1], med[0])))
     systematic = len(s) >= 5 and (
         (mag >= 0.25 * threshold_px and consistency >= 0.7) or abs(zoom - 1.0) >= 0.01
@@ -103,27 +97,49 @@ def systematic_offset(
         median_zoom=zoom,
         systematic=bool(systematic),
     )
-    if systematic:
-        parts = []
-        if mag >= 0.25 * threshold_px and consistency >= 0.7:
-            parts.append(
-                f"every frame's render is shifted by about ({med[0]:+.1f}, {med[1]:+.1f}) px "
-                f"({consistency:.0%} of frames in the same direction)"
-            )
-        if abs(zoom - 1.0) >= 0.01:
-            parts.append(f"the render is scaled by {zoom:.3f} relative to the photos")
-        out["message"] = (
-            "systematic offset: "
-            + " and ".join(parts)
-            + ". A constant offset points at calibration (intrinsics, camera-to-rig or "
-            "RGB-vs-depth camera extrinsics), not at individual bad poses."
-        )
-    else:
-        out["message"] = (
+    out["message"] = _offset_message(med, mag, consistency, zoom, bool(systematic), threshold_px)
+    return out
+
+
+def _consistency(s: np.ndarray, med: np.ndarray, mag: float) -> float:
+    """Fraction of the shifts s (N, 2) within 45 degrees of the median shift med (2,) of
+    magnitude mag; 0 for a median shift of (about) zero."""
+    if mag > 1e-9:
+        u = med / mag
+        n = np.linalg.norm(s, axis=1)
+        cosang = (s @ u) / np.maximum(n, 1e-12)
+        return float(np.mean(cosang >= math.cos(math.radians(45))))
+    return 0.0
+
+
+def _offset_message(
+    med: np.ndarray,
+    mag: float,
+    consistency: float,
+    zoom: float,
+    systematic: bool,
+    threshold_px: float,
+) -> str:
+    """The sentence ``systematic_offset`` reports: what is shifted or scaled, or that nothing is."""
+    if not systematic:
+        return (
             f"no systematic offset (median shift {mag:.1f} px, consistency {consistency:.0%}, "
             f"zoom {zoom:.3f})"
         )
-    return out
+    parts = []
+    if mag >= 0.25 * threshold_px and consistency >= 0.7:
+        parts.append(
+            f"every frame's render is shifted by about ({med[0]:+.1f}, {med[1]:+.1f}) px "
+            f"({consistency:.0%} of frames in the same direction)"
+        )
+    if abs(zoom - 1.0) >= 0.01:
+        parts.append(f"the render is scaled by {zoom:.3f} relative to the photos")
+    return (
+        "systematic offset: "
+        + " and ".join(parts)
+        + ". A constant offset points at calibration (intrinsics, camera-to-rig or "
+        "RGB-vs-depth camera extrinsics), not at individual bad poses."
+    )
 
 
 def run_statistics(records: list[Mapping[str, Any]], threshold_px: float) -> dict[str, Any]:
