@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import logging
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -147,55 +147,85 @@ def correct_run(
     by_id = trajectory.by_id()
     m_by_id = {m.frame_id: m for m in measurements}
     thr = {str(r["frame_id"]): r.get("threshold_px") for r in rows}
-    corrections: dict[str, Correction] = {}
     budget = config.correct.budget * main_pass_seconds(measurements)
-    stopped = ""
-    if ids:
-        logger.info("correcting %d frame(s) (%d rounds of render -> match -> PnP%s)", len(ids),
-                    config.correct.rounds, f", at most {budget:.0f} s" if budget > 0 else "")
-        checker = checker_factory()
-        t0 = clock()
-        try:
-            for fid in ids:
-                if fid not in by_id:
-                    continue
-                n_done = len(corrections)
-                spent = clock() - t0
-                if stopped or (budget > 0 and n_done and spent + spent / n_done > budget):
-                    if not stopped:
-                        stopped = (f"time limit: {n_done} frame(s) took {spent:.1f} s of the "
-                                   f"{budget:.1f} s budget (correct.budget "
-                                   f"{config.correct.budget:g} x the main pass)")
-                        logger.warning("corrections: %s; %d frame(s) left uncorrected",
-                                       stopped, len(ids) - n_done)
-                    corrections[fid] = Correction(fid, False, "time_limit")
-                    continue
-                try:
-                    corrections[fid] = correct_frame(checker, by_id[fid], m_by_id.get(fid),
-                                                     config, thr.get(fid))
-                except Exception as err:  # one frame must not stop the outputs
-                    if config.fail_fast:
-                        raise
-                    logger.error("frame %s: correction failed: %s", fid, err)
-                    corrections[fid] = Correction(fid, False, "internal_error")
-        finally:
-            checker.close()
+    corrections, stopped = _correct_frames(
+        ids, by_id, m_by_id, thr, config, checker_factory, budget, clock
+    )
     save_corrections(out, corrections.values(), config.measurement_fingerprint())
     fmt = write_trajectory_file(corrected_trajectory(trajectory, corrections),
                                 out / CORRECTED_NAME)
     atomic_write_text(out / BAD_FRAMES_NAME, bad_frames_text(rows, corrections))
-    applied = [c for c in corrections.values() if c.applied]
-    summary = {
-        "corrections": {
-            "mode": config.correct.frames,
-            "attempted": sum(c.reason != "time_limit" for c in corrections.values()),
-            "succeeded": sum(c.success for c in corrections.values()),
-            "not_attempted": sum(c.reason == "time_limit" for c in corrections.values()),
-            "stopped": stopped or None,
-            "applied": len(applied),
-            "file": CORRECTED_NAME,
-            "format": fmt,
-            "bad_frames_file": BAD_FRAMES_NAME,
-        }
-    }
+    summary = {"corrections": _corrections_summary(corrections, config, stopped, fmt)}
     return add_correction_columns(rows, corrections), summary
+
+
+def _correct_frames(
+    ids: Sequence[str],
+    by_id: Mapping[str, Frame],
+    m_by_id: Mapping[str, FrameMeasurement],
+    thr: Mapping[str, float | None],
+    config: RunConfig,
+    checker_factory: Callable[[], Any],
+    budget: float,
+    clock: Callable[[], float],
+) -> tuple[dict[str, Correction], str]:
+    """The corrections of the frames ``ids`` within ``budget`` seconds (0: no limit), and why
+    they stopped early ("" when they did not)."""
+    corrections: dict[str, Correction] = {}
+    stopped = ""
+    if not ids:
+        return corrections, stopped
+    logger.info("correcting %d frame(s) (%d rounds of render -> match -> PnP%s)", len(ids),
+                config.correct.rounds, f", at most {budget:.0f} s" if budget > 0 else "")
+    checker = checker_factory()
+    t0 = clock()
+    try:
+        for fid in ids:
+            if fid not in by_id:
+                continue
+            n_done = len(corrections)
+            spent = clock() - t0
+            if stopped or (budget > 0 and n_done and spent + spent / n_done > budget):
+                if not stopped:
+                    stopped = (f"time limit: {n_done} frame(s) took {spent:.1f} s of the "
+                               f"{budget:.1f} s budget (correct.budget "
+                               f"{config.correct.budget:g} x the main pass)")
+                    logger.warning("corrections: %s; %d frame(s) left uncorrected",
+                                   stopped, len(ids) - n_done)
+                corrections[fid] = Correction(fid, False, "time_limit")
+                continue
+            corrections[fid] = _correct_one(checker, fid, by_id[fid], m_by_id.get(fid),
+                                            config, thr.get(fid))
+    finally:
+        checker.close()
+    return corrections, stopped
+
+
+def _correct_one(checker: Any, fid: str, frame: Frame, m: FrameMeasurement | None,
+                 config: RunConfig, threshold_px: float | None) -> Correction:
+    """``correct_frame``, or on an error (unless ``fail_fast``) an ``internal_error`` one."""
+    try:
+        return correct_frame(checker, frame, m, config, threshold_px)
+    except Exception as err:  # one frame must not stop the outputs
+        if config.fail_fast:
+            raise
+        logger.error("frame %s: correction failed: %s", fid, err)
+        return Correction(fid, False, "internal_error")
+
+
+def _corrections_summary(
+    corrections: Mapping[str, Correction], config: RunConfig, stopped: str, fmt: str
+) -> dict[str, Any]:
+    """The summary's ``corrections`` entry (``fmt``: the corrected trajectory's format)."""
+    applied = [c for c in corrections.values() if c.applied]
+    return {
+        "mode": config.correct.frames,
+        "attempted": sum(c.reason != "time_limit" for c in corrections.values()),
+        "succeeded": sum(c.success for c in corrections.values()),
+        "not_attempted": sum(c.reason == "time_limit" for c in corrections.values()),
+        "stopped": stopped or None,
+        "applied": len(applied),
+        "file": CORRECTED_NAME,
+        "format": fmt,
+        "bad_frames_file": BAD_FRAMES_NAME,
+    }

@@ -39,7 +39,7 @@ import logging
 import math
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -163,6 +163,21 @@ def _measure_round(
     return rnd, res
 
 
+@dataclass(frozen=True)
+class _Rounds:
+    """What every round of ``refine_registration`` works with."""
+
+    todo: Sequence[Frame]  # the frames measured again
+    ecfg: RunConfig  # ``evidence_config`` of the run's config
+    measure: MeasureFn
+    clock: Callable[[], float]
+    origin: np.ndarray  # (3,) mean camera centre, where the totals are summarised
+    budget: float  # seconds the rounds may take; 0: no limit
+    budget_factor: float  # ``correct.budget`` (for the message)
+    t_start: float  # ``clock()`` when the rounds started
+    first: Mapping[str, Any]  # the main pass's registration entry
+
+
 def refine_registration(
     frames: Sequence[Frame],
     measurements: Sequence[FrameMeasurement],
@@ -191,10 +206,8 @@ def refine_registration(
     origin = np.mean(centres, axis=0)
     budget = c.budget * main_pass_seconds(measurements)
     t_start = clock()
-    c_rigid = start.copy()
-    history = [start.copy()]  # history[k]: the correction after k rounds' updates
-    done: list[RefineRound] = []
-    stopped, kept = "round limit", None
+    r = _Rounds(todo, ecfg, measure, clock, origin, budget, c.budget, t_start,
+                summary["registration"])  # fmt: skip
     logger.info(
         "registration check failed: refining its estimate (up to %d round(s) of "
         "measuring %d frames again at the corrected poses%s)",
@@ -202,47 +215,7 @@ def refine_registration(
         len(todo),
         f", at most {budget:.0f} s" if budget > 0 else "",
     )
-    for k in range(1, rounds + 1):
-        if k > 1 and budget > 0 and clock() - t_start + done[-1].time_s > budget:
-            stopped = (f"time limit: {k - 1} round(s) took {clock() - t_start:.1f} s of the "
-                       f"{budget:.1f} s budget (correct.budget "
-                       f"{c.budget:g} x the main pass)")
-            break
-        rnd, res = _measure_round(k, todo, c_rigid, measure, ecfg, clock)
-        reg = res["registration"]
-        done.append(rnd)
-        # round 1 against the main pass: the first estimate's poses against the checked ones
-        prev = done[-2].effect_px if len(done) >= 2 else _f(summary["registration"].get(
-            "effect_px"))
-        prev_ci = done[-2].effect_px_ci if len(done) >= 2 else summary["registration"].get(
-            "effect_px_ci")
-        if _grew(prev, prev_ci, rnd.effect_px, rnd.effect_px_ci):
-            # the last update moved the poses further from what the evidence says: the
-            # estimate does not converge (an ill-posed split); keep the one before it
-            kept = max(k - 2, 0)
-            c_rigid = history[kept]
-            stopped = (f"not converging: what is left grew from {prev:.1f} px to "
-                       f"{rnd.effect_px:.1f} px in round {k}; " + (
-                           f"the estimate measured in round {k - 1} is kept" if k > 1 else
-                           "the first estimate moved the poses further off than they were; "
-                           "it is reported unrefined"))
-            break
-        if reg.get("corrected_world_from_world") is None:
-            stopped = f"round {k}: no residual fit ({reg.get('reason') or reg.get('status')})"
-            break
-        c_rigid = np.asarray(reg["corrected_world_from_world"], np.float64) @ c_rigid
-        history.append(c_rigid.copy())
-        total_angle, total_t, _ = _summary_of(c_rigid, origin)
-        done[-1] = replace(done[-1], total_angle_deg=total_angle, total_translation=total_t)
-        eff = done[-1].effect_px
-        if eff is not None and eff < CONVERGED_REL * float(res["threshold_px"]):
-            stopped = "converged"
-            break
-        if len(done) >= 2 and done[-1].status == done[-2].status == PASSED:
-            # what is left is below the shared threshold twice in a row: the noise of the
-            # evidence, which further rounds would only follow
-            stopped = "converged (passed twice)"
-            break
+    c_rigid, done, stopped, kept = _run_rounds(r, start, rounds)
     logger.info("registration refinement: %d round(s) in %.1f s, %s", len(done),
                 clock() - t_start, stopped)
     return RefinedRegistration(
@@ -255,6 +228,79 @@ def refine_registration(
         frame_ids=tuple(f.frame_id for f in todo),
         kept=kept,
     )
+
+
+def _run_rounds(
+    r: _Rounds, start: np.ndarray, rounds: int
+) -> tuple[np.ndarray, list[RefineRound], str, int | None]:
+    """Up to ``rounds`` rounds from the correction ``start`` (4, 4): (the correction kept,
+    the rounds' records, why they stopped, the updates kept where the rounds diverged)."""
+    c_rigid = start.copy()
+    history = [start.copy()]  # history[k]: the correction after k rounds' updates
+    done: list[RefineRound] = []
+    for k in range(1, rounds + 1):
+        stopped = _out_of_time(r, k, done)
+        if stopped is not None:
+            return c_rigid, done, stopped, None
+        rnd, res = _measure_round(k, r.todo, c_rigid, r.measure, r.ecfg, r.clock)
+        reg = res["registration"]
+        done.append(rnd)
+        prev, prev_ci = _left_before(r, done)
+        if _grew(prev, prev_ci, rnd.effect_px, rnd.effect_px_ci):
+            # the last update moved the poses further from what the evidence says: the
+            # estimate does not converge (an ill-posed split); keep the one before it
+            kept = max(k - 2, 0)
+            return history[kept], done, _not_converging(prev, rnd.effect_px, k), kept
+        if reg.get("corrected_world_from_world") is None:
+            stopped = f"round {k}: no residual fit ({reg.get('reason') or reg.get('status')})"
+            return c_rigid, done, stopped, None
+        c_rigid = np.asarray(reg["corrected_world_from_world"], np.float64) @ c_rigid
+        history.append(c_rigid.copy())
+        total_angle, total_t, _ = _summary_of(c_rigid, r.origin)
+        done[-1] = replace(done[-1], total_angle_deg=total_angle, total_translation=total_t)
+        stopped = _converged(done, res)
+        if stopped is not None:
+            return c_rigid, done, stopped, None
+    return c_rigid, done, "round limit", None
+
+
+def _out_of_time(r: _Rounds, k: int, done: Sequence[RefineRound]) -> str | None:
+    """Why round ``k`` is not started: one more round as long as the last would pass the
+    budget; None when it may start."""
+    if k > 1 and r.budget > 0 and r.clock() - r.t_start + done[-1].time_s > r.budget:
+        return (f"time limit: {k - 1} round(s) took {r.clock() - r.t_start:.1f} s of the "
+                f"{r.budget:.1f} s budget (correct.budget "
+                f"{r.budget_factor:g} x the main pass)")
+    return None
+
+
+def _left_before(r: _Rounds, done: Sequence[RefineRound]) -> tuple[float | None, Any]:
+    """What was left before the last round (px) and its 95 % interval."""
+    # round 1 against the main pass: the first estimate's poses against the checked ones
+    if len(done) >= 2:
+        return done[-2].effect_px, done[-2].effect_px_ci
+    return _f(r.first.get("effect_px")), r.first.get("effect_px_ci")
+
+
+def _not_converging(prev: float, effect: float, k: int) -> str:
+    """Why the rounds stopped when what is left grew from ``prev`` to ``effect`` in round k."""
+    return (f"not converging: what is left grew from {prev:.1f} px to "
+            f"{effect:.1f} px in round {k}; " + (
+                f"the estimate measured in round {k - 1} is kept" if k > 1 else
+                "the first estimate moved the poses further off than they were; "
+                "it is reported unrefined"))
+
+
+def _converged(done: Sequence[RefineRound], res: Mapping[str, Any]) -> str | None:
+    """Why the rounds stop after the last one (``res``: its shared checks), or None."""
+    eff = done[-1].effect_px
+    if eff is not None and eff < CONVERGED_REL * float(res["threshold_px"]):
+        return "converged"
+    if len(done) >= 2 and done[-1].status == done[-2].status == PASSED:
+        # what is left is below the shared threshold twice in a row: the noise of the
+        # evidence, which further rounds would only follow
+        return "converged (passed twice)"
+    return None
 
 
 def main_pass_seconds(measurements: Sequence[FrameMeasurement]) -> float:
