@@ -98,6 +98,21 @@ def _camera_estimate(p, fit, g, cid, deltas, off, sel, base) -> CalibrationEstim
     )
 
 
+def _camera_fields(
+    p: _Problem, g: int, inl: np.ndarray, sel: _Selection, world: bool
+) -> dict:
+    """The counts of camera group ``g`` (``inl``: inlier mask over the points) and the fit
+    choice, which every estimate of the camera reports."""
+    frames = np.flatnonzero(p.cam == g)
+    pts = p.cam[p.fidx] == g
+    return dict(
+        n_frames=len(frames), n_points=int(pts.sum()), n_inliers=int((inl & pts).sum()),
+        separable=sel.separable, max_correlation=sel.corr, registration_fitted=world,
+        ambiguity=sel.ambiguity, gain_world_only=sel.gain_world,
+        gain_calibration_only=sel.gain_calib,
+    )  # fmt: skip
+
+
 def _choose_calibration_fit(
     p: _Problem, registration: str, scale: float, penalty: float, sel: _Selection
 ) -> tuple[_Fit, bool]:
@@ -158,17 +173,10 @@ def estimate_calibration(
     sel_pts = _effect_points(p, inl)
     out: dict[str, CalibrationEstimate] = {}
     for g, cid in enumerate(p.camera_ids):
-        frames = np.flatnonzero(p.cam == g)
-        pts = p.cam[p.fidx] == g
-        base = dict(
-            n_frames=len(frames), n_points=int(pts.sum()), n_inliers=int((inl & pts).sum()),
-            separable=sel.separable, max_correlation=sel.corr, registration_fitted=world,
-            ambiguity=sel.ambiguity, gain_world_only=sel.gain_world,
-            gain_calibration_only=sel.gain_calib,
-        )  # fmt: skip
+        base = _camera_fields(p, g, inl, sel, world)
         if not fit.ok:
             out[cid] = CalibrationEstimate(False, "ill_conditioned", cid, **base)
-        elif (inl & pts).sum() < min_inliers or len(frames) < min_frames:
+        elif base["n_inliers"] < min_inliers or base["n_frames"] < min_frames:
             out[cid] = CalibrationEstimate(False, "too_few_inliers", cid, **base)
         else:
             out[cid] = _camera_estimate(p, fit, g, cid, deltas, off, sel_pts, base)

@@ -26,6 +26,7 @@ from pgt_check.geometry.shared_errors.registration import (
     _registration_from_fit,
 )
 from pgt_check.geometry.shared_errors.results import DriftEstimate, DriftWindow
+from pgt_check.geometry.shared_errors.selection import _Selection
 from pgt_check.geometry.shared_errors.solver import _bootstrap_deltas, _Fit, _fit_at, _solve
 
 
@@ -247,26 +248,65 @@ def estimate_drift(
     )  # fmt: skip
     if not fit.ok:
         return DriftEstimate(False, "ill_conditioned", threshold_px=threshold_px)
+    compared = _compare_windows(p, fit, calib, window, step, min_points, opt)
+    if compared is None:
+        return DriftEstimate(False, "too_few_inliers", threshold_px=threshold_px)
+    return _drift_estimate(p, *compared, calib, sel, opt)
+
+
+def _drift_bounds(
+    p: _Problem, fit: _Fit, window: float, step: float, min_points: int, opt: _DriftOptions
+) -> list[tuple[int, int]]:
+    """The windows (``_window_bounds``) for a nominal ``window`` and ``step`` (fractions of the
+    index span and of the window), grown to enough inliers of the reference ``fit``."""
     span = int(p.index[-1] - p.index[0]) + 1
     length = max(1, int(round(window * span)))
-    inliers = _inliers_per_frame(p, fit, max_error_px)
+    inliers = _inliers_per_frame(p, fit, opt.max_error_px)
     points = np.bincount(p.fidx, minlength=p.n_frames)
     stride = max(1, int(round(step * length)))
-    bounds = _window_bounds(
-        p.index, inliers, points, length, stride, min_frames, min_window_inliers, min_points
-    )
+    return _window_bounds(
+        p.index, inliers, points, length, stride, opt.min_frames, opt.min_window_inliers,
+        min_points,
+    )  # fmt: skip
+
+
+def _compare_windows(
+    p: _Problem,
+    fit: _Fit,
+    calib: bool,
+    window: float,
+    step: float,
+    min_points: int,
+    opt: _DriftOptions,
+) -> tuple[_State, list[tuple[int, int]], tuple] | None:
+    """(reference state, window bounds, ``_compare`` result) with the reference refitted once
+    on the unflagged frames when frames are flagged; None without a successful window."""
+    bounds = _drift_bounds(p, fit, window, step, min_points, opt)
     if not bounds:
-        return DriftEstimate(False, "too_few_inliers", threshold_px=threshold_px)
+        return None
     ref_state, ref_deltas = _reference(p, fit.state, None, opt, calib)
     res = _compare(p, bounds, ref_state, ref_deltas, opt, calib)
     if res is None:
-        return DriftEstimate(False, "too_few_inliers", threshold_px=threshold_px)
-    if res[3].any() and (~res[3]).sum() >= 2 * min_frames:
+        return None
+    if res[3].any() and (~res[3]).sum() >= 2 * opt.min_frames:
         # refit the reference on the unflagged frames and compare again
         ref = _reference(p, ref_state, np.flatnonzero(~res[3]), opt, calib)
         res2 = None if ref is None else _compare(p, bounds, *ref, opt, calib)
         if res2 is not None:
             ref_state, res = ref[0], res2
+    return ref_state, bounds, res
+
+
+def _drift_estimate(
+    p: _Problem,
+    ref_state: _State,
+    bounds: list[tuple[int, int]],
+    res: tuple,
+    calib: bool,
+    sel: _Selection | None,
+    opt: _DriftOptions,
+) -> DriftEstimate:
+    """The successful estimate from the windows' comparison ``res`` (``_compare``)."""
     wins, score, low, flagged, segments, rejected = res
     return DriftEstimate(
         True,
@@ -280,5 +320,5 @@ def estimate_drift(
         frame_flagged=flagged,
         segments=segments,
         rejected_segments=rejected,
-        threshold_px=threshold_px,
+        threshold_px=opt.threshold_px,
     )

@@ -94,10 +94,7 @@ def _registration_from_fit(
     st = fit.state
     rn = np.linalg.norm(fit.residuals, axis=1)
     inl = rn < max_error_px
-    base = dict(
-        n_frames=p.n_frames, n_points=len(rn), n_inliers=int(inl.sum()), frame_ids=p.frame_ids,
-        similarity=similarity, calibration_fitted=calib, **_selection_fields(selection),
-    )  # fmt: skip
+    base = _estimate_fields(p, rn, inl, similarity, calib, selection)
     if not fit.ok:
         return RegistrationEstimate(False, "ill_conditioned", **base)
     if inl.sum() < min_inliers:
@@ -106,18 +103,12 @@ def _registration_from_fit(
     # before: the reference world map, fitted calibration kept (the world part alone is judged)
     r_before, _ = _residuals(p, st.with_world(ref))
     sel = _effect_points(p, inl)
-    # depth of the selected points in the checked cameras
-    zc = np.einsum("nj,nj->n", p.y[sel] - p.centre[p.fidx[sel]], p.rt[p.fidx[sel]][:, 2, :])
-    depth = float(scene_depth) if scene_depth else float(np.median(zc))
+    depth = _scene_depth(p, sel, scene_depth)
     eff_f, counts, angle, scale, tnorm = _world_effects(
         p, fit, ref, sel, n_bootstrap, seed, similarity, ref_deltas
     )
     has_boot = counts is not None
-    # the effect is the median over THIS trajectory's frames; its interval comes from the
-    # uncertainty of the correction (bootstrap states), not from re-drawing the frames for
-    # the median: a similarity moves far frames more than near ones, and resampling which
-    # frames enter the median measured that spread instead of the correction's precision
-    eff = np.nanmedian(eff_f, axis=1) if has_boot else np.array([np.nanmedian(eff_f[0])])
+    eff = _median_effect(eff_f, has_boot)
 
     def ci(x: np.ndarray) -> _CI:
         return tuple(_ci(x[1:]).tolist()) if has_boot else _NAN_CI
@@ -142,6 +133,38 @@ def _registration_from_fit(
         residual_median_after=float(np.median(rn[inl])),
         **base,
     )
+
+
+def _estimate_fields(
+    p: _Problem,
+    rn: np.ndarray,
+    inl: np.ndarray,
+    similarity: bool,
+    calib: bool,
+    selection: _Selection | None,
+) -> dict:
+    """What every estimate reports, successful or not (rn: residual norms, inl: inlier mask)."""
+    return dict(
+        n_frames=p.n_frames, n_points=len(rn), n_inliers=int(inl.sum()), frame_ids=p.frame_ids,
+        similarity=similarity, calibration_fitted=calib, **_selection_fields(selection),
+    )  # fmt: skip
+
+
+def _scene_depth(p: _Problem, sel: np.ndarray, scene_depth: float | None) -> float:
+    """``scene_depth`` if given, else the median depth of the selected points (mask ``sel``)
+    in the checked cameras."""
+    zc = np.einsum("nj,nj->n", p.y[sel] - p.centre[p.fidx[sel]], p.rt[p.fidx[sel]][:, 2, :])
+    return float(scene_depth) if scene_depth else float(np.median(zc))
+
+
+def _median_effect(eff_f: np.ndarray, has_boot: bool) -> np.ndarray:
+    """(1+B,) median over the frames of the per-frame effects eff_f (1+B, F); (1,) of the
+    point estimate alone without bootstrap states."""
+    # the effect is the median over THIS trajectory's frames; its interval comes from the
+    # uncertainty of the correction (bootstrap states), not from re-drawing the frames for
+    # the median: a similarity moves far frames more than near ones, and resampling which
+    # frames enter the median measured that spread instead of the correction's precision
+    return np.nanmedian(eff_f, axis=1) if has_boot else np.array([np.nanmedian(eff_f[0])])
 
 
 def _selection_fields(sel: _Selection | None) -> dict:
