@@ -11,8 +11,9 @@ The frame's own photo is used only with ``mode="self"`` (an upper bound for eval
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -62,8 +63,6 @@ def select_references(
     are those of scoring every frame: same cost, limits and tie-break (lower trajectory
     position first).
     """
-    from scipy.spatial import cKDTree
-
     n = len(frames)
     wanted = None if only is None else set(only)
     todo = [(i, f) for i, f in enumerate(frames) if wanted is None or f.frame_id in wanted]
@@ -74,6 +73,40 @@ def select_references(
         return {f.frame_id: ReferenceChoice((f.frame_id,), "", 0.0, 0.0) for _, f in todo}
     if n == 0:
         return out
+    ix = _pose_index(frames, config)
+    count = max(1, config.count)
+    gap = max(1, config.min_frame_gap)
+    for i, f in todo:
+        near, best, dt, dr = _nearest(ix, i, config, count, gap)
+        if not len(best):
+            out[f.frame_id] = ReferenceChoice((), "no_reference_within_limits")
+            continue
+        j = int(best[0])
+        out[f.frame_id] = ReferenceChoice(
+            tuple(frames[int(near[m])].frame_id for m in best), "", float(dt[j]), float(dr[j])
+        )
+    return out
+
+
+@dataclass(frozen=True)
+class _PoseIndex:
+    """The frames' poses as the search needs them, in trajectory order."""
+
+    centres: np.ndarray  # (N, 3)
+    rotations: np.ndarray  # (N, 3, 3)
+    has_image: np.ndarray  # (N,) bool
+    stamps: np.ndarray  # (N,) s, NaN where unknown
+    t_scale: float  # translation_scale, or 10 % of the trajectory's extent
+    q_scale: float  # quaternion coordinate per unit of rotation cost
+    embedded: np.ndarray  # (N, 7) (c / t_scale, q * q_scale)
+    tree: Any  # cKDTree over ``embedded`` and its flipped quaternions (2N points)
+
+
+def _pose_index(frames: Sequence[Frame], config: ReferenceConfig) -> _PoseIndex:
+    """The KD-tree and pose arrays of ``frames`` (at least one)."""
+    from scipy.spatial import cKDTree
+
+    n = len(frames)
     centres = np.array([f.world_from_cam[:3, 3] for f in frames])
     rotations = np.array([f.world_from_cam[:3, :3] for f in frames])
     has_image = np.array([f.image_file is not None for f in frames])
@@ -87,40 +120,48 @@ def select_references(
     embedded = np.hstack([centres / t_scale, quats * q_scale])
     flipped = np.hstack([centres / t_scale, -quats * q_scale])
     tree = cKDTree(np.vstack([embedded, flipped]))  # q and -q: the same rotation
-    count = max(1, config.count)
-    gap = max(1, config.min_frame_gap)
-    for i, f in todo:
-        k = min(2 * n, max(32, 8 * count + 4 * gap))
-        while True:
-            dist, found = tree.query(embedded[i], k=k)
-            dist, found = np.atleast_1d(dist), np.atleast_1d(found)
-            near = np.unique(found[np.isfinite(dist)] % n)
-            dt = np.linalg.norm(centres[near] - centres[i], axis=1)
-            dr = _angles_deg(rotations[near], rotations[i])
-            cost = dt / t_scale + dr / config.rotation_scale_deg
-            if config.time_scale_s is not None and np.isfinite(stamps[i]):
-                dtime = np.abs(stamps[near] - stamps[i])
-                cost = cost + np.where(np.isfinite(dtime), dtime / config.time_scale_s, 0.0)
-            ok = has_image[near] & (np.abs(near - i) >= gap)
-            ok &= dr <= config.max_rotation_deg
-            if config.max_translation is not None:
-                ok &= dt <= config.max_translation
-            cand = np.flatnonzero(ok)
-            best = cand[np.argsort(cost[cand], kind="stable")[:count]]
-            reach = float(np.max(dist)) if len(dist) else 0.0  # every frame left out: >= reach
-            if (
-                k >= 2 * n
-                or (len(best) == count and reach > float(cost[best[-1]]) + _BOUND_MARGIN)
-                or (config.max_translation is not None
-                    and reach > config.max_translation / t_scale + q_scale * 2.0)
-            ):
-                break
-            k = min(2 * n, 2 * k)
-        if not len(best):
-            out[f.frame_id] = ReferenceChoice((), "no_reference_within_limits")
-            continue
-        j = int(best[0])
-        out[f.frame_id] = ReferenceChoice(
-            tuple(frames[int(near[m])].frame_id for m in best), "", float(dt[j]), float(dr[j])
-        )
-    return out
+    return _PoseIndex(centres, rotations, has_image, stamps, t_scale, q_scale, embedded, tree)
+
+
+def _nearest(
+    ix: _PoseIndex, i: int, config: ReferenceConfig, count: int, gap: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(near, best, dt, dr) of frame ``i``: the frames scored (positions), the ``count`` best
+    within the limits (indices into near, best first) and the translation / rotation (deg)
+    to each of near; the neighbourhood doubles until no frame left out could score better."""
+    n = len(ix.centres)
+    k = min(2 * n, max(32, 8 * count + 4 * gap))
+    while True:
+        dist, found = ix.tree.query(ix.embedded[i], k=k)
+        dist, found = np.atleast_1d(dist), np.atleast_1d(found)
+        near = np.unique(found[np.isfinite(dist)] % n)
+        dt, dr, cost, ok = _scores(ix, i, near, config, gap)
+        cand = np.flatnonzero(ok)
+        best = cand[np.argsort(cost[cand], kind="stable")[:count]]
+        reach = float(np.max(dist)) if len(dist) else 0.0  # every frame left out: >= reach
+        if (
+            k >= 2 * n
+            or (len(best) == count and reach > float(cost[best[-1]]) + _BOUND_MARGIN)
+            or (config.max_translation is not None
+                and reach > config.max_translation / ix.t_scale + ix.q_scale * 2.0)
+        ):
+            return near, best, dt, dr
+        k = min(2 * n, 2 * k)
+
+
+def _scores(
+    ix: _PoseIndex, i: int, near: np.ndarray, config: ReferenceConfig, gap: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(dt, dr, cost, ok) of the frames ``near`` as references of frame ``i``: translation,
+    rotation (deg), cost (module docstring) and whether they are within the limits."""
+    dt = np.linalg.norm(ix.centres[near] - ix.centres[i], axis=1)
+    dr = _angles_deg(ix.rotations[near], ix.rotations[i])
+    cost = dt / ix.t_scale + dr / config.rotation_scale_deg
+    if config.time_scale_s is not None and np.isfinite(ix.stamps[i]):
+        dtime = np.abs(ix.stamps[near] - ix.stamps[i])
+        cost = cost + np.where(np.isfinite(dtime), dtime / config.time_scale_s, 0.0)
+    ok = ix.has_image[near] & (np.abs(near - i) >= gap)
+    ok &= dr <= config.max_rotation_deg
+    if config.max_translation is not None:
+        ok &= dt <= config.max_translation
+    return dt, dr, cost, ok

@@ -138,10 +138,7 @@ def build_frame_cache(
 
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    variants = tuple(dict.fromkeys(("photo", *variants)))
-    unknown = sorted(set(variants) - set(VARIANTS))
-    if unknown:
-        raise ValueError(f"unknown variant(s) {unknown} (allowed: {VARIANTS})")
+    variants = _checked_variants(variants)
     traj = read_trajectory(trajectory, sensors=sensors, images=images)
     frames = sorted(
         ((frame_order_key(f, i), f) for i, f in enumerate(traj.frames)), key=lambda kv: kv[0]
@@ -152,6 +149,41 @@ def build_frame_cache(
     coloured = base.shading != "shaded"
     meshes = _variant_meshes(base, variants, decimate_fraction)
     renderers = {k: make_renderer(m) for k, m in meshes.items()}
+    records = _write_frames(frames, out, short_side, renderers, overwrite)
+    index = {
+        "trajectory": str(trajectory),
+        "sensors": None if sensors is None else str(sensors),
+        "mesh": str(mesh),
+        "short_side": short_side,
+        "decimate_fraction": decimate_fraction,
+        "variants": list(variants),
+        "mesh_coloured": coloured,
+        "frames": records,
+    }
+    index_path = out / INDEX_NAME
+    index_path.write_text(json.dumps(index, indent=1))
+    logger.info("wrote %d frames to %s", len(records), out)
+    return index_path
+
+
+def _checked_variants(variants: Sequence[str]) -> tuple[str, ...]:
+    """``variants`` with "photo" first and without repeats; ValueError for an unknown one."""
+    variants = tuple(dict.fromkeys(("photo", *variants)))
+    unknown = sorted(set(variants) - set(VARIANTS))
+    if unknown:
+        raise ValueError(f"unknown variant(s) {unknown} (allowed: {VARIANTS})")
+    return variants
+
+
+def _write_frames(
+    frames: Sequence[tuple[float, Any]],
+    out: Path,
+    short_side: int,
+    renderers: dict,
+    overwrite: bool,
+) -> list[dict[str, Any]]:
+    """Write the cache file of each (order key, frame), keeping existing ones unless
+    ``overwrite``, and close the renderers; returns the frames' ``index.json`` records."""
     records = []
     t0 = time.perf_counter()
     try:
@@ -178,20 +210,7 @@ def build_frame_cache(
     finally:
         for r in renderers.values():
             r.close()
-    index = {
-        "trajectory": str(trajectory),
-        "sensors": None if sensors is None else str(sensors),
-        "mesh": str(mesh),
-        "short_side": short_side,
-        "decimate_fraction": decimate_fraction,
-        "variants": list(variants),
-        "mesh_coloured": coloured,
-        "frames": records,
-    }
-    index_path = out / INDEX_NAME
-    index_path.write_text(json.dumps(index, indent=1))
-    logger.info("wrote %d frames to %s", len(records), out)
-    return index_path
+    return records
 
 
 def fixed_offset_pairs(n: int, offset: int) -> list[tuple[int, int]]:
