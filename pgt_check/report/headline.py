@@ -55,95 +55,135 @@ def failure_headline(summary: Mapping[str, Any], out: str | Path) -> list[str]:
     inp = settings.get("input") or {}
     traj, mesh = inp.get("trajectory") or "TRAJECTORY", inp.get("mesh") or "MESH"
     out = Path(out)
-    lines: list[str] = []
     cal_sig = {k: v for k, v in calib.items() if v.get("status") in ("failed", "finding")}
     texture = (shared.get("texture") or {}).get("status") == "finding"
-    rejudge = f"pgt-check report {_q(out)} --remove-calibration true"
-    sensors_file = out / CALIBRATED_SENSORS
-    fix_cal = (
-        f"pgt-check {_q(traj)} --mesh {_q(mesh)} --sensors {_q(sensors_file)} "
-        f"--out {_q(str(out) + '-calibrated')}"
-    )
     if _failed(reg) or _failed(sim):
         e = reg if _failed(reg) else sim
-        what = "the whole trajectory is off the mesh" if e is reg else (
-            f"the trajectory's scale is off (x{_g(e.get('scale'), 5)})")
+        return _registration_lines(e, e is reg, cal_sig, texture, out, traj, mesh)
+    if cal_failed:
+        return _calibration_lines(cal_failed, out, traj, mesh)
+    if change_failed:
+        return _calibration_change_lines(change_failed)
+    return _drift_lines(summary, drift)
+
+
+def _calibration_fixes(out: Path, traj: Any, mesh: Any) -> list[str]:
+    """The re-judge-as-calibration command, and the re-run with the run's calibrated sensors
+    file when it wrote one."""
+    lines = [f"re-judge as calibration: pgt-check report {_q(out)} --remove-calibration true"]
+    sensors_file = out / CALIBRATED_SENSORS
+    if sensors_file.is_file():
         lines.append(
-            f"FAILED on an error all frames share: {what} by {_g(e.get('effect_px'))} px"
-            f"{_ci(e, 'effect_px')} = {_g(e.get('angle_deg'))} deg{_ci(e, 'angle_deg')} and "
-            f"{_g(e.get('translation'))} scene units{_ci(e, 'translation')} "
-            f"(run-level {e.get('kind', 'rigid')} fit over {e.get('n_frames', '?')} frames)"
+            f"fix: pgt-check {_q(traj)} --mesh {_q(mesh)} --sensors {_q(sensors_file)} "
+            f"--out {_q(str(out) + '-calibrated')}"
         )
-        if e.get("ambiguous_with_calibration") and cal_sig:
-            cam, c = next(iter(cal_sig.items()))
-            pp = c.get("principal_point_shift_px") or [float("nan")] * 2
-            lines.append(
-                "most likely: the photo camera's calibration, not the registration: every frame "
-                f"is displaced alike, as a principal point off by ({_g(pp[0])}, {_g(pp[1])}) px "
-                f"or a camera-to-sensor rotation of {_g(c.get('rotation_deg'))} deg would do "
-                "(e.g. photos from a camera beside the sensor whose poses are given); these "
-                "views cannot tell the two apart"
-                + ("; the mesh colours sit off its geometry too, as such an offset makes them"
-                   if texture else "")
-            )
-            lines.append(f"re-judge as calibration: {rejudge}")
-            if sensors_file.is_file():
-                lines.append(f"fix: {fix_cal}")
-            lines.append(
-                "or, if it is a misregistration: "
-                + (f"{_q(out / REGISTERED_TRAJECTORY)} holds the registered poses"
-                   if (out / REGISTERED_TRAJECTORY).is_file()
-                   else "re-run with --registration-rounds 8 --resume to write "
-                   "registered_trajectory.txt (only the rounds are measured)")
-            )
-        else:
-            lines.append(
-                "most likely: a misregistration of the trajectory to the mesh (the alignment "
-                "step: one transform for all frames)"
-            )
-            reg_file = out / REGISTERED_TRAJECTORY
-            lines.append(
-                f"fix: pgt-check {_q(reg_file)} --mesh {_q(mesh)} --out "
-                f"{_q(str(out) + '-registered')}" if reg_file.is_file()
-                else "fix: re-run with --registration-rounds 8 --resume (writes "
-                "registered_trajectory.txt; only the rounds are measured)"
-            )
-    elif cal_failed:
-        cam, c = next(iter(cal_failed.items()))
-        pp = c.get("principal_point_shift_px") or [float("nan")] * 2
-        lines.append(
-            f"FAILED on an error all frames share: every photo of camera {cam} is displaced by "
-            f"{_g(c.get('effect_px'))} px{_ci(c, 'effect_px')}: a camera-to-sensor rotation of "
-            f"{_g(c.get('rotation_deg'))} deg{_ci(c, 'rotation_deg')} (principal point off by "
-            f"({_g(pp[0])}, {_g(pp[1])}) px), focal length x{_g(c.get('focal_scale'), 5)}"
-        )
-        lines.append("most likely: the camera calibration (intrinsics or camera-to-sensor "
-                     "mounting), not the poses")
-        lines.append(f"re-judge as calibration: {rejudge}")
-        if sensors_file.is_file():
-            lines.append(f"fix: {fix_cal}")
-    elif change_failed:
-        cam, c = next(iter(change_failed.items()))
-        lines.append(
-            f"FAILED on an error all frames share: camera {cam} changed since the trusted run: "
-            f"what is left moves the images by {_g(c.get('effect_px'))} px"
-            f"{_ci(c, 'effect_px')} ({_g(c.get('rotation_deg'))} deg)"
-        )
-        lines.append("most likely: a new mounting, focus or principal point of that camera")
-        lines.append("fix: calibrate again on a run you trust (its summary.json) and pass it "
-                     "with --calibration-from")
-    else:
-        acc = (summary.get("accuracy") or {}).get("limits") or {}
-        worst = max((p.get("effect_px") or 0.0 for p in drift.get("per_frame") or []),
-                    default=float("nan"))
-        ppd, ppu = acc.get("points_px_per_deg"), acc.get("points_px_per_unit")
-        segs = ", ".join(f"{a} .. {b}" for a, b in drift.get("segments") or [])
-        lines.append(
-            f"FAILED on an error neighbouring frames share: drift of up to {_g(worst)} px "
-            f"(about {_g(worst / ppd if ppd else None)} deg or "
-            f"{_g(worst / ppu if ppu else None)} scene units) in {segs or 'a segment'}"
-        )
-        lines.append("most likely: SLAM / VIO drift along those segments")
-        lines.append("fix: re-estimate those segments' poses (corrected_trajectory.txt holds "
-                     "verified corrections of the FAIL frames, --correct fail)")
     return lines
+
+
+def _registration_lines(
+    e: Mapping[str, Any],
+    is_reg: bool,
+    cal_sig: Mapping[str, Mapping[str, Any]],
+    texture: bool,
+    out: Path,
+    traj: Any,
+    mesh: Any,
+) -> list[str]:
+    """Lines for a failed registration (``is_reg``) or similarity check ``e``: its size, then
+    calibration or misregistration as the likely cause with the commands for it."""
+    what = "the whole trajectory is off the mesh" if is_reg else (
+        f"the trajectory's scale is off (x{_g(e.get('scale'), 5)})")
+    lines = [
+        f"FAILED on an error all frames share: {what} by {_g(e.get('effect_px'))} px"
+        f"{_ci(e, 'effect_px')} = {_g(e.get('angle_deg'))} deg{_ci(e, 'angle_deg')} and "
+        f"{_g(e.get('translation'))} scene units{_ci(e, 'translation')} "
+        f"(run-level {e.get('kind', 'rigid')} fit over {e.get('n_frames', '?')} frames)"
+    ]
+    if e.get("ambiguous_with_calibration") and cal_sig:
+        return lines + _calibration_or_registration(
+            next(iter(cal_sig.values())), texture, out, traj, mesh
+        )
+    return lines + _misregistration(out, mesh)
+
+
+def _calibration_or_registration(
+    c: Mapping[str, Any], texture: bool, out: Path, traj: Any, mesh: Any
+) -> list[str]:
+    """Lines naming calibration (camera check ``c``) as the likely cause of a run-level offset
+    these views cannot tell from a misregistration, with the commands for either."""
+    pp = c.get("principal_point_shift_px") or [float("nan")] * 2
+    return [
+        "most likely: the photo camera's calibration, not the registration: every frame "
+        f"is displaced alike, as a principal point off by ({_g(pp[0])}, {_g(pp[1])}) px "
+        f"or a camera-to-sensor rotation of {_g(c.get('rotation_deg'))} deg would do "
+        "(e.g. photos from a camera beside the sensor whose poses are given); these "
+        "views cannot tell the two apart"
+        + ("; the mesh colours sit off its geometry too, as such an offset makes them"
+           if texture else ""),
+        *_calibration_fixes(out, traj, mesh),
+        "or, if it is a misregistration: "
+        + (f"{_q(out / REGISTERED_TRAJECTORY)} holds the registered poses"
+           if (out / REGISTERED_TRAJECTORY).is_file()
+           else "re-run with --registration-rounds 8 --resume to write "
+           "registered_trajectory.txt (only the rounds are measured)"),
+    ]
+
+
+def _misregistration(out: Path, mesh: Any) -> list[str]:
+    """Lines naming a misregistration as the likely cause, with the command that fixes it."""
+    reg_file = out / REGISTERED_TRAJECTORY
+    return [
+        "most likely: a misregistration of the trajectory to the mesh (the alignment "
+        "step: one transform for all frames)",
+        f"fix: pgt-check {_q(reg_file)} --mesh {_q(mesh)} --out "
+        f"{_q(str(out) + '-registered')}" if reg_file.is_file()
+        else "fix: re-run with --registration-rounds 8 --resume (writes "
+        "registered_trajectory.txt; only the rounds are measured)",
+    ]
+
+
+def _calibration_lines(
+    cal_failed: Mapping[str, Mapping[str, Any]], out: Path, traj: Any, mesh: Any
+) -> list[str]:
+    """Lines for a failed per-camera calibration check (the first failed camera)."""
+    cam, c = next(iter(cal_failed.items()))
+    pp = c.get("principal_point_shift_px") or [float("nan")] * 2
+    return [
+        f"FAILED on an error all frames share: every photo of camera {cam} is displaced by "
+        f"{_g(c.get('effect_px'))} px{_ci(c, 'effect_px')}: a camera-to-sensor rotation of "
+        f"{_g(c.get('rotation_deg'))} deg{_ci(c, 'rotation_deg')} (principal point off by "
+        f"({_g(pp[0])}, {_g(pp[1])}) px), focal length x{_g(c.get('focal_scale'), 5)}",
+        "most likely: the camera calibration (intrinsics or camera-to-sensor "
+        "mounting), not the poses",
+        *_calibration_fixes(out, traj, mesh),
+    ]
+
+
+def _calibration_change_lines(change_failed: Mapping[str, Mapping[str, Any]]) -> list[str]:
+    """Lines for a camera whose calibration changed since the trusted run (the first one)."""
+    cam, c = next(iter(change_failed.items()))
+    return [
+        f"FAILED on an error all frames share: camera {cam} changed since the trusted run: "
+        f"what is left moves the images by {_g(c.get('effect_px'))} px"
+        f"{_ci(c, 'effect_px')} ({_g(c.get('rotation_deg'))} deg)",
+        "most likely: a new mounting, focus or principal point of that camera",
+        "fix: calibrate again on a run you trust (its summary.json) and pass it "
+        "with --calibration-from",
+    ]
+
+
+def _drift_lines(summary: Mapping[str, Any], drift: Mapping[str, Any]) -> list[str]:
+    """Lines for failed drift: the worst frame's effect in px, deg and scene units, and where."""
+    acc = (summary.get("accuracy") or {}).get("limits") or {}
+    worst = max((p.get("effect_px") or 0.0 for p in drift.get("per_frame") or []),
+                default=float("nan"))
+    ppd, ppu = acc.get("points_px_per_deg"), acc.get("points_px_per_unit")
+    segs = ", ".join(f"{a} .. {b}" for a, b in drift.get("segments") or [])
+    return [
+        f"FAILED on an error neighbouring frames share: drift of up to {_g(worst)} px "
+        f"(about {_g(worst / ppd if ppd else None)} deg or "
+        f"{_g(worst / ppu if ppu else None)} scene units) in {segs or 'a segment'}",
+        "most likely: SLAM / VIO drift along those segments",
+        "fix: re-estimate those segments' poses (corrected_trajectory.txt holds "
+        "verified corrections of the FAIL frames, --correct fail)",
+    ]
