@@ -6,7 +6,7 @@ import collections
 import logging
 import threading
 import uuid
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from typing import Any
 
 from pgt_check.config import RunConfig
@@ -84,6 +84,96 @@ def _dask_client(config: RunConfig) -> tuple[Any, Any]:
     return client, cluster
 
 
+class _DaskRun:
+    """State of one Dask run: the client, frames in flight, frames to retry alone."""
+
+    def __init__(
+        self,
+        client: Any,
+        checker_factory: CheckerFactory,
+        config: RunConfig,
+        stop: threading.Event,
+        stats: ExecutorStats,
+        as_completed: Callable[[], Any],
+        killed: type[BaseException],
+    ) -> None:
+        """``as_completed`` / ``killed``: distributed's, imported before connecting."""
+        self.client, self.factory, self.config, self.stop, self.stats = (
+            client, checker_factory, config, stop, stats,
+        )  # fmt: skip
+        self.as_completed, self.killed = as_completed, killed
+        self.token = uuid.uuid4().hex[:12]
+        self.inflight: dict[Any, Task] = {}
+        self.retry: collections.deque[Task] = collections.deque()
+        self.source: Iterator[Frame] = iter(())
+        self.exhausted = False
+        self.max_inflight = 2
+        self.ac: Any = None
+
+    def submit(self, task: Task) -> bool:
+        """Send one frame to the cluster (never refused)."""
+        fut = self.client.submit(
+            _dask_measure,
+            self.token,
+            self.factory,
+            task.frame,
+            key=f"pgt-check-{self.token}-{self.stats.submitted}",
+            pure=False,
+        )
+        self.inflight[fut] = task
+        self.stats.submitted += 1
+        self.ac.add(fut)
+        return True
+
+    def refill(self) -> None:
+        """Submit frames under the policy both pools share (``fill``)."""
+        self.exhausted = fill(
+            self.stop,
+            self.inflight,
+            self.retry,
+            self.source,
+            self.exhausted,
+            self.max_inflight,
+            self.submit,
+        )
+
+    def outcome(self, fut: Any, task: Task) -> FrameMeasurement | None:
+        """Measurement of a completed future, or None (cancelled, stopping, re-queued)."""
+        if fut.status == "finished":
+            return fut.result()
+        if fut.status == "cancelled" or self.stop.is_set():
+            return None
+        err = fut.exception()
+        if isinstance(err, CheckerSetupError):
+            raise err
+        if isinstance(err, self.killed):
+            return _dask_crash(task, err, self.retry, self.config, self.stats)
+        if self.config.fail_fast:
+            raise err
+        return internal_error(task.frame, err)
+
+    def results(self, frames: Iterable[Frame]) -> Iterator[FrameMeasurement]:
+        """The frames' measurements as they complete."""
+        nthreads = sum(self.client.nthreads().values()) or 1
+        self.stats.workers = nthreads
+        self.max_inflight = max(2, INFLIGHT_PER_WORKER * nthreads)
+        self.source = iter(frames)
+        self.ac = self.as_completed()
+        logger.info(
+            "Dask: %d worker threads, up to %d frames in flight", nthreads, self.max_inflight
+        )
+        noted = [False]
+        self.refill()
+        for fut in self.ac:
+            rec = self.outcome(fut, self.inflight.pop(fut))
+            fut.release()
+            if rec is not None:
+                self.stats.yielded += 1
+                yield rec
+            note_stop(self.stop, noted, len(self.inflight))
+            self.refill()
+
+
 def iter_dask(
     frames: Iterable[Frame],
     checker_factory: CheckerFactory,
@@ -91,68 +181,18 @@ def iter_dask(
     stop: threading.Event,
     stats: ExecutorStats,
 ) -> Iterator[FrameMeasurement]:
+    """Measure ``frames`` on a Dask cluster (``_dask_client``); yields as frames finish."""
     from distributed import as_completed
     from distributed.scheduler import KilledWorker
 
     client, cluster = _dask_client(config)
-    token = uuid.uuid4().hex[:12]
-    inflight: dict[Any, Task] = {}
-    retry: collections.deque[Task] = collections.deque()
-    noted = [False]
+    run = _DaskRun(client, checker_factory, config, stop, stats, as_completed, KilledWorker)
     try:
-        nthreads = sum(client.nthreads().values()) or 1
-        stats.workers = nthreads
-        max_inflight = max(2, INFLIGHT_PER_WORKER * nthreads)
-        source = iter(frames)
-        exhausted = False
-        ac = as_completed()
-        logger.info("Dask: %d worker threads, up to %d frames in flight", nthreads, max_inflight)
-
-        def submit(task: Task) -> bool:
-            fut = client.submit(
-                _dask_measure,
-                token,
-                checker_factory,
-                task.frame,
-                key=f"pgt-check-{token}-{stats.submitted}",
-                pure=False,
-            )
-            inflight[fut] = task
-            stats.submitted += 1
-            ac.add(fut)
-            return True
-
-        def refill() -> None:
-            nonlocal exhausted
-            exhausted = fill(stop, inflight, retry, source, exhausted, max_inflight, submit)
-
-        refill()
-        for fut in ac:
-            task = inflight.pop(fut)
-            frame = task.frame
-            rec: FrameMeasurement | None = None
-            if fut.status == "finished":
-                rec = fut.result()
-            elif fut.status != "cancelled" and not stop.is_set():
-                err = fut.exception()
-                if isinstance(err, CheckerSetupError):
-                    raise err
-                if isinstance(err, KilledWorker):
-                    rec = _dask_crash(task, err, retry, config, stats)
-                else:
-                    if config.fail_fast:
-                        raise err
-                    rec = internal_error(frame, err)
-            fut.release()
-            if rec is not None:
-                stats.yielded += 1
-                yield rec
-            note_stop(stop, noted, len(inflight))
-            refill()
+        yield from run.results(frames)
         stats.stopped = stop.is_set()
     finally:
-        if inflight:
-            client.cancel(list(inflight))
+        if run.inflight:
+            client.cancel(list(run.inflight))
         client.close()
         if cluster is not None:
             cluster.close()
