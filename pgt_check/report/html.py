@@ -147,12 +147,8 @@ def page_context(
 ) -> dict[str, Any]:
     """Everything the template shows (plain data; the template autoescapes it)."""
     n = len(records)
-    counts = summary.get("counts", {})
     stats = summary.get("statistics", {})
     err = stats.get("corner_error_px", {})
-    gate = summary.get("gate", {})
-    from pgt_check.report.paths import path_comparison
-
     columns = table_columns(records)
     inspect = [str(f) for f in select_detail_frames(records)]
     data = {
@@ -165,8 +161,30 @@ def page_context(
         "kind_labels": KIND_LABELS,
         "page_size": PAGE_SIZE,
     }
-    auc = stats.get("auc") or {}
-    offset = stats.get("systematic_offset") or {}
+    return {
+        **_comparison_context(records, summary),
+        "shared_errors": shared_error_rows(summary),
+        **_accuracy_context(summary),
+        **_verdict_context(summary, n, stats, err, absolute_paths),
+        "run_info": _run_info_rows(summary),
+        "plots": list(plots),
+        "n_detail": len(inspect),
+        "n_with_assets": sum(1 for f in inspect if f in data["assets"]),
+        "columns": columns,
+        "settings": _settings_rows(summary.get("settings") or {}, absolute_paths),
+        "timing": _timing_rows(summary),
+        "versions": sorted((str(k), str(v)) for k, v in (summary.get("versions") or {}).items()),
+        "data_json": script_json(data),
+    }
+
+
+def _comparison_context(
+    records: Sequence[Mapping[str, Any]], summary: Mapping[str, Any]
+) -> dict[str, Any]:
+    """The raw-vs-enhanced table, the enhancer's name and the count of frames the two paths
+    disagree on (empty when no frame has an enhanced path)."""
+    from pgt_check.report.paths import path_comparison
+
     comparison = summary.get("raw_vs_enhanced")
     if not isinstance(comparison, Mapping):
         comparison = path_comparison(records)
@@ -179,8 +197,23 @@ def page_context(
         # which enhancer made the enhanced path (MaRINeR or reprojection), for the table head
         "enhance_method": str(method) if isinstance(method, str) else "",
         "n_disagree": int(comparison.get("frames_disagree") or 0) if show_comparison else 0,
-        "shared_errors": shared_error_rows(summary),
-        **_accuracy_context(summary),
+    }
+
+
+def _verdict_context(
+    summary: Mapping[str, Any],
+    n: int,
+    stats: Mapping[str, Any],
+    err: Mapping[str, Any],
+    absolute_paths: bool,
+) -> dict[str, Any]:
+    """The title, the gate, the verdict counts and the run's statistics (``summary`` of ``n``
+    frames; ``stats`` its statistics, ``err`` their corner error)."""
+    counts = summary.get("counts", {})
+    gate = summary.get("gate", {})
+    auc = stats.get("auc") or {}
+    offset = stats.get("systematic_offset") or {}
+    return {
         "title": _title(summary, absolute_paths),
         "gate_passed": bool(gate.get("passed")),
         "gate_explanation": str(gate.get("explanation", "")),
@@ -206,15 +239,6 @@ def page_context(
         ],
         "offset_message": str(offset.get("message", "")),
         "offset_systematic": bool(offset.get("systematic")),
-        "run_info": _run_info_rows(summary),
-        "plots": list(plots),
-        "n_detail": len(inspect),
-        "n_with_assets": sum(1 for f in inspect if f in data["assets"]),
-        "columns": columns,
-        "settings": _settings_rows(summary.get("settings") or {}, absolute_paths),
-        "timing": _timing_rows(summary),
-        "versions": sorted((str(k), str(v)) for k, v in (summary.get("versions") or {}).items()),
-        "data_json": script_json(data),
     }
 
 
