@@ -69,61 +69,14 @@ def junit_xml_text(
     ``display_path`` maps a record's image_path to what is shown (e.g. without absolute paths).
     """
     n = len(records)
-    n_fail = sum(1 for r in records if r.get("verdict") == "FAIL")
-    n_skip = sum(1 for r in records if r.get("verdict") == "UNVERIFIABLE")
-    total_time = sum(
-        float(r["time_s"])
-        for r in records
-        if isinstance(r.get("time_s"), (int, float)) and math.isfinite(r["time_s"])
-    )
-    counts = {
-        "tests": str(n),
-        "failures": str(n_fail),
-        "errors": "0",
-        "skipped": str(n_skip),
-        "time": _seconds(total_time),
-    }
+    counts = _suite_counts(records)
     root = ET.Element("testsuites", {"name": suite_name, **counts})
     suite = ET.SubElement(root, "testsuite", {"name": suite_name, **counts})
-    props = ET.SubElement(suite, "properties")
     gate = summary.get("gate", {}) if isinstance(summary.get("gate"), Mapping) else {}
-    for name, value in (
-        ("pgt-check.version", summary.get("version")),
-        ("threshold_px", summary.get("threshold_px")),
-        ("gate.passed", gate.get("passed")),
-        ("gate.explanation", gate.get("explanation")),
-        ("fingerprint", summary.get("fingerprint")),
-    ):
-        if value is not None:
-            ET.SubElement(props, "property", {"name": name, "value": xml_text(value)})
+    _add_properties(suite, summary, gate)
     classname = f"{suite_name}.frames"
     for rec in records:
-        path = display_path(str(rec.get("image_path") or ""))
-        case = ET.SubElement(
-            suite,
-            "testcase",
-            {
-                "name": xml_text(rec.get("frame_id")),
-                "classname": classname,
-                "time": _seconds(rec.get("time_s")),
-            },
-        )
-        # the correction is in the failure / system-out text (the Surefire schema that CI
-        # servers validate against has no per-testcase properties)
-        verdict = rec.get("verdict")
-        if verdict == "FAIL":
-            el = ET.SubElement(
-                case, "failure", {"message": xml_text(rec.get("reason") or "FAIL"), "type": "FAIL"}
-            )
-            el.text = xml_text(_frame_text(rec, path))
-        elif verdict == "UNVERIFIABLE":
-            ET.SubElement(
-                case,
-                "skipped",
-                {"message": xml_text(f"UNVERIFIABLE: {rec.get('reason') or 'unknown'}")},
-            )
-        out = ET.SubElement(case, "system-out")
-        out.text = xml_text(_frame_text(rec, path))
+        _add_testcase(suite, rec, classname, display_path)
     so = ET.SubElement(suite, "system-out")
     c = summary.get("counts", {})
     so.text = xml_text(
@@ -133,3 +86,70 @@ def junit_xml_text(
     )
     ET.indent(root, space=" ")
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
+
+
+def _suite_counts(records: Sequence[Mapping[str, Any]]) -> dict[str, str]:
+    """The tests / failures / errors / skipped / time attributes of the suite, as text."""
+    n_fail = sum(1 for r in records if r.get("verdict") == "FAIL")
+    n_skip = sum(1 for r in records if r.get("verdict") == "UNVERIFIABLE")
+    total_time = sum(
+        float(r["time_s"])
+        for r in records
+        if isinstance(r.get("time_s"), (int, float)) and math.isfinite(r["time_s"])
+    )
+    return {
+        "tests": str(len(records)),
+        "failures": str(n_fail),
+        "errors": "0",
+        "skipped": str(n_skip),
+        "time": _seconds(total_time),
+    }
+
+
+def _add_properties(suite: ET.Element, summary: Mapping[str, Any], gate: Mapping[str, Any]) -> None:
+    """Add the suite's <properties> (version, threshold, gate, fingerprint); returns None."""
+    props = ET.SubElement(suite, "properties")
+    for name, value in (
+        ("pgt-check.version", summary.get("version")),
+        ("threshold_px", summary.get("threshold_px")),
+        ("gate.passed", gate.get("passed")),
+        ("gate.explanation", gate.get("explanation")),
+        ("fingerprint", summary.get("fingerprint")),
+    ):
+        if value is not None:
+            ET.SubElement(props, "property", {"name": name, "value": xml_text(value)})
+
+
+def _add_testcase(
+    suite: ET.Element,
+    rec: Mapping[str, Any],
+    classname: str,
+    display_path: Callable[[str], str],
+) -> None:
+    """Add one record's <testcase> (with its failure or skipped element); returns None."""
+    path = display_path(str(rec.get("image_path") or ""))
+    case = ET.SubElement(
+        suite,
+        "testcase",
+        {
+            "name": xml_text(rec.get("frame_id")),
+            "classname": classname,
+            "time": _seconds(rec.get("time_s")),
+        },
+    )
+    # the correction is in the failure / system-out text (the Surefire schema that CI
+    # servers validate against has no per-testcase properties)
+    verdict = rec.get("verdict")
+    if verdict == "FAIL":
+        el = ET.SubElement(
+            case, "failure", {"message": xml_text(rec.get("reason") or "FAIL"), "type": "FAIL"}
+        )
+        el.text = xml_text(_frame_text(rec, path))
+    elif verdict == "UNVERIFIABLE":
+        ET.SubElement(
+            case,
+            "skipped",
+            {"message": xml_text(f"UNVERIFIABLE: {rec.get('reason') or 'unknown'}")},
+        )
+    out = ET.SubElement(case, "system-out")
+    out.text = xml_text(_frame_text(rec, path))
