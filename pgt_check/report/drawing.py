@@ -164,10 +164,25 @@ def draw_arrows(
     green, outliers red dots); the homography moves a grid of points (thick arrows in the path's
     colour). Lines and arrows are ``magnification`` times their length (written on the panel).
     """
-    import cv2
-
     canvas = (photo.astype(np.float32) * 0.55 + 40).astype(np.uint8)
     k = int(max(1, magnification))
+    k0, k1, inl = _matches(path)
+    n = len(inl)
+    idx_in, idx_out = _drawn_matches(inl, max_drawn, seed)
+    _draw_matches(canvas, k0, k1, idx_in, idx_out, k)
+    colour = PATH_BGR.get(name, (255, 255, 255))
+    if path.photo_from_render is not None:
+        _draw_homography_arrows(canvas, path.photo_from_render, k, colour)
+        text = f"{name.upper()}: arrows x{k} (homography), {int(inl.sum())}/{n} inliers"
+    else:
+        text = f"{name.upper()}: no homography, {n} matches"
+    _label(canvas, text, colour)
+    return canvas
+
+
+def _matches(path: PathImages) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(N, 2) render and (N', 2) photo keypoints of a path and the (n,) inlier mask of its
+    n = min(N, N') matches (all False where the path gives none)."""
     k0 = np.asarray(path.kpts_render, np.float64).reshape(-1, 2)
     k1 = np.asarray(path.kpts_photo, np.float64).reshape(-1, 2)
     n = min(len(k0), len(k1))
@@ -175,6 +190,12 @@ def draw_arrows(
     if path.inliers is not None:
         given = np.asarray(path.inliers, bool).reshape(-1)[:n]
         inl[: len(given)] = given
+    return k0, k1, inl
+
+
+def _drawn_matches(inl: np.ndarray, max_drawn: int, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """Indices of the inliers and outliers to draw: at most ``max_drawn`` in all, outliers at
+    most a quarter, a seeded random sample where there are more."""
     rng = np.random.default_rng(seed)
     idx_in, idx_out = np.flatnonzero(inl), np.flatnonzero(~inl)
     n_out = min(len(idx_out), max_drawn // 4)
@@ -183,6 +204,21 @@ def draw_arrows(
         idx_in = rng.choice(idx_in, n_in, replace=False)
     if len(idx_out) > n_out:
         idx_out = rng.choice(idx_out, n_out, replace=False)
+    return idx_in, idx_out
+
+
+def _draw_matches(
+    canvas: np.ndarray,
+    k0: np.ndarray,
+    k1: np.ndarray,
+    idx_in: np.ndarray,
+    idx_out: np.ndarray,
+    k: int,
+) -> None:
+    """Draw outliers as red dots and inliers as green lines ``k`` times their length, in place
+    on ``canvas``; returns None."""
+    import cv2
+
     for i in idx_out:
         if np.all(np.isfinite(k0[i])):
             cv2.circle(canvas, (round(k0[i][0]), round(k0[i][1])), 2, _OUTLIER_BGR, -1, cv2.LINE_AA)
@@ -193,23 +229,25 @@ def draw_arrows(
         pa, pb = (round(a[0]), round(a[1])), (round(b[0]), round(b[1]))
         cv2.line(canvas, pa, pb, _INLIER_BGR, 1, cv2.LINE_AA)
         cv2.circle(canvas, pa, 2, _INLIER_BGR, -1, cv2.LINE_AA)
-    colour = PATH_BGR.get(name, (255, 255, 255))
+
+
+def _draw_homography_arrows(
+    canvas: np.ndarray, photo_from_render: np.ndarray, k: int, colour: tuple[int, int, int]
+) -> None:
+    """Draw the (3, 3) homography's displacement of a point grid as arrows ``k`` times their
+    length, in place on ``canvas``; returns None."""
+    import cv2
+
     h, w = canvas.shape[:2]
     thick = max(2, round(max(h, w) / 400))
-    if path.photo_from_render is not None:
-        pts = grid_points(w, h)
-        d = homography_displacements(path.photo_from_render, pts)
-        for p, dp in zip(pts, d, strict=True):
-            if not np.all(np.isfinite(dp)):
-                continue
-            q = p + k * dp
-            cv2.arrowedLine(canvas, (round(p[0]), round(p[1])), (round(q[0]), round(q[1])),
-                            colour, thick, cv2.LINE_AA, tipLength=0.25)
-        text = f"{name.upper()}: arrows x{k} (homography), {int(inl.sum())}/{n} inliers"
-    else:
-        text = f"{name.upper()}: no homography, {n} matches"
-    _label(canvas, text, colour)
-    return canvas
+    pts = grid_points(w, h)
+    d = homography_displacements(photo_from_render, pts)
+    for p, dp in zip(pts, d, strict=True):
+        if not np.all(np.isfinite(dp)):
+            continue
+        q = p + k * dp
+        cv2.arrowedLine(canvas, (round(p[0]), round(p[1])), (round(q[0]), round(q[1])),
+                        colour, thick, cv2.LINE_AA, tipLength=0.25)
 
 
 def write_jpeg(path: Path, bgr: np.ndarray, quality: int = JPEG_QUALITY) -> None:
