@@ -298,17 +298,13 @@ def _without_reference(
 ) -> tuple[_Decision, bool]:
     """(decision, final) where the reference that decided is clearly off on its own render."""
     # a reference that its own render shows off cannot vouch for or against this frame:
-    # what this frame's own render says decides; a PASS of it only when clear (a large
-    # relative error may still be this frame's own)
+    # what this frame's own render says decides (absolute evidence; demanding a clear PASS
+    # there made correct frames next to a wrong one UNVERIFIABLE: reports/edge_pipeline.md)
     evidence, path = d[2], d[3]
     base, why, own_path = own_outcome(m, out, config)
     off = f"reference {ref_off} fails on its own render"
     if base is Verdict.UNVERIFIABLE:
         return (base, f"reference_off ({off})", evidence, path), True
-    clear = _error_ratio(m, own_path, config, shared) <= 1.0 - CLEAR_MARGIN
-    if base is Verdict.PASS and not clear:
-        reason = f"paths_disagree ({off}; the {own_path} path passes, not clearly)"
-        return (Verdict.UNVERIFIABLE, reason, evidence, own_path), True
     return (base, why, Evidence.ABSOLUTE.value, own_path), False
 
 
@@ -331,10 +327,15 @@ def _settle_disagreement(
     ]
     if base is not Verdict.FAIL or not passing:
         return d, False
-    # a FAIL that is not confident (reprojected references, whose poses may be the wrong
-    # ones, or a render with few inliers) against a PASS of another absolute path: a
-    # clear PASS (within half the threshold) decides, otherwise the paths disagree
+    # a FAIL that is not confident against a PASS of another absolute path: a clear PASS
+    # (within half the threshold) decides. A reprojected reference's FAIL is relative
+    # evidence (the reference's pose error and the mesh's geometry between the two views
+    # are in it): any absolute PASS outweighs it; on TSDF-fused scans it failed correct
+    # frames whose edges passed (reports/edge_pipeline.md). A render's FAIL on few inliers
+    # against a PASS that is not clear: the paths disagree
     clear = [n for n in passing if _error_ratio(m, n, config, shared) <= 1.0 - CLEAR_MARGIN]
+    if evidence == Evidence.RELATIVE.value:
+        clear = clear or passing
     if not clear:
         reason = f"paths_disagree ({why} on the {path} path; an absolute path passes)"
         return (Verdict.UNVERIFIABLE, reason, evidence, path), True

@@ -139,7 +139,7 @@ def _frame(fid, raw_err, enh_err=None, ref=None):
     [
         (3.0, "PASS", ""),  # this frame's own render passes clearly
         (None, "UNVERIFIABLE", "reference_off"),  # nothing absolute to judge it by
-        (12.0, "UNVERIFIABLE", "paths_disagree"),  # passes, but not clearly
+        (12.0, "PASS", ""),  # passes, not clearly: still its own absolute evidence
         (40.0, "FAIL", "corner_error"),  # its own render fails too
     ],
 )
@@ -188,6 +188,25 @@ def test_a_weak_raw_fail_against_an_edge_pass(edge_err, verdict, reason, decided
     assert j.reason.startswith(reason)
     m40 = FrameMeasurement(**{**m.__dict__, "raw": _path("raw", 17.0, 40)})
     assert judge(m40, cfg).verdict is Verdict.FAIL
+
+
+def test_a_relative_fail_does_not_outweigh_an_absolute_pass():
+    """A reprojected reference's FAIL (relative evidence, few inliers) against the edge
+    path's PASS near the threshold: the absolute PASS decides (on TSDF-fused scans the
+    reprojection through the scan's rounded geometry failed correct frames). A confident
+    relative FAIL still stands, and so does the UNVERIFIABLE of two absolute paths that
+    disagree (test above)."""
+    from pgt_check.verdict.decide import judge
+
+    cfg = VerdictConfig()
+    m = _with(_frame("r", None), enhanced=_path("enhanced", 25.0, 20, "q", Evidence.RELATIVE),
+              edges=_path("edges", 12.0, 2000), verdict_path="enhanced")
+    j = judge(m, cfg)
+    assert (j.verdict, j.decided_by, j.evidence) == (Verdict.PASS, "edges", "absolute"), j
+    confident = _with(m, enhanced=_path("enhanced", 25.0, 150, "q", Evidence.RELATIVE))
+    assert judge(confident, cfg).verdict is Verdict.FAIL
+    far = _with(m, edges=_path("edges", 20.0, 2000))  # the edge path fails too
+    assert judge(far, cfg).verdict is Verdict.FAIL
 
 
 def _with(m, **kw):
