@@ -5,8 +5,8 @@ come from ``verdict.frame_bounds``.
 Per run (``run_accuracy``): how many frames are verified to within X deg / Y units, percentiles
 of the bounds, the shared errors as sizes with their 95 % intervals, and the detection limits of
 this run. The limits come from this run's own noise, not from constants: the single-frame limit
-is the error flagged in 95 % of (frame, error axis) pairs, each frame at its threshold plus its
-bootstrap noise and with its own sensitivities over error axes (``pooled_detection_size``;
+is the error flagged in 95 % of (frame, error axis) pairs, each frame at its threshold plus the
+median per-frame bootstrap noise, with its own sensitivities over error axes (``pooled_detection_size``;
 px per degree / per scene unit as the check's homography measures them); the shared limit is the
 shared threshold plus the half-width of the registration fit's own 95 % interval, turned with
 the image effect of a world rotation / translation as the registration check measures it
@@ -199,9 +199,10 @@ def pooled_detection_size(
 ) -> float | None:
     """The error size (deg or units) flagged in a share ``q`` of (frame, error axis) pairs.
 
-    Each frame flags an error once its corner error exceeds its threshold plus its bootstrap
-    noise (``acc_noise_px``; ``noise_px`` where missing): at ``e / g`` for an axis of
-    sensitivity ``g``. Over error axes the frame's size is taken as lognormal through its
+    Each frame flags an error once its corner error exceeds its threshold plus the run's
+    median bootstrap noise ``noise_px`` (a frame's own noise is its pose fit's, which on
+    frames with little evidence reaches tens of px while their corner error does not): at
+    ``e / g`` for an axis of sensitivity ``g``. Over error axes the frame's size is taken as lognormal through its
     median (``mid_key`` sensitivity) and 95 % point (``low_key``, the 5 % quantile of the
     sensitivities); the frames' distributions are pooled with equal weight and the pooled
     ``q`` point is found by bisection. None without a frame that has both sensitivities."""
@@ -210,9 +211,7 @@ def pooled_detection_size(
         mid, low = _num(r.get(mid_key)), _num(r.get(low_key))
         if not mid or not low or mid <= 0 or low <= 0:
             continue
-        thr = _num(r.get("threshold_px")) or threshold_px
-        noise = _num(r.get("acc_noise_px"))
-        e = thr + (noise if noise is not None else (noise_px or 0.0))
+        e = (_num(r.get("threshold_px")) or threshold_px) + (noise_px or 0.0)
         mus.append(math.log(e / mid))
         sigmas.append(max(math.log(mid / low), 0.0) / _Z95)
     if not mus:
@@ -275,7 +274,7 @@ def detection_limits(
         "single frame: the rotation alone / translation alone flagged in 95 % of (frame, "
         "error axis) pairs: each frame flags an error once its corner error (its points' "
         "image motion fitted by a homography, as the check measures it) exceeds its "
-        "threshold + its bootstrap noise; per frame lognormal over error axes through its "
+        "threshold + the median per-frame bootstrap noise; per frame lognormal over error axes through its "
         "median and 5 % sensitivities, pooled over the frames; shared: shared threshold + "
         "half-width of the registration fit's 95 % interval (px), turned with the image "
         "effect of a world rotation about the camera centroid / a world translation as the "

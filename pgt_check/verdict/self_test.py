@@ -89,6 +89,9 @@ class CurvePoint:
     failed: int  # FAIL (single frame) / registration failed (shared)
     unverifiable: int  # UNVERIFIABLE (single frame) / registration not checked (shared)
     status: str = ""  # shared test: the registration check's status
+    #: single frame: the frames still PASSing at this size, "id (corner error px / threshold
+    #: px, path)": where a limit is missed, these say why
+    missed: tuple[str, ...] = ()
 
     @property
     def share(self) -> float | None:
@@ -329,11 +332,14 @@ def run_self_test(
     ms = _measure_as(measure, jobs, ecfg) if jobs else {}
     v = config.verdict
 
-    def tally(keys: Sequence[str]) -> tuple[int, int, int, int]:
-        got = [judge(ms[x], v, shared).verdict for x in keys if x in ms]
+    def tally(keys: Sequence[str]) -> tuple[int, int, int, int, str, tuple[str, ...]]:
+        judged = {x: judge(ms[x], v, shared) for x in keys if x in ms}
+        got = [j.verdict for j in judged.values()]
         fail = sum(g is Verdict.FAIL for g in got)
         unv = sum(g is Verdict.UNVERIFIABLE for g in got)
-        return len(keys), fail + unv + (len(keys) - len(got)), fail, unv
+        missed = tuple(_missed(ms[x], j, v) for x, j in judged.items()
+                       if j.verdict is Verdict.PASS)
+        return len(keys), fail + unv + (len(keys) - len(got)), fail, unv, "", missed
 
     zero = tally(plan.get(("", 0.0), []))
     curves = []
@@ -361,6 +367,17 @@ def run_self_test(
     st = SelfTest(n, tuple(f.frame_id for f in chosen), MULTIPLES, tuple(curves),
                   time.perf_counter() - t0)
     return replace(st, sentence=self_test_sentence(st))
+
+
+def _missed(m: FrameMeasurement, j: Any, v: Any) -> str:
+    """``id (corner error px / threshold px, path)`` of a moved frame that still PASSes."""
+    from pgt_check.verdict.decide import resolve_threshold_px
+
+    name = j.decided_by
+    path = getattr(m, name, None) if name in ("raw", "enhanced", "edges") else None
+    err = getattr(path, "corner_error_px", None)
+    thr = resolve_threshold_px(v, m.width, m.height)
+    return f"{m.frame_id} ({_g(err)} px / {_g(thr)} px, {name or '?'})"
 
 
 def _shared_point(k: float, size: float, ms: Sequence[FrameMeasurement], config: RunConfig,

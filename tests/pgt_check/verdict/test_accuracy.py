@@ -111,9 +111,10 @@ def test_pooled_detection_size_is_the_95_percent_point_of_the_pooled_frames():
 
     # two kinds of frames: sensitive ones (median 20 px/deg, 5 % axis 10) and weak ones
     # (median 5, 5 % axis 4); threshold 8 + noise 1 -> sizes lognormal per frame
-    frames = [dict(acc_px_per_deg=20.0, acc_low_px_per_deg=10.0, acc_noise_px=1.0)] * 3
-    frames += [dict(acc_px_per_deg=5.0, acc_low_px_per_deg=4.0, acc_noise_px=1.0)]
-    size = pooled_detection_size(frames, 8.0, None, "acc_px_per_deg", "acc_low_px_per_deg")
+    frames = [dict(acc_px_per_deg=20.0, acc_low_px_per_deg=10.0, acc_noise_px=30.0)] * 3
+    frames += [dict(acc_px_per_deg=5.0, acc_low_px_per_deg=4.0, acc_noise_px=0.1)]
+    # the run's median noise (1 px) counts, not a frame's own (its pose fit's)
+    size = pooled_detection_size(frames, 8.0, 1.0, "acc_px_per_deg", "acc_low_px_per_deg")
     # Monte Carlo of the stated model: the share of (frame, axis) sizes at or below it is 95 %
     import numpy as np
 
@@ -128,6 +129,6 @@ def test_pooled_detection_size_is_the_95_percent_point_of_the_pooled_frames():
     assert size > 9.0 / 10.0
     # threshold per row wins over the run's; frames without sensitivities are left out
     rows_thr = [dict(f, threshold_px=16.0) for f in frames] + [dict(acc_px_per_deg=None)]
-    assert pooled_detection_size(rows_thr, 8.0, None, "acc_px_per_deg",
+    assert pooled_detection_size(rows_thr, 8.0, 1.0, "acc_px_per_deg",
                                  "acc_low_px_per_deg") == pytest.approx(size * 17 / 9, rel=1e-6)
     assert pooled_detection_size([{}], 8.0, None, "acc_px_per_deg", "acc_low_px_per_deg") is None

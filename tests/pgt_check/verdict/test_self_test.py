@@ -115,6 +115,11 @@ def test_boxes_self_test_end_to_end(boxes_self_test, capsys):
         assert [p["k"] for p in c["points"]] == [0.0, *MULTIPLES]
         assert shares[0] == 0.0  # nothing injected: not flagged
         assert shares[-1] == 1.0  # 2x the stated limit: flagged
+        if c["test"] == "single_frame":  # each frame still passing is named, with its error
+            for p in c["points"]:
+                assert len(p["missed"]) == p["n"] - p["flagged"]
+                assert all(x.split(" (")[0] in st["frame_ids"] and " px / " in x
+                           for x in p["missed"])
         # monotone-ish: no share falls by more than one trial in six below an earlier one
         assert all(b >= a - 1 / 6 - 1e-9 for i, a in enumerate(shares) for b in shares[i:])
         assert c["stated"] == pytest.approx(
