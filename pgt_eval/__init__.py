@@ -212,7 +212,7 @@ def _photograph_boxes(out: Path, photo_scene, cam, n_frames: int, rng: np.random
     poses in ``out``; returns the trajectory path. Shared by the generated scenes."""
     import cv2
 
-    from pgt_check.io.lamar import write_lamar
+    from pgt_check.io.lamar_write import write_lamar
     from pgt_check.render import make_renderer, mesh_from_trimesh
 
     coloured = make_renderer(mesh_from_trimesh(photo_scene))

@@ -10,7 +10,7 @@ from __future__ import annotations
 from pgt_check.io.camera import parse_camera_spec
 from pgt_check.io.formats import FORMATS, detect_format, read_trajectory
 from pgt_check.io.images import image_size, load_image
-from pgt_check.io.lamar import write_lamar
+from pgt_check.io.lamar_write import write_lamar
 
 __all__ = [
     "FORMATS",

@@ -18,7 +18,6 @@ Lines starting with ``#`` are comments; whitespace around commas is ignored.
 from __future__ import annotations
 
 import logging
-import os
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -27,7 +26,6 @@ from pathlib import Path
 import numpy as np
 
 from pgt_check.errors import FormatError, InputError
-from pgt_check.geometry.transforms import rotmat_to_quat
 from pgt_check.io._text import (
     QuaternionCounter,
     UniqueKeys,
@@ -36,7 +34,7 @@ from pgt_check.io._text import (
     parse_timestamp,
     split_row,
 )
-from pgt_check.io.camera import camera_from_colmap, opencv_to_colmap_params
+from pgt_check.io.camera import camera_from_colmap
 from pgt_check.types import Camera, Frame, Trajectory
 
 logger = logging.getLogger(__name__)
@@ -408,89 +406,3 @@ def _metadata(files: LamarFiles, root: Path) -> dict[str, str]:
     if files.rigs is not None:
         metadata["rigs_file"] = str(files.rigs)
     return metadata
-
-
-def _fmt(value: float) -> str:
-    return repr(float(value))
-
-
-def write_lamar(trajectory: Trajectory, directory: str | Path, suffix: str = "") -> dict[str, Path]:
-    """Write ``sensors{suffix}.txt``, ``images{suffix}.txt``, ``trajectories{suffix}.txt``.
-
-    Cameras get ids ``cam0, cam1, ...`` (one per distinct Camera), written in COLMAP pixel
-    convention (0.5 added to cx, cy). Timestamps are the frames' timestamps when they are all
-    integers and unique per camera, else the frame indices. Image paths are written relative to
-    ``directory`` when the frame has a resolved ``image_file``, else ``image_path`` verbatim.
-    Poses are world_from_cam, one row per frame (no rigs). Returns the written paths by kind.
-    """
-    directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
-    camera_ids: dict[Camera, str] = {}
-    for frame in trajectory:
-        camera_ids.setdefault(frame.camera, f"cam{len(camera_ids)}")
-    stamp_text = _stamp_texts(trajectory, camera_ids, directory)
-    sensors_rows = _sensors_rows(camera_ids)
-    images_rows = ["# timestamp, sensor_id, image_path"]
-    traj_rows = [f"# timestamp, device_id, {POSE_LAYOUT}"]
-    for stamp, frame in zip(stamp_text, trajectory, strict=True):
-        cam_id = camera_ids[frame.camera]
-        images_rows.append(f"{stamp}, {cam_id}, {_image_text(frame, directory)}")
-        q = rotmat_to_quat(frame.world_from_cam[:3, :3])
-        t = frame.world_from_cam[:3, 3]
-        traj_rows.append(f"{stamp}, {cam_id}, " + ", ".join(_fmt(v) for v in (*q, *t)))
-    out = {
-        "sensors": directory / f"sensors{suffix}.txt",
-        "images": directory / f"images{suffix}.txt",
-        "trajectories": directory / f"trajectories{suffix}.txt",
-    }
-    for kind, rows in (
-        ("sensors", sensors_rows),
-        ("images", images_rows),
-        ("trajectories", traj_rows),
-    ):
-        out[kind].write_text("\n".join(rows) + "\n", encoding="utf-8")
-    return out
-
-
-def _stamp_texts(
-    trajectory: Trajectory, camera_ids: dict[Camera, str], directory: Path
-) -> list[str]:
-    """The timestamp column of each frame: its timestamp if all are integers and unique per
-    camera, else the frame indices (logged at INFO)."""
-    stamps = [f.timestamp for f in trajectory]
-    keys = {(s, camera_ids[f.camera]) for s, f in zip(stamps, trajectory, strict=True)}
-    if any(s is None or float(s) != int(s) for s in stamps) or len(keys) != len(trajectory):
-        if trajectory.frames:
-            logger.info(
-                "%s: timestamps are missing, non-integer or repeated; writing frame indices",
-                directory,
-            )
-        stamps = list(range(len(trajectory)))
-    return [str(int(s)) for s in stamps]
-
-
-def _sensors_rows(camera_ids: dict[Camera, str]) -> list[str]:
-    """The lines of the sensors file (header first), one camera row per camera id."""
-    sensors_rows = ["# sensor_id, name, sensor_type, [sensor_params]+"]
-    for camera, cam_id in camera_ids.items():
-        values = ", ".join(_fmt(p) for p in opencv_to_colmap_params(camera.model, camera.params))
-        sensors_rows.append(
-            f"{cam_id}, {cam_id}, camera, {camera.model}, {camera.width}, {camera.height}, {values}"
-        )
-    return sensors_rows
-
-
-def _image_text(frame: Frame, directory: Path) -> str:
-    """A frame's image path as written in the images file: relative to ``directory`` when the
-    frame has an ``image_file``, else its ``image_path``; raises InputError if unwritable."""
-    if frame.image_file is not None:
-        image = Path(
-            os.path.relpath(Path(frame.image_file).absolute(), directory.absolute())
-        ).as_posix()
-    else:
-        image = frame.image_path
-    if "," in image or not image:
-        raise InputError(
-            f"frame {frame.frame_id}: image path {image!r} cannot be written to a LaMAR file"
-        )
-    return image
