@@ -122,6 +122,18 @@ def select_model(
     return min(finite, key=lambda m: (costs[m], cands.index(m))), costs
 
 
+#: shift radius (px) searched around each rolled start, on this many render edge points
+ROLL_POLISH_RADIUS_PX = 12
+ROLL_POLISH_POINTS = 500
+
+
+def _roll(width: int, height: int, angle_deg: float) -> np.ndarray:
+    """(3, 3) in-plane rotation by ``angle_deg`` about the image centre."""
+    c, s = math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))
+    cx, cy = (width - 1) / 2, (height - 1) / 2
+    return np.array([[c, -s, cx - c * cx + s * cy], [s, c, cy - s * cx - c * cy], [0, 0, 1.0]])
+
+
 def _refined(
     re: RenderEdges,
     pe: PhotoEdges,
@@ -140,6 +152,15 @@ def _refined(
     if re.camera_K is not None and np.hypot(*shift) > 0.5:
         starts.append(rotation_homography(re.camera_K, *shift))
     polished = [polish(re, pe, bins, h0, tau, config) for h0 in starts]
+    # rolled starts: the search's shift is biased under a roll, so their shift is searched
+    # again within a wider radius (on fewer points), then polished as the others are (the
+    # scores compare on the same points)
+    wide = dataclasses.replace(config, polish_radius_px=ROLL_POLISH_RADIUS_PX,
+                               refine_points=min(config.refine_points, ROLL_POLISH_POINTS))
+    for a in config.roll_starts_deg:
+        h_roll = translation_matrix(*shift) @ _roll(re.width, re.height, a)
+        polished.append(polish(re, pe, bins, polish(re, pe, bins, h_roll, tau, wide)[0], tau,
+                               config))
     h_start = max(polished, key=lambda hs: hs[1])[0]
     if config.select_model:
         config = dataclasses.replace(

@@ -98,6 +98,10 @@ class EdgeAlignConfig:
     max_corner_gain: float = 20.0
     #: before refining, re-search the shift within +- this (px) at the narrow final scale
     polish_radius_px: int = 3
+    #: the refinement also starts from the best shift turned by these in-plane angles (deg,
+    #: about the image centre): the shift search cannot see a roll, and from the shift alone
+    #: the refinement followed a 4.5 deg roll of a castle view by less than half
+    roll_starts_deg: tuple[float, ...] = (-6.0, -4.0, -2.0, 2.0, 4.0, 6.0)
     #: a third start (``tiles.tile_start``): the affine map fitting the best shifts of a
     #: tile_grid x tile_grid split of the render edges, each searched within +- tile_radius x
     #: diagonal of the global best shift (motions that vary across the image by more than the
