@@ -28,23 +28,23 @@ def correct_stage(
     traj: Trajectory,
     measurements: list[FrameMeasurement],
     judged: Any,
-    shared_extra: dict[str, Any],
     config: RunConfig,
     checker_factory: Callable[[], Any],
-) -> tuple[list[dict[str, Any]], dict[str, Any]]:
+) -> tuple[list[dict[str, Any]], dict[str, Any], Any]:
     """The correction stage (``pgt_check.correct``) after the verdicts: a failed registration
-    check's estimate refined (in ``shared_extra["shared_errors"]``), then the corrected poses
-    of the chosen frames; the rows (with correction columns) and the corrections' summary."""
+    check's estimate refined, then the corrected poses of the chosen frames; the rows (with
+    correction columns), the corrections' summary and the run-level checks as reported
+    (``judged.shared`` with the refined registration correction; the verdicts keep
+    ``judged.shared``)."""
     out = Path(config.out)
     rows = judged.rows
-    if judged.shared is not None:  # a failed registration check: its estimate refined
+    shared = judged.shared
+    if shared is not None:  # a failed registration check: its estimate refined
         from pgt_check.correct.registration import refine_run
 
         measure = PlainMeasure()
         try:
-            shared_extra["shared_errors"] = refine_run(
-                traj, measurements, shared_extra["shared_errors"], config, measure, out
-            )
+            shared = refine_run(traj, measurements, judged.shared, config, measure, out)
         except RunInterrupted:
             raise
         except Exception as err:  # the verdicts and the first estimate stand without it
@@ -59,7 +59,7 @@ def correct_stage(
         from pgt_check.correct.frames import correct_run
 
         rows, corrections = correct_run(traj, measurements, rows, config, checker_factory, out)
-    return rows, corrections
+    return rows, corrections, shared
 
 
 def self_test_stage(traj: Trajectory, rows: list[dict[str, Any]], judged: Any,

@@ -15,6 +15,7 @@ import functools
 import logging
 import time
 from collections.abc import Callable, Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -210,9 +211,10 @@ def _check_frames_locked(
     )
     judged = judge_run(measurements, config)
     traj = trajectory if trajectory is not None else Trajectory(tuple(frames))
-    shared_extra = judged.summary_extra()
-    rows, corrections = correct_stage(traj, measurements, judged, shared_extra, config,
-                                      checker_factory)
+    rows, corrections, shared = correct_stage(traj, measurements, judged, config,
+                                              checker_factory)
+    # summary.json's run-level section: the checks with the refined registration correction
+    shared_extra = replace(judged, shared=shared).summary_extra()
     if config.self_test > 0:  # the stated detection limits tested (``verdict.self_test``)
         shared_extra["self_test"] = self_test_stage(traj, rows, judged, shared_extra, config)
     assets = write_report_assets(

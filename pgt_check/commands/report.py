@@ -10,6 +10,7 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -33,17 +34,15 @@ def _shared_extra(judged: Any, out: Path) -> dict[str, Any]:
         needs_refinement,
     )
 
-    extra = judged.summary_extra()
-    if judged.shared is None:
-        return extra
-    shared = extra["shared_errors"]
+    shared = judged.shared
+    if shared is None:
+        return judged.summary_extra()
     refined = load_refinement(out, shared)
     if refined is None and needs_refinement(shared) and (out / REFINED_FILE).is_file():
         print(f"pgt-check report: note: {REFINED_FILE} was measured for another registration "
               "estimate (other verdict settings); the estimate shown is not refined",
               file=sys.stderr)
-    extra["shared_errors"] = apply_refinement(shared, refined)
-    return extra
+    return replace(judged, shared=apply_refinement(shared, refined)).summary_extra()
 
 
 def _warn_stale_auto_decisions(records: list[FrameMeasurement], config: RunConfig) -> None:

@@ -55,12 +55,16 @@ from pgt_check.correct.registration_result import (  # noqa: F401  (re-exported)
     _summary_of,
     apply_refinement,
     load_refinement,
+    refined_registration,
     registered_trajectory,
+    registration_entries,
     save_refinement,
 )
 from pgt_check.geometry.transforms import move_pose
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.types import Frame, Trajectory
+from pgt_check.verdict.shared import SharedChecks
+from pgt_check.verdict.shared_results import RegistrationCheck
 from pgt_check.verdict.status import FAILED, PASSED
 
 logger = logging.getLogger(__name__)
@@ -93,11 +97,11 @@ def _grew(
     return not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi
 
 
-def needs_refinement(shared_summary: Mapping[str, Any]) -> bool:
-    """The rigid or the similarity check FAILED and the rigid fit has a correction."""
-    reg, sim = shared_summary.get("registration", {}), shared_summary.get("similarity", {})
-    failed = FAILED in (reg.get("status"), sim.get("status"))
-    return failed and reg.get("corrected_world_from_world") is not None
+def needs_refinement(shared: SharedChecks | Mapping[str, Any]) -> bool:
+    """The rigid or the similarity check FAILED and the rigid fit has a correction
+    (``shared``: the run-level checks or their summary section)."""
+    reg, sim = registration_entries(shared)
+    return FAILED in (reg.status, sim.status) and reg.corrected_world_from_world is not None
 
 
 def refine_frames(
@@ -136,9 +140,9 @@ def _f(x: Any) -> float | None:
 def _measure_round(
     k: int, todo: Sequence[Frame], c_rigid: np.ndarray, measure: MeasureFn, ecfg: RunConfig,
     clock: Callable[[], float] = time.perf_counter,
-) -> tuple[RefineRound, dict[str, Any]]:
+) -> tuple[RefineRound, SharedChecks]:
     """Round ``k``: the frames moved by ``c_rigid`` measured again and the shared checks run on
-    them; the round's record and the checks' summary (its registration entry: what is left)."""
+    them; the round's record and the checks (their registration entry: what is left)."""
     from pgt_check.verdict.shared import run_shared_checks
 
     t0 = clock()
@@ -146,19 +150,18 @@ def _measure_round(
     ms = measure(moved, ecfg)
     order = {f.frame_id: i for i, f in enumerate(moved)}
     ms = sorted(ms, key=lambda m: order.get(m.frame_id, len(order)))
-    res = run_shared_checks(ms, ecfg).summary()
-    reg = res["registration"]
+    res = run_shared_checks(ms, ecfg)
+    reg = res.registration
     rnd = RefineRound(
-        k, len(ms), sum(m.evidence is not None for m in ms), str(reg.get("status")),
-        _f(reg.get("angle_deg")), reg.get("angle_deg_ci"), _f(reg.get("translation")),
-        reg.get("translation_ci"), _f(reg.get("effect_px")), reg.get("effect_px_ci"),
-        clock() - t0,
+        k, len(ms), sum(m.evidence is not None for m in ms), str(reg.status),
+        _f(reg.angle_deg), reg.angle_deg_ci, _f(reg.translation), reg.translation_ci,
+        _f(reg.effect_px), reg.effect_px_ci, clock() - t0,
     )  # fmt: skip
     logger.info(
         "registration round %d: what is left moves the images by %s px (%s)",
         k,
         "?" if rnd.effect_px is None else f"{rnd.effect_px:.2f}",
-        reg.get("status"),
+        reg.status,
     )
     return rnd, res
 
@@ -175,39 +178,40 @@ class _Rounds:
     budget: float  # seconds the rounds may take; 0: no limit
     budget_factor: float  # ``correct.budget`` (for the message)
     t_start: float  # ``clock()`` when the rounds started
-    first: Mapping[str, Any]  # the main pass's registration entry
+    first: RegistrationCheck  # the main pass's registration entry
 
 
 def refine_registration(
     frames: Sequence[Frame],
     measurements: Sequence[FrameMeasurement],
-    summary: Mapping[str, Any],
+    shared: SharedChecks | Mapping[str, Any],
     config: RunConfig,
     measure: MeasureFn,
     clock: Callable[[], float] = time.perf_counter,
 ) -> RefinedRegistration | None:
     """Rounds of measure-at-the-corrected-poses -> residual fit -> compose (module docstring).
 
-    ``summary``: the main pass's ``shared_errors`` section; ``measure(frames, config)``: the absolute
+    ``shared``: the main pass's run-level checks (or their summary section,
+    ``registration_entries``); ``measure(frames, config)``: the absolute
     evidence of the frames at their (moved) poses, in any order. None when there is nothing to
     refine (``needs_refinement`` false, rounds 0, or no frame to measure). Bounded by
     ``correct.registration_rounds``, ``correct.budget`` and the growth rule (module
     docstring); ``clock`` (seconds) is replaceable for tests."""
     c = config.correct
     rounds = c.registration_rounds
-    if rounds <= 0 or not needs_refinement(summary):
+    if rounds <= 0 or not needs_refinement(shared):
         return None
     todo = refine_frames(measurements, frames, c.registration_frames)
     if len(todo) < 3:
         return None
     ecfg = evidence_config(config)
-    start = np.asarray(summary["registration"]["corrected_world_from_world"], np.float64)
+    first = registration_entries(shared)[0]
+    start = np.asarray(first.corrected_world_from_world, np.float64)
     centres = [np.asarray(m.world_from_cam)[:3, 3] for m in measurements if m.world_from_cam]
     origin = np.mean(centres, axis=0)
     budget = c.budget * main_pass_seconds(measurements)
     t_start = clock()
-    r = _Rounds(todo, ecfg, measure, clock, origin, budget, c.budget, t_start,
-                summary["registration"])  # fmt: skip
+    r = _Rounds(todo, ecfg, measure, clock, origin, budget, c.budget, t_start, first)
     logger.info(
         "registration check failed: refining its estimate (up to %d round(s) of "
         "measuring %d frames again at the corrected poses%s)",
@@ -243,7 +247,7 @@ def _run_rounds(
         if stopped is not None:
             return c_rigid, done, stopped, None
         rnd, res = _measure_round(k, r.todo, c_rigid, r.measure, r.ecfg, r.clock)
-        reg = res["registration"]
+        reg = res.registration
         done.append(rnd)
         prev, prev_ci = _left_before(r, done)
         if _grew(prev, prev_ci, rnd.effect_px, rnd.effect_px_ci):
@@ -251,10 +255,10 @@ def _run_rounds(
             # estimate does not converge (an ill-posed split); keep the one before it
             kept = max(k - 2, 0)
             return history[kept], done, _not_converging(prev, rnd.effect_px, k), kept
-        if reg.get("corrected_world_from_world") is None:
-            stopped = f"round {k}: no residual fit ({reg.get('reason') or reg.get('status')})"
+        if reg.corrected_world_from_world is None:
+            stopped = f"round {k}: no residual fit ({reg.reason or reg.status})"
             return c_rigid, done, stopped, None
-        c_rigid = np.asarray(reg["corrected_world_from_world"], np.float64) @ c_rigid
+        c_rigid = np.asarray(reg.corrected_world_from_world, np.float64) @ c_rigid
         history.append(c_rigid.copy())
         total_angle, total_t, _ = _summary_of(c_rigid, r.origin)
         done[-1] = replace(done[-1], total_angle_deg=total_angle, total_translation=total_t)
@@ -279,7 +283,7 @@ def _left_before(r: _Rounds, done: Sequence[RefineRound]) -> tuple[float | None,
     # round 1 against the main pass: the first estimate's poses against the checked ones
     if len(done) >= 2:
         return done[-2].effect_px, done[-2].effect_px_ci
-    return _f(r.first.get("effect_px")), r.first.get("effect_px_ci")
+    return _f(r.first.effect_px), r.first.effect_px_ci
 
 
 def _not_converging(prev: float, effect: float, k: int) -> str:
@@ -291,10 +295,10 @@ def _not_converging(prev: float, effect: float, k: int) -> str:
                 "it is reported unrefined"))
 
 
-def _converged(done: Sequence[RefineRound], res: Mapping[str, Any]) -> str | None:
+def _converged(done: Sequence[RefineRound], res: SharedChecks) -> str | None:
     """Why the rounds stop after the last one (``res``: its shared checks), or None."""
     eff = done[-1].effect_px
-    if eff is not None and eff < CONVERGED_REL * float(res["threshold_px"]):
+    if eff is not None and eff < CONVERGED_REL * float(res.threshold_px):
         return "converged"
     if len(done) >= 2 and done[-1].status == done[-2].status == PASSED:
         # what is left is below the shared threshold twice in a row: the noise of the
@@ -317,29 +321,29 @@ def main_pass_seconds(measurements: Sequence[FrameMeasurement]) -> float:
 def refine_run(
     trajectory: Trajectory,
     measurements: Sequence[FrameMeasurement],
-    summary: dict[str, Any],
+    shared: SharedChecks,
     config: RunConfig,
     measure: MeasureFn,
     out: str | Path,
-) -> dict[str, Any]:
+) -> SharedChecks:
     """The correction step for a failed registration check: reuse the stored refinement of
     this start or run the rounds, save it, write ``registered_trajectory.txt``; returns
-    ``summary`` (the main pass's ``shared_errors`` section) with the refined corrections."""
+    ``shared`` (the main pass's run-level checks) with the refined correction."""
     from pgt_check.io.writers import write_trajectory_file
 
     out = Path(out)
     refined = None
-    if config.correct.registration_rounds > 0 and needs_refinement(summary):
-        refined = load_refinement(out, summary, refine_fingerprint(config))
+    if config.correct.registration_rounds > 0 and needs_refinement(shared):
+        refined = load_refinement(out, shared, refine_fingerprint(config))
         if refined is not None:
             logger.info("registration refinement reused from %s", out / REFINED_FILE)
         else:
-            refined = refine_registration(trajectory.frames, measurements, summary, config, measure)
+            refined = refine_registration(trajectory.frames, measurements, shared, config, measure)
             if refined is not None:
                 save_refinement(out, refined)
     path = out / REGISTERED_NAME
     if refined is None:
         path.unlink(missing_ok=True)  # a previous run's file would no longer be true
-        return summary
+        return shared
     write_trajectory_file(registered_trajectory(trajectory, refined), path)
-    return apply_refinement(summary, refined)
+    return apply_refinement(shared, refined)

@@ -10,15 +10,17 @@ from __future__ import annotations
 import json
 import logging
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, overload
 
 import numpy as np
 
 from pgt_check.files import atomic_write_text
 from pgt_check.geometry.transforms import move_pose, rotation_angle_deg
 from pgt_check.types import Trajectory
+from pgt_check.verdict.shared import SharedChecks
+from pgt_check.verdict.shared_results import RegistrationCheck
 
 logger = logging.getLogger(__name__)
 
@@ -106,18 +108,17 @@ def _summary_of(c: np.ndarray, origin: np.ndarray) -> tuple[float, float, float]
 
 
 def _refined_entry(
-    entry: dict[str, Any],
+    entry: RegistrationCheck,
     c: np.ndarray,
     origin: np.ndarray,
     last: RefineRound,
     refined: RefinedRegistration,
-) -> dict[str, Any]:
-    """The registration summary entry with the refined correction ``c``. The
+) -> RegistrationCheck:
+    """The registration entry with the refined correction ``c``. The
     intervals: the refined value +- half the width of the last round's interval (approximate:
     the uncertainty of the last residual fit, the earlier rounds' being applied)."""
     angle, t, _ = _summary_of(c, origin)
-    out = dict(entry)
-    t1, rel1 = entry.get("translation"), entry.get("translation_rel_depth")
+    t1, rel1 = entry.translation, entry.translation_rel_depth
     depth = t1 / rel1 if t1 and rel1 else None
 
     def around(value: float, ci: Any) -> list[float] | None:
@@ -127,7 +128,8 @@ def _refined_entry(
         return [max(0.0, value - w), value + w]
 
     t_ci = around(t, last.translation_ci)
-    out.update(
+    return replace(
+        entry,
         angle_deg=angle,
         angle_deg_ci=around(angle, last.angle_deg_ci),
         translation=t,
@@ -137,9 +139,8 @@ def _refined_entry(
         if depth is None or t_ci is None
         else [v / depth for v in t_ci],
         corrected_world_from_world=c.tolist(),
+        refinement=_refinement_record(entry, refined),
     )
-    out["refinement"] = _refinement_record(entry, refined)
-    return out
 
 
 _FIRST_KEYS = (
@@ -148,10 +149,11 @@ _FIRST_KEYS = (
 )
 
 
-def _refinement_record(entry: Mapping[str, Any], refined: RefinedRegistration) -> dict[str, Any]:
+def _refinement_record(entry: RegistrationCheck, refined: RefinedRegistration) -> dict[str, Any]:
     """The summary's ``refinement`` block: the first estimate, the rounds, why they stopped."""
+    first = entry.to_json()
     return {
-        "first_pass": {k: entry.get(k) for k in _FIRST_KEYS},
+        "first_pass": {k: first[k] for k in _FIRST_KEYS},
         "rounds": [asdict(r) for r in refined.rounds],
         "rounds_kept": refined.n_kept,
         "stopped": refined.stopped,
@@ -161,45 +163,78 @@ def _refinement_record(entry: Mapping[str, Any], refined: RefinedRegistration) -
     }
 
 
-def apply_refinement(
-    shared_summary: dict[str, Any], refined: RefinedRegistration | None
-) -> dict[str, Any]:
-    """The summary's ``shared_errors`` section with the refined rigid correction (a copy; the
-    statuses and image effects stay the main pass's, which decided the verdicts). The
-    similarity entry keeps its first estimate: its scale was already right (x1.03 recovered
-    within 0.1 % on the castle and the boxes) and rigid rounds cannot refine a scale."""
-    if refined is None:
-        return shared_summary
-    out = dict(shared_summary)
-    origin = np.asarray(refined.origin, np.float64)
+def registration_entries(
+    shared: SharedChecks | Mapping[str, Any],
+) -> tuple[RegistrationCheck, RegistrationCheck]:
+    """The rigid and the similarity check of ``shared``: a ``SharedChecks``, or its summary
+    section (``shared_errors``, as scripts that hold the summary pass it; read with
+    ``RegistrationCheck.from_json``, a missing entry as not checked)."""
+    if isinstance(shared, SharedChecks):
+        return shared.registration, shared.similarity
+    reg, sim = (RegistrationCheck.from_json(shared.get(k) or {}) for k in ("registration", "similarity"))
+    return reg, sim
+
+
+def refined_registration(
+    entry: RegistrationCheck, refined: RefinedRegistration
+) -> RegistrationCheck:
+    """The rigid registration check with the refined correction and its ``refinement`` record
+    (the status and image effect stay the main pass's, which decided the verdicts); ``entry``
+    itself when it has no correction."""
+    if entry.corrected_world_from_world is None:
+        return entry
     n = len(refined.rounds)
-    entry = shared_summary.get("registration")
-    if not entry or entry.get("corrected_world_from_world") is None:
-        return out
     if refined.n_kept == 0:  # every update undone: the first estimate stands
-        new = dict(entry)
-        new["refinement"] = _refinement_record(entry, refined)
         did = (f"Refinement stopped after {n} round(s) ({refined.stopped}): the first "
                f"estimate is reported")
-        new["message"] = f"{entry.get('message', '')}. {did}"
-        out["registration"] = new
-        return out
+        return replace(entry, message=f"{entry.message}. {did}",
+                       refinement=_refinement_record(entry, refined))
     last = refined.rounds[refined.n_kept - 1]
+    origin = np.asarray(refined.origin, np.float64)
     new = _refined_entry(entry, np.asarray(refined.rigid, np.float64), origin, last, refined)
-    f = new["refinement"]["first_pass"]
-    rel = new["translation_rel_depth"]
-    new["message"] = (
-        f"{entry.get('message', '')}. Refined by measuring {len(refined.frame_ids)} frames "
+    rel = new.translation_rel_depth
+    message = (
+        f"{entry.message}. Refined by measuring {len(refined.frame_ids)} frames "
         f"again at the corrected poses ({n} round(s), {refined.stopped}): "
-        f"{new['angle_deg']:.2f} deg, {new['translation']:.4g} scene units"
+        f"{new.angle_deg:.2f} deg, {new.translation:.4g} scene units"
         + (f" ({100 * rel:.1f} % of the scene depth)" if rel is not None else "")
-        + f" (first estimate {f['angle_deg']:.2f} deg, {f['translation']:.4g}); "
+        + f" (first estimate {entry.angle_deg:.2f} deg, {entry.translation:.4g}); "
         + (f"the last round found {_px(last.effect_px)} px left ({last.status})"
            if refined.n_kept == n else
            f"round {refined.n_kept + 1} found {_px(refined.rounds[refined.n_kept].effect_px)} "
            f"px left at it ({refined.rounds[refined.n_kept].status})")
     )
-    out["registration"] = new
+    return replace(new, message=message)
+
+
+@overload
+def apply_refinement(shared: SharedChecks, refined: RefinedRegistration | None) -> SharedChecks:
+    ...
+
+
+@overload
+def apply_refinement(
+    shared: Mapping[str, Any], refined: RefinedRegistration | None
+) -> dict[str, Any]:
+    ...
+
+
+def apply_refinement(
+    shared: SharedChecks | Mapping[str, Any], refined: RefinedRegistration | None
+) -> SharedChecks | dict[str, Any]:
+    """The run-level checks with the refined rigid correction (``refined_registration``); a
+    summary section (``shared_errors``) gives its refined copy. The similarity entry keeps its
+    first estimate: its scale was already right (x1.03 recovered within 0.1 % on the castle
+    and the boxes) and rigid rounds cannot refine a scale."""
+    if isinstance(shared, SharedChecks):
+        if refined is None:
+            return shared
+        return replace(shared, registration=refined_registration(shared.registration, refined))
+    out = dict(shared)
+    if refined is None or not shared.get("registration"):
+        return out
+    reg, _ = registration_entries(shared)
+    out["registration"] = refined_registration(reg, refined).to_json()
     return out
 
 
@@ -214,12 +249,12 @@ def save_refinement(out_dir: str | Path, refined: RefinedRegistration) -> Path:
 
 
 def load_refinement(
-    out_dir: str | Path, shared_summary: Mapping[str, Any], fingerprint: str | None = None
+    out_dir: str | Path, shared: SharedChecks | Mapping[str, Any], fingerprint: str | None = None
 ) -> RefinedRegistration | None:
     """The stored refinement when it started from this run's rigid correction (and, if
     given, was measured with the same settings); else None (stale or absent)."""
     path = Path(out_dir) / REFINED_FILE
-    c = shared_summary.get("registration", {}).get("corrected_world_from_world")
+    c = registration_entries(shared)[0].corrected_world_from_world
     if not path.is_file() or c is None:
         return None
     try:

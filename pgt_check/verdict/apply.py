@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from pgt_check.config import RunConfig
@@ -24,6 +24,8 @@ from pgt_check.verdict.frame_bounds import (
 )
 from pgt_check.verdict.off_mesh import off_mesh_frames
 from pgt_check.verdict.shared import SharedChecks, run_shared_checks
+from pgt_check.verdict.shared_results import Sensitivity
+from pgt_check.verdict.status import NOT_CHECKED
 
 #: the verdict columns every row gets beside the measurement columns, with their meaning
 VERDICT_COLUMNS: dict[str, str] = {
@@ -58,10 +60,10 @@ def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> Ru
     Measurements are not changed (records.jsonl stays as measured)."""
     ms = list(measurements)
     shared = run_shared_checks(ms, config) if config.verdict.shared_checks and ms else None
-    if shared is not None and shared.registration.get("status") not in (None, "not_checked"):
+    if shared is not None and shared.registration.status != NOT_CHECKED:
         # what a world rotation / translation does to the images (the shared detection limit)
-        ppd, ppu = world_sensitivity(ms)
-        shared.registration["sensitivity"] = {"px_per_deg": ppd, "px_per_unit": ppu}
+        sens = Sensitivity(*world_sensitivity(ms))
+        shared = replace(shared, registration=replace(shared.registration, sensitivity=sens))
     v = config.verdict
     outs = [path_outcomes(m, v, shared) for m in ms]
     own = own_outcomes(ms, v, shared, outs)

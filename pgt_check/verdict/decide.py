@@ -406,11 +406,11 @@ def _run_level(
         return Verdict.FAIL, f"drift: this segment moves {px:.1f} px off the mesh", evidence
     reg = NOT_CHECKED if shared is None else shared.registration_status
     if reg == FAILED:
-        e = shared.registration if shared.registration["status"] == FAILED else shared.similarity
+        e = shared.registration if shared.registration.status == FAILED else shared.similarity
         return (
             Verdict.FAIL,
-            f"registration: trajectory off the mesh by {e['effect_px']:.1f} "
-            f"px ({e['angle_deg']:.2f} deg)",
+            f"registration: trajectory off the mesh by {e.effect_px:.1f} "
+            f"px ({e.angle_deg:.2f} deg)",
             evidence,
         )
     changed = None if shared is None else shared.calibration_changed(camera_id)

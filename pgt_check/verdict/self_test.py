@@ -386,7 +386,7 @@ def _shared_point(k: float, size: float, ms: Sequence[FrameMeasurement], config:
     # the rigid fit can trade a shift for a rotation and pass where the similarity fails)
     res = checks(ms, config)
     status = str(res.registration_status)
-    rigid = str(res.registration.get("status"))
+    rigid = str(res.registration.status)
     return CurvePoint(k, size, 1, int(status == FAILED), int(status == FAILED),
                       int(status == "not_checked"),
                       status if rigid == status else f"{status} (rigid {rigid})")

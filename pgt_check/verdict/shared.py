@@ -23,7 +23,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -43,6 +43,7 @@ from pgt_check.verdict.shared_entries import (
     registration_entry,
     shared_or_not,
 )
+from pgt_check.verdict.shared_results import RegistrationCheck
 from pgt_check.verdict.status import FAILED, INCONCLUSIVE, NOT_CHECKED, PASSED
 from pgt_check.verdict.texture import texture_entry
 
@@ -60,8 +61,8 @@ class SharedChecks:
     """
 
     threshold_px: float
-    registration: dict[str, Any]
-    similarity: dict[str, Any]
+    registration: RegistrationCheck
+    similarity: RegistrationCheck
     drift: dict[str, Any]
     calibration: dict[str, dict[str, Any]]
     drift_px: dict[str, float] = field(default_factory=dict)
@@ -90,17 +91,18 @@ class SharedChecks:
     def registration_status(self) -> str:
         """The worse of the rigid and the similarity check."""
         order = (FAILED, INCONCLUSIVE, NOT_CHECKED, PASSED)
-        sts = {self.registration.get("status"), self.similarity.get("status")}
+        sts = {self.registration.status, self.similarity.status}
         for s in order:
             if s in sts:
                 return s
         return NOT_CHECKED
 
     def summary(self) -> dict[str, Any]:
+        """The summary.json ``shared_errors`` section."""
         return {
             "threshold_px": self.threshold_px,
-            "registration": self.registration,
-            "similarity": self.similarity,
+            "registration": self.registration.to_json(),
+            "similarity": self.similarity.to_json(),
             "drift": self.drift,
             "calibration": self.calibration,
             **({"texture": self.texture} if self.texture else {}),
@@ -327,8 +329,7 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
     drift, drift_px, flagged = drift_entry(
         estimate_drift(all_ev, threshold_px=drift_thr, **kw), ids, drift_thr
     )
-    for entry in (reg, sim):
-        entry["frames_left_out"] = left_out
+    reg, sim = (replace(e, frames_left_out=tuple(left_out)) for e in (reg, sim))
     return SharedChecks(
         thr, reg, sim, drift, calib, drift_px, flagged, homs, frozenset(left_out), frame_homs,
         drift_thr, texture_entry(measurements, thr), change,

@@ -10,10 +10,12 @@ its lower bound exceeds it, ``passed`` when its upper bound is below it (module 
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
 
+from pgt_check.verdict.shared_results import RegistrationCheck
 from pgt_check.verdict.status import FAILED, FINDING, INCONCLUSIVE, NOT_CHECKED, PASSED
 
 __all__ = [
@@ -51,60 +53,62 @@ def check_status(success: bool, effect_ci: Any, effect: float, threshold: float)
     return INCONCLUSIVE
 
 
-def registration_entry(est: Any, threshold: float, kind: str) -> dict[str, Any]:
+def registration_entry(est: Any, threshold: float, kind: str) -> RegistrationCheck:
+    """The rigid or similarity check of a ``RegistrationEstimate`` (``kind``), with its
+    message."""
     status = check_status(est.success, est.effect_px_ci, est.effect_px, threshold)
-    entry: dict[str, Any] = {
-        "status": status,
-        "reason": est.reason,
-        "kind": kind,
-        "angle_deg": finite_or_none(est.angle_deg),
-        "angle_deg_ci": finite_interval(est.angle_deg_ci),
-        "translation": finite_or_none(est.translation),
-        "translation_ci": finite_interval(est.translation_ci),
-        "translation_rel_depth": finite_or_none(est.translation_frac),
-        "translation_rel_depth_ci": finite_interval(est.translation_frac_ci),
-        "scale": finite_or_none(est.scale),
-        "scale_ci": finite_interval(est.scale_ci),
-        "effect_px": finite_or_none(est.effect_px),
-        "effect_px_ci": finite_interval(est.effect_px_ci),
-        "n_frames": est.n_frames,
-        "n_points": est.n_points,
-        "n_inliers": est.n_inliers,
-        "ambiguous_with_calibration": bool(est.ambiguous_with_calibration),
-        "corrected_world_from_world": (
+    check = RegistrationCheck(
+        status=status,
+        reason=est.reason,
+        kind=kind,
+        angle_deg=finite_or_none(est.angle_deg),
+        angle_deg_ci=finite_interval(est.angle_deg_ci),
+        translation=finite_or_none(est.translation),
+        translation_ci=finite_interval(est.translation_ci),
+        translation_rel_depth=finite_or_none(est.translation_frac),
+        translation_rel_depth_ci=finite_interval(est.translation_frac_ci),
+        scale=finite_or_none(est.scale),
+        scale_ci=finite_interval(est.scale_ci),
+        effect_px=finite_or_none(est.effect_px),
+        effect_px_ci=finite_interval(est.effect_px_ci),
+        n_frames=est.n_frames,
+        n_points=est.n_points,
+        n_inliers=est.n_inliers,
+        ambiguous_with_calibration=bool(est.ambiguous_with_calibration),
+        corrected_world_from_world=(
             None
             if est.corrected_world_from_world is None
             else np.asarray(est.corrected_world_from_world).tolist()
         ),
-    }
-    entry["message"] = registration_message(entry, threshold)
-    return entry
+    )
+    return replace(check, message=registration_message(check, threshold))
 
 
-def registration_message(e: dict[str, Any], threshold: float) -> str:
-    what = "similarity" if e["kind"] == "similarity" else "rigid registration"
-    if e["status"] == NOT_CHECKED:
+def registration_message(e: RegistrationCheck, threshold: float) -> str:
+    """The one-line message of the registration check ``e`` (its ``message`` not yet set)."""
+    what = "similarity" if e.kind == "similarity" else "rigid registration"
+    if e.status == NOT_CHECKED:
         return (
             f"{what} of the trajectory to the mesh not checked: too little absolute "
-            f"evidence ({e['reason'] or 'no frames'}; {e['n_frames']} frames)"
+            f"evidence ({e.reason or 'no frames'}; {e.n_frames} frames)"
         )
-    lo, hi = e["effect_px_ci"] or (e["effect_px"], e["effect_px"])
-    scale = f", scale {e['scale']:.4f}" if e["kind"] == "similarity" else ""
-    rel = e["translation_rel_depth"]
+    lo, hi = e.effect_px_ci or (e.effect_px, e.effect_px)
+    scale = f", scale {e.scale:.4f}" if e.kind == "similarity" else ""
+    rel = e.translation_rel_depth
     nums = (
-        f"{e['angle_deg']:.2f} deg, {e['translation']:.4g} scene units"
+        f"{e.angle_deg:.2f} deg, {e.translation:.4g} scene units"
         + (f" ({100 * rel:.1f} % of the scene depth)" if rel is not None else "")
-        + f"{scale}; moves the images by {e['effect_px']:.1f} px (95 % {lo:.1f}-{hi:.1f}) "
-        f"over {e['n_frames']} frames"
+        + f"{scale}; moves the images by {e.effect_px:.1f} px (95 % {lo:.1f}-{hi:.1f}) "
+        f"over {e.n_frames} frames"
     )
     verdict = {
         PASSED: f"passed: below {threshold:.1f} px",
         FAILED: f"FAILED: the trajectory is misregistered to the mesh (above {threshold:.1f} px)",
         INCONCLUSIVE: f"inconclusive: the interval straddles {threshold:.1f} px",
-    }[e["status"]]
+    }[e.status]
     amb = (
         " (not separable from a calibration error with these views)"
-        if e["ambiguous_with_calibration"]
+        if e.ambiguous_with_calibration
         else ""
     )
     return f"{what} {verdict}: correction {nums}{amb}"
@@ -265,20 +269,26 @@ def drift_entry(est: Any, ids: list[str], threshold: float) -> tuple[dict, dict,
     return entry, score, flagged
 
 
-def shared_or_not(entry: dict[str, Any], residuals: np.ndarray, tol_px: float) -> dict:
-    """A FAILED registration entry becomes INCONCLUSIVE when fewer than half of the frames
-    agree with the correction (residual within ``tol_px`` after it): the frames then carry
-    errors of their own, and one shared correction does not describe them (e.g. 3 frames, 2
-    with large pose errors, which leaving frames out cannot separate)."""
+def shared_or_not(
+    entry: RegistrationCheck, residuals: np.ndarray, tol_px: float
+) -> RegistrationCheck:
+    """``entry`` with ``frames_agreeing``: the share of the frames that agree with the
+    correction (residual within ``tol_px`` after it). A FAILED entry becomes INCONCLUSIVE when
+    fewer than half agree: the frames then carry errors of their own, and one shared
+    correction does not describe them (e.g. 3 frames, 2 with large pose errors, which leaving
+    frames out cannot separate)."""
     finite = residuals[np.isfinite(residuals)]
     agree = float(np.mean(finite <= tol_px)) if len(finite) else 0.0
-    entry["frames_agreeing"] = agree
-    if entry.get("status") == FAILED and agree < 0.5:
-        entry["status"] = INCONCLUSIVE
-        what = entry["message"].split(" FAILED", 1)[0]
-        entry["message"] = (
+    if entry.status != FAILED or agree >= 0.5:
+        return replace(entry, frames_agreeing=agree)
+    what = entry.message.split(" FAILED", 1)[0]
+    return replace(
+        entry,
+        status=INCONCLUSIVE,
+        message=(
             f"{what} inconclusive: only {agree:.0%} of the frames agree with one shared "
             f"correction (the others have errors of their own); the fitted one moves the "
-            f"images by {entry.get('effect_px') or float('nan'):.1f} px"
-        )
-    return entry
+            f"images by {entry.effect_px or float('nan'):.1f} px"
+        ),
+        frames_agreeing=agree,
+    )

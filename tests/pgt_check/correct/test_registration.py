@@ -30,6 +30,7 @@ from pgt_check.geometry.transforms import invert_rigid, rotation_angle_deg
 from pgt_check.measure import AbsoluteEvidence, FrameMeasurement, PathMeasurement
 from pgt_check.types import Camera, Frame, Trajectory
 from pgt_check.verdict import judge_run
+from pgt_check.verdict.shared_results import RegistrationCheck
 from pgt_eval import _look_at, move_trajectory, shared_transform
 
 CAM = Camera.pinhole(640, 480, 500.0, 500.0, 319.5, 239.5)
@@ -160,6 +161,7 @@ def test_the_similarity_entry_keeps_its_first_estimate(moved_case):
                                   FakeMeasure(true))
     first = judged.shared.summary()["similarity"]
     assert apply_refinement(judged.shared.summary(), refined)["similarity"] == first
+    assert apply_refinement(judged.shared, refined).similarity is judged.shared.similarity
 
 
 def test_nothing_to_refine_when_the_registration_passes():
@@ -180,7 +182,7 @@ def test_rounds_zero_switches_it_off(moved_case, tmp_path):
                                "correct": {"registration_rounds": 0}})
     fake = FakeMeasure(true)
     (tmp_path / REGISTERED_NAME).write_text("stale\n")
-    summary = refine_run(checked, ms, judged.shared.summary(), off, fake, tmp_path)
+    summary = refine_run(checked, ms, judged.shared, off, fake, tmp_path).summary()
     assert fake.calls == [] and "refinement" not in summary["registration"]
     assert not (tmp_path / REGISTERED_NAME).exists()  # a stale file is not left behind
 
@@ -192,7 +194,7 @@ def test_refine_run_writes_the_registered_trajectory_and_reuses_the_stored_resul
 
     true, checked, move, config, ms, judged = moved_case
     fake = FakeMeasure(true)
-    summary = refine_run(checked, ms, judged.shared.summary(), config, fake, tmp_path)
+    summary = refine_run(checked, ms, judged.shared, config, fake, tmp_path).summary()
     n_calls = len(fake.calls)
     assert n_calls >= 2 and summary["registration"]["refinement"]["rounds"]
     files = write_lamar(checked, tmp_path / "in")  # sensors and images to read it with
@@ -203,7 +205,7 @@ def test_refine_run_writes_the_registered_trajectory_and_reuses_the_stored_resul
            for r, t in zip(registered.frames, true.frames, strict=True)]  # read back in order
     assert np.mean(off) < 0.2 * _off(checked.frames, true)
     # resumed / rebuilt: the stored refinement of the same start is reused, not measured
-    again = refine_run(checked, ms, judged.shared.summary(), config, fake, tmp_path)
+    again = refine_run(checked, ms, judged.shared, config, fake, tmp_path).summary()
     assert len(fake.calls) == n_calls
     assert json.dumps(again, sort_keys=True) == json.dumps(summary, sort_keys=True)
 
@@ -215,6 +217,7 @@ def test_a_stored_refinement_of_another_start_or_settings_is_stale(moved_case, t
     save_refinement(tmp_path, refined)
     summary = judged.shared.summary()
     assert load_refinement(tmp_path, summary, refine_fingerprint(config)) is not None
+    assert load_refinement(tmp_path, judged.shared, refine_fingerprint(config)) is not None
     assert load_refinement(tmp_path, summary, "other") is None
     other = dict(summary)
     c = np.asarray(summary["registration"]["corrected_world_from_world"])
@@ -333,16 +336,14 @@ def test_the_rounds_stop_rules(moved_case, monkeypatch, residuals, n_rounds, sto
     seq = iter(residuals)
 
     class Checks:
-        def __init__(self, status, effect):
-            self.status, self.effect = status, effect
+        threshold_px = 2.4
 
-        def summary(self):
-            ok = self.status is not None
-            return {"threshold_px": 2.4, "registration": {
-                "status": self.status or "not_checked", "reason": "" if ok else "ill_conditioned",
-                "angle_deg": 0.1 if ok else None, "translation": 0.001 if ok else None,
-                "effect_px": self.effect, "corrected_world_from_world": small.tolist() if ok
-                else None}}
+        def __init__(self, status, effect):
+            ok = status is not None
+            self.registration = RegistrationCheck(
+                status=status or "not_checked", reason="" if ok else "ill_conditioned",
+                angle_deg=0.1 if ok else None, translation=0.001 if ok else None,
+                effect_px=effect, corrected_world_from_world=small.tolist() if ok else None)
 
     monkeypatch.setattr(shared_mod, "run_shared_checks", lambda m, c: Checks(*next(seq)))
     refined = refine_registration(checked.frames, ms, judged.shared.summary(), config,
@@ -360,14 +361,12 @@ class _Checks:
     step = np.eye(4)
     step[:3, 3] = (0.001, 0.0, 0.0)
 
-    def __init__(self, status, effect, effect_ci=None):
-        self.status, self.effect, self.effect_ci = status, effect, effect_ci
+    threshold_px = 2.4
 
-    def summary(self):
-        return {"threshold_px": 2.4, "registration": {
-            "status": self.status, "reason": "", "angle_deg": 0.1, "translation": 0.001,
-            "effect_px": self.effect, "effect_px_ci": self.effect_ci,
-            "corrected_world_from_world": self.step.tolist()}}
+    def __init__(self, status, effect, effect_ci=None):
+        self.registration = RegistrationCheck(
+            status=status, angle_deg=0.1, translation=0.001, effect_px=effect,
+            effect_px_ci=effect_ci, corrected_world_from_world=self.step.tolist())
 
 
 def _scripted(monkeypatch, residuals):
@@ -408,8 +407,8 @@ def test_an_oscillating_refinement_stops_and_says_why(moved_case, monkeypatch, t
     assert np.allclose(refined.rigid, step)
     # the summary says so; the reported estimate is the kept one
     _scripted(monkeypatch, residuals)
-    summary = refine_run(checked, ms, judged.shared.summary(), config, FakeMeasure(true),
-                         tmp_path)
+    summary = refine_run(checked, ms, judged.shared, config, FakeMeasure(true),
+                         tmp_path).summary()
     reg = summary["registration"]
     assert reg["refinement"]["stopped"] == refined.stopped
     assert reg["refinement"]["rounds_kept"] == kept

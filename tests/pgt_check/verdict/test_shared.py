@@ -313,9 +313,11 @@ def test_a_changed_camera_fails_frames_the_other_checks_pass():
 
     from pgt_check.verdict.decide import _run_level
     from pgt_check.verdict.shared import SharedChecks
+    from pgt_check.verdict.shared_results import RegistrationCheck
 
     ok = {"status": "passed", "effect_px": 0.5}
-    shared = SharedChecks(2.4, ok, ok, ok, {}, drift_threshold_px=4.8)
+    reg = RegistrationCheck(status="passed", effect_px=0.5)
+    shared = SharedChecks(2.4, reg, reg, ok, {}, drift_threshold_px=4.8)
     assert _run_level("f1", shared, "absolute", True, "cam0")[0].value == "PASS"
     changed = replace(shared, calibration_change={"cam0": {"status": "failed", "effect_px": 6.1}})
     v, reason, _ = _run_level("f1", changed, "absolute", True, "cam0")
@@ -329,20 +331,21 @@ def test_a_failed_registration_most_frames_disagree_with_is_inconclusive():
     separate them; measured: castle, 4 of 10 frames perturbed, the 320 px presets), fewer
     than half of the frames agree with the fitted correction: one shared correction does not
     describe them, and the check says so instead of failing every frame."""
+    from dataclasses import replace
+
     from pgt_check.verdict.shared_entries import shared_or_not as _shared_or_not
+    from pgt_check.verdict.shared_results import RegistrationCheck
 
-    def entry():
-        return {"status": "failed", "effect_px": 48.0,
-                "message": "rigid registration FAILED: the trajectory is misregistered"}
-
-    disagree = _shared_or_not(entry(), np.array([1.0, 2.0, 30.0, 40.0, 50.0, np.inf]), 8.0)
-    assert disagree["status"] == "inconclusive"
-    assert disagree["frames_agreeing"] == pytest.approx(2 / 5)
-    assert disagree["message"].startswith("rigid registration inconclusive: only 40%")
-    agree = _shared_or_not(entry(), np.array([1.0, 2.0, 3.0, 40.0]), 8.0)
-    assert agree["status"] == "failed" and agree["frames_agreeing"] == pytest.approx(0.75)
-    passed = _shared_or_not({**entry(), "status": "passed"}, np.array([30.0, 40.0]), 8.0)
-    assert passed["status"] == "passed"
+    entry = RegistrationCheck(status="failed", effect_px=48.0,
+                              message="rigid registration FAILED: the trajectory is misregistered")
+    disagree = _shared_or_not(entry, np.array([1.0, 2.0, 30.0, 40.0, 50.0, np.inf]), 8.0)
+    assert disagree.status == "inconclusive"
+    assert disagree.frames_agreeing == pytest.approx(2 / 5)
+    assert disagree.message.startswith("rigid registration inconclusive: only 40%")
+    agree = _shared_or_not(entry, np.array([1.0, 2.0, 3.0, 40.0]), 8.0)
+    assert agree.status == "failed" and agree.frames_agreeing == pytest.approx(0.75)
+    passed = _shared_or_not(replace(entry, status="passed"), np.array([30.0, 40.0]), 8.0)
+    assert passed.status == "passed"
 
 
 def test_each_frame_weighs_the_same_in_the_pooled_fits(truth):

@@ -1,6 +1,6 @@
-"""The summary.json entries of the run-level checks (``verdict/shared_entries.py``) on small
-fake estimates: the status from the interval against the threshold, the registration entry and
-its message, the calibration FINDING, and ``shared_or_not``."""
+"""The entries of the run-level checks (``verdict/shared_entries.py``) on small fake estimates:
+the status from the interval against the threshold, the registration check and its message, the
+calibration FINDING, and ``shared_or_not``."""
 
 from __future__ import annotations
 
@@ -97,12 +97,12 @@ def test_check_status(success, ci, effect, want):
 
 def test_registration_entry_failed_and_its_message():
     e = registration_entry(_registration(6.0, (4.5, 7.5)), 3.0, "rigid")
-    assert e["status"] == FAILED and e["kind"] == "rigid"
-    assert e["effect_px_ci"] == [4.5, 7.5] and e["corrected_world_from_world"] == np.eye(4).tolist()
-    assert e["message"].startswith("rigid registration FAILED: the trajectory is misregistered")
-    assert "1.50 deg" in e["message"] and "6.0 px (95 % 4.5-7.5)" in e["message"]
-    assert "2.0 % of the scene depth" in e["message"] and "over 12 frames" in e["message"]
-    json.dumps(e)  # summary.json-ready
+    assert e.status == FAILED and e.kind == "rigid"
+    assert e.effect_px_ci == [4.5, 7.5] and e.corrected_world_from_world == np.eye(4).tolist()
+    assert e.message.startswith("rigid registration FAILED: the trajectory is misregistered")
+    assert "1.50 deg" in e.message and "6.0 px (95 % 4.5-7.5)" in e.message
+    assert "2.0 % of the scene depth" in e.message and "over 12 frames" in e.message
+    json.dumps(e.to_json())  # summary.json-ready
 
 
 def test_registration_entry_similarity_passed_and_ambiguous():
@@ -111,9 +111,9 @@ def test_registration_entry_similarity_passed_and_ambiguous():
         3.0,
         "similarity",
     )
-    assert e["status"] == PASSED
-    assert e["message"].startswith("similarity passed: below 3.0 px")
-    assert "scale 1.0100" in e["message"] and "not separable from a calibration" in e["message"]
+    assert e.status == PASSED
+    assert e.message.startswith("similarity passed: below 3.0 px")
+    assert "scale 1.0100" in e.message and "not separable from a calibration" in e.message
 
 
 def test_registration_entry_not_checked_keeps_the_reason_and_no_numbers():
@@ -122,10 +122,10 @@ def test_registration_entry_not_checked_keeps_the_reason_and_no_numbers():
         3.0,
         "rigid",
     )
-    assert e["status"] == NOT_CHECKED and e["reason"] == "too_few_frames"
-    assert e["effect_px"] is None and e["angle_deg"] is None and e["effect_px_ci"] is None
-    assert e["corrected_world_from_world"] is None
-    assert "not checked" in e["message"] and "too_few_frames" in e["message"]
+    assert e.status == NOT_CHECKED and e.reason == "too_few_frames"
+    assert e.effect_px is None and e.angle_deg is None and e.effect_px_ci is None
+    assert e.corrected_world_from_world is None
+    assert "not checked" in e.message and "too_few_frames" in e.message
 
 
 def test_calibration_entry_failed_only_above_the_frame_threshold_else_finding():
@@ -191,11 +191,12 @@ def test_drift_entry_interpolates_frames_without_evidence_and_grows_segments():
 
 def test_shared_or_not_makes_a_failure_inconclusive_when_most_frames_disagree():
     failed = registration_entry(_registration(6.0, (4.5, 7.5)), 3.0, "rigid")
-    out = shared_or_not(dict(failed), np.array([0.5, 20.0, 30.0, np.nan]), 2.0)
-    assert out["status"] == INCONCLUSIVE and out["frames_agreeing"] == pytest.approx(1 / 3)
-    assert out["message"].startswith("rigid registration inconclusive: only 33% of the frames")
-    kept = shared_or_not(dict(failed), np.array([0.5, 1.0, 30.0]), 2.0)
-    assert kept["status"] == FAILED and kept["frames_agreeing"] == pytest.approx(2 / 3)
+    out = shared_or_not(failed, np.array([0.5, 20.0, 30.0, np.nan]), 2.0)
+    assert out.status == INCONCLUSIVE and out.frames_agreeing == pytest.approx(1 / 3)
+    assert out.message.startswith("rigid registration inconclusive: only 33% of the frames")
+    kept = shared_or_not(failed, np.array([0.5, 1.0, 30.0]), 2.0)
+    assert kept.status == FAILED and kept.frames_agreeing == pytest.approx(2 / 3)
     passed = registration_entry(_registration(1.0, (0.5, 1.5)), 3.0, "rigid")
-    assert shared_or_not(dict(passed), np.array([9.0, 9.0]), 2.0)["status"] == PASSED
-    assert shared_or_not(dict(failed), np.array([np.nan]), 2.0)["status"] == INCONCLUSIVE
+    assert shared_or_not(passed, np.array([9.0, 9.0]), 2.0).status == PASSED
+    assert shared_or_not(failed, np.array([np.nan]), 2.0).status == INCONCLUSIVE
+    assert failed.status == FAILED and failed.frames_agreeing is None  # entries are not changed

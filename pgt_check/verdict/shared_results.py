@@ -1,0 +1,113 @@
+"""The typed entries of the run-level checks (``verdict.shared``): what ``SharedChecks`` keeps and
+the verdicts and the correction step read by attribute. Each has ``to_json``, its summary.json
+``shared_errors`` entry key for key as it is written (the summary is the one place where the
+checks become dicts; ``verdict.shared_entries`` builds the entries from the typed estimates of
+``geometry.shared_errors``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from pgt_check.verdict.status import NOT_CHECKED
+
+__all__ = ["RegistrationCheck", "Sensitivity"]
+
+
+@dataclass(frozen=True)
+class Sensitivity:
+    """What a world rotation / translation does to the images (the shared detection limit):
+    px per degree and per scene unit (``verdict.frame_bounds.world_sensitivity``)."""
+
+    px_per_deg: float
+    px_per_unit: float
+
+    def to_json(self) -> dict[str, float]:
+        """The summary's ``registration.sensitivity``."""
+        return {"px_per_deg": self.px_per_deg, "px_per_unit": self.px_per_unit}
+
+
+@dataclass(frozen=True)
+class RegistrationCheck:
+    """The rigid or similarity registration check (``shared_entries.registration_entry``).
+
+    Sizes are None where not finite (not measured), intervals ``[lo, hi]`` (95 %) or None;
+    ``corrected_world_from_world``: the (4, 4) correction as nested lists (None when the fit
+    failed). The fields after ``message`` are added by later steps and left out of the summary
+    while None: ``frames_agreeing`` (``shared_or_not``), ``frames_left_out``
+    (``run_shared_checks``), ``sensitivity`` (``judge_run``, rigid entry), ``refinement`` (the
+    correction step's record, ``correct.registration_result``)."""
+
+    status: str = NOT_CHECKED
+    reason: str = ""
+    kind: str = "rigid"  # or "similarity"
+    angle_deg: float | None = None
+    angle_deg_ci: list[float] | None = None
+    translation: float | None = None
+    translation_ci: list[float] | None = None
+    translation_rel_depth: float | None = None
+    translation_rel_depth_ci: list[float] | None = None
+    scale: float | None = None
+    scale_ci: list[float] | None = None
+    effect_px: float | None = None
+    effect_px_ci: list[float] | None = None
+    n_frames: int = 0
+    n_points: int = 0
+    n_inliers: int = 0
+    ambiguous_with_calibration: bool = False
+    corrected_world_from_world: list[list[float]] | None = None
+    message: str = ""
+    #: share of the frames whose residual agrees with the correction
+    frames_agreeing: float | None = None
+    #: frames with an error of their own, left out of the pooled fit
+    frames_left_out: tuple[str, ...] | None = None
+    sensitivity: Sensitivity | None = None
+    #: the summary's ``refinement`` block (first pass, rounds, why they stopped)
+    refinement: Mapping[str, Any] | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """The summary.json entry (``shared_errors.registration`` / ``.similarity``)."""
+        out: dict[str, Any] = {
+            "status": self.status,
+            "reason": self.reason,
+            "kind": self.kind,
+            "angle_deg": self.angle_deg,
+            "angle_deg_ci": self.angle_deg_ci,
+            "translation": self.translation,
+            "translation_ci": self.translation_ci,
+            "translation_rel_depth": self.translation_rel_depth,
+            "translation_rel_depth_ci": self.translation_rel_depth_ci,
+            "scale": self.scale,
+            "scale_ci": self.scale_ci,
+            "effect_px": self.effect_px,
+            "effect_px_ci": self.effect_px_ci,
+            "n_frames": self.n_frames,
+            "n_points": self.n_points,
+            "n_inliers": self.n_inliers,
+            "ambiguous_with_calibration": self.ambiguous_with_calibration,
+            "corrected_world_from_world": self.corrected_world_from_world,
+            "message": self.message,
+        }
+        if self.frames_agreeing is not None:
+            out["frames_agreeing"] = self.frames_agreeing
+        if self.frames_left_out is not None:
+            out["frames_left_out"] = list(self.frames_left_out)
+        if self.sensitivity is not None:
+            out["sensitivity"] = self.sensitivity.to_json()
+        if self.refinement is not None:
+            out["refinement"] = dict(self.refinement)
+        return out
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> RegistrationCheck:
+        """The entry of a summary section (``to_json``'s form; for callers that hold the
+        summary, not the ``SharedChecks``); keys it lacks keep their defaults."""
+        names = cls.__dataclass_fields__
+        kw = {k: v for k, v in d.items() if k in names}
+        if kw.get("frames_left_out") is not None:
+            kw["frames_left_out"] = tuple(kw["frames_left_out"])
+        if isinstance(kw.get("sensitivity"), Mapping):
+            kw["sensitivity"] = Sensitivity(**kw["sensitivity"])
+        return cls(**kw)
