@@ -43,7 +43,7 @@ from pgt_check.verdict.shared_entries import (
     registration_entry,
     shared_or_not,
 )
-from pgt_check.verdict.shared_results import RegistrationCheck
+from pgt_check.verdict.shared_results import DriftCheck, RegistrationCheck
 from pgt_check.verdict.status import FAILED, INCONCLUSIVE, NOT_CHECKED, PASSED
 from pgt_check.verdict.texture import texture_entry
 
@@ -63,7 +63,7 @@ class SharedChecks:
     threshold_px: float
     registration: RegistrationCheck
     similarity: RegistrationCheck
-    drift: dict[str, Any]
+    drift: DriftCheck
     calibration: dict[str, dict[str, Any]]
     drift_px: dict[str, float] = field(default_factory=dict)
     drift_flagged: frozenset[str] = frozenset()
@@ -103,7 +103,7 @@ class SharedChecks:
             "threshold_px": self.threshold_px,
             "registration": self.registration.to_json(),
             "similarity": self.similarity.to_json(),
-            "drift": self.drift,
+            "drift": self.drift.to_json(),
             "calibration": self.calibration,
             **({"texture": self.texture} if self.texture else {}),
             **(

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from pgt_check.verdict.shared_results import RegistrationCheck
+from pgt_check.verdict.shared_results import DriftCheck, DriftFrame, RegistrationCheck
 from pgt_check.verdict.status import FAILED, FINDING, INCONCLUSIVE, NOT_CHECKED, PASSED
 
 __all__ = [
@@ -223,50 +223,47 @@ def drift_coverage(
     return score, low, segments, interpolated
 
 
-def drift_entry(est: Any, ids: list[str], threshold: float) -> tuple[dict, dict, frozenset]:
-    """The drift section of the summary, the per-frame scores and the flagged frame ids;
-    ``ids``: every frame of the run in trajectory order (with or without evidence)."""
+def drift_entry(
+    est: Any, ids: list[str], threshold: float
+) -> tuple[DriftCheck, dict[str, float], frozenset[str]]:
+    """The drift check, the per-frame scores and the flagged frame ids; ``ids``: every frame of
+    the run in trajectory order (with or without evidence)."""
     if not est.success:
         return (
-            {
-                "status": NOT_CHECKED,
-                "reason": est.reason,
-                "message": f"drift not checked ({est.reason})",
-            },
+            DriftCheck(NOT_CHECKED, est.reason, f"drift not checked ({est.reason})"),
             {},
             frozenset(),
         )
     score, low, runs, interpolated = drift_coverage(est, ids, threshold)
     flagged = {fid for fid, f in zip(est.frame_ids, est.frame_flagged, strict=True) if f}
     flagged = frozenset(flagged.union(*({ids[i] for i in range(a, b + 1)} for a, b in runs)))
-    segments = [[ids[a], ids[b]] for a, b in runs]
-    status = FAILED if flagged else PASSED
-    entry = {
-        "status": status,
-        "reason": est.reason,
-        "threshold_px": threshold,
-        "segments": segments,
-        "n_windows": len(est.windows),
-        "per_frame": [
-            {
-                "frame_id": fid,
-                "index": i,
-                "effect_px": finite_or_none(score[fid]),
-                "lo_px": finite_or_none(low[fid]),
-                "flagged": fid in flagged,
-                "own_evidence": fid not in interpolated,
-            }
+    segments = tuple((ids[a], ids[b]) for a, b in runs)
+    check = DriftCheck(
+        status=FAILED if flagged else PASSED,
+        reason=est.reason,
+        threshold_px=threshold,
+        segments=segments,
+        n_windows=len(est.windows),
+        per_frame=tuple(
+            DriftFrame(
+                frame_id=fid,
+                index=i,
+                effect_px=finite_or_none(score[fid]),
+                lo_px=finite_or_none(low[fid]),
+                flagged=fid in flagged,
+                own_evidence=fid not in interpolated,
+            )
             for i, fid in enumerate(ids)
             if fid in score
-        ],
-        "message": (
+        ),
+        message=(
             f"drift FAILED: {len(segments)} segment(s) move away from the mesh by more than "
             f"{threshold:.1f} px: " + ", ".join(f"{a} .. {b}" for a, b in segments)
             if flagged
             else f"drift passed: no window moves by more than {threshold:.1f} px"
         ),
-    }
-    return entry, score, flagged
+    )
+    return check, score, flagged
 
 
 def shared_or_not(

@@ -8,12 +8,12 @@ checks become dicts; ``verdict.shared_entries`` builds the entries from the type
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from typing import Any
 
 from pgt_check.verdict.status import NOT_CHECKED
 
-__all__ = ["RegistrationCheck", "Sensitivity"]
+__all__ = ["DriftCheck", "DriftFrame", "RegistrationCheck", "Sensitivity"]
 
 
 @dataclass(frozen=True)
@@ -111,3 +111,46 @@ class RegistrationCheck:
         if isinstance(kw.get("sensitivity"), Mapping):
             kw["sensitivity"] = Sensitivity(**kw["sensitivity"])
         return cls(**kw)
+
+
+@dataclass(frozen=True)
+class DriftFrame:
+    """One frame's drift score (``shared_entries.drift_coverage``): its trajectory ``index``,
+    the score and its lower 95 % bound (px; None where not finite), whether it lies in a flagged
+    segment and whether the score is its own (else interpolated between frames with evidence)."""
+
+    frame_id: str
+    index: int
+    effect_px: float | None
+    lo_px: float | None
+    flagged: bool
+    own_evidence: bool
+
+
+@dataclass(frozen=True)
+class DriftCheck:
+    """The drift check (``shared_entries.drift_entry``): flagged ``segments`` as (first, last)
+    frame ids, the windows fitted, each frame's score. A check that did not run
+    (``NOT_CHECKED``) has only its status, reason and message."""
+
+    status: str
+    reason: str
+    message: str
+    threshold_px: float = float("nan")
+    segments: tuple[tuple[str, str], ...] = ()
+    n_windows: int = 0
+    per_frame: tuple[DriftFrame, ...] = ()
+
+    def to_json(self) -> dict[str, Any]:
+        """The summary.json entry (``shared_errors.drift``)."""
+        if self.status == NOT_CHECKED:
+            return {"status": self.status, "reason": self.reason, "message": self.message}
+        return {
+            "status": self.status,
+            "reason": self.reason,
+            "threshold_px": self.threshold_px,
+            "segments": [list(s) for s in self.segments],
+            "n_windows": self.n_windows,
+            "per_frame": [asdict(f) for f in self.per_frame],
+            "message": self.message,
+        }

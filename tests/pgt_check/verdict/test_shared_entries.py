@@ -161,7 +161,8 @@ def test_drift_entry_not_checked():
     entry, score, flagged = drift_entry(
         SimpleNamespace(success=False, reason="too_few_frames"), ["a", "b"], 2.0
     )
-    assert entry["status"] == NOT_CHECKED and score == {} and flagged == frozenset()
+    assert entry.status == NOT_CHECKED and score == {} and flagged == frozenset()
+    assert list(entry.to_json()) == ["status", "reason", "message"]
 
 
 def test_drift_entry_interpolates_frames_without_evidence_and_grows_segments():
@@ -178,15 +179,19 @@ def test_drift_entry_interpolates_frames_without_evidence_and_grows_segments():
         windows=(1, 2),
     )
     entry, score, flagged = drift_entry(est, ids, 2.0)
-    assert entry["status"] == FAILED
+    assert entry.status == FAILED
     assert score["f1"] == pytest.approx(1.75) and score["f3"] == pytest.approx(4.0)
     # f3 (no evidence of its own) lies inside the segment; f1's interpolated lower bound
     # (1.35) stays below the threshold, so the segment does not grow over it
     assert flagged == frozenset({"f2", "f3", "f4"})
-    assert entry["segments"] == [["f2", "f4"]]
-    own = {r["frame_id"]: r["own_evidence"] for r in entry["per_frame"]}
+    assert entry.segments == (("f2", "f4"),) and entry.to_json()["segments"] == [["f2", "f4"]]
+    own = {r.frame_id: r.own_evidence for r in entry.per_frame}
     assert own == {"f0": True, "f1": False, "f2": True, "f3": False, "f4": True}
-    assert "1 segment(s)" in entry["message"] and "f2 .. f4" in entry["message"]
+    assert "1 segment(s)" in entry.message and "f2 .. f4" in entry.message
+    assert list(entry.to_json()) == ["status", "reason", "threshold_px", "segments", "n_windows",
+                                     "per_frame", "message"]
+    assert list(entry.to_json()["per_frame"][0]) == ["frame_id", "index", "effect_px", "lo_px",
+                                                     "flagged", "own_evidence"]
 
 
 def test_shared_or_not_makes_a_failure_inconclusive_when_most_frames_disagree():
