@@ -5,7 +5,8 @@ Per dataset, the given trajectory, a copy with independent errors on 40 % of the
 of the scene depth are checked end to end (``FrameChecker`` + ``judge_run``, as the CLI does),
 once with the edge settings before #29 (``decision = support``, ``select_model = never``) and
 once with the defaults (``decision = either``, ``select_model = fallback``). Reported: PASS share
-on the given poses (verified share), per-frame ROC-AUC, flagged share of the perturbed frames
+on the given poses (verified share), per-frame ROC-AUC on the injected errors (score: the corner
+error of the path the verdict rests on, and the ``corner_error_px`` column), flagged share of the perturbed frames
 and of the clean ones, the registration check's status on the given and the moved copy
 (whether the run-level checks got enough frames), the registration estimate of the moved
 copy, and seconds per frame.
@@ -112,7 +113,7 @@ def write(rows: list[dict], frames: int) -> None:
                 continue
             table.append([
                 ds, label, _pass_share(g), g.get("registration", ""),
-                _f(pf.get("frame_auc")) if pf else "",
+                f"{_f(pf.get('verdict_auc'))} / {_f(pf.get('frame_auc'))}" if pf else "",
                 pf.get("flagged_bad", "") if pf else "", pf.get("flagged_good", "") if pf else "",
                 mv["flagged"] if mv else "", mv.get("registration", "") if mv else "",
                 (f"{_f(mv.get('reg_deg'))} deg / {_f(mv.get('reg_t'), '.3f')} "
@@ -125,7 +126,8 @@ def write(rows: list[dict], frames: int) -> None:
         f"Machine: {machine()}. Up to {frames} frames per dataset (castle has 10).\n",
         (__doc__ or "").split("\n\n")[1].replace("\n", " ") + "\n",
         md_table(["dataset", "edge settings", "PASS given", "registration (given)",
-                  "per-frame AUC", "per-frame: flagged bad", "per-frame: flagged clean",
+                  "per-frame AUC (deciding path / corner_error_px)", "per-frame: flagged bad",
+                  "per-frame: flagged clean",
                   "moved: flagged", "moved: registration", "moved: estimate",
                   "s/frame (given)"], table),
     ]
@@ -136,7 +138,12 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--frames", type=int, default=30)
     ap.add_argument("--datasets", default="tsdf,boxes,castle,7s-colourless")
+    ap.add_argument("--from-json", action="store_true",
+                    help="only rewrite reports/edge_pipeline.md from its .json")
     a = ap.parse_args(argv)
+    if a.from_json:
+        write(json.loads((REPORTS / "edge_pipeline.json").read_text()), a.frames)
+        return 0
     rows: list[dict] = []
     for old in CACHE.glob("pipe-*.json"):  # measured with an older working tree
         old.unlink()
