@@ -116,3 +116,32 @@ def test_edge_evidence_on_tsdf_scene(tsdf_scene):
     # on the rounded, shrunk silhouettes of the scan a fixed homography bends to the misfit;
     # the model chosen by cross-validation keeps the correct poses' corner error smaller
     assert np.median(err_cv) < np.median(err_fixed), (err_cv, err_fixed)
+
+
+@pytest.fixture(scope="module")
+def tsdf_scene_8(tmp_path_factory):
+    from pgt_eval import make_tsdf_scene
+
+    out = tmp_path_factory.mktemp("tsdf8")
+    return make_tsdf_scene(out, n_frames=8), out / "tsdf.ply"  # the benchmarks' scan
+
+
+def test_default_run_on_tsdf_scene_verifies_correct_frames_and_flags_wrong_ones(
+    tsdf_scene_8, tmp_path
+):
+    """Issue #29 end to end with the default settings (either rule, fallback model): the
+    correct poses of the fused scan PASS (before #29 the support rule and the reprojected
+    references' FAILs left most of them UNVERIFIABLE), and every frame of a copy whose
+    frames are all perturbed (neighbours too) is flagged."""
+    from pgt_check.api import check
+    from pgt_check.io import read_trajectory
+    from pgt_eval import perturb_trajectory
+
+    traj_path, mesh = tsdf_scene_8
+    df = check(traj_path, mesh, out=str(tmp_path / "given"), report_details=0)
+    assert (df.verdict == "PASS").mean() >= 0.75, df[["frame_id", "verdict", "reason"]]
+    # rotations alone (3-4 deg: 15-20 px at these corners, threshold 8): no translation can
+    # cancel their image effect, so every one must be flagged
+    bad, _ = perturb_trajectory(read_trajectory(traj_path), 1.0, (3.0, 4.0), (0.0, 0.0), seed=2)
+    df_bad = check(bad, mesh, out=str(tmp_path / "bad"), report_details=0)
+    assert (df_bad.verdict != "PASS").all(), df_bad[["frame_id", "verdict", "reason"]]
