@@ -417,7 +417,7 @@ def _run_level(
     if changed is not None:
         return (
             Verdict.FAIL,
-            f"calibration: this camera changed since the trusted run ({changed['effect_px']:.1f} "
+            f"calibration: this camera changed since the trusted run ({changed.effect_px:.1f} "
             "px)",
             evidence,
         )

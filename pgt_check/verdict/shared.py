@@ -43,7 +43,7 @@ from pgt_check.verdict.shared_entries import (
     registration_entry,
     shared_or_not,
 )
-from pgt_check.verdict.shared_results import DriftCheck, RegistrationCheck
+from pgt_check.verdict.shared_results import CalibrationCheck, DriftCheck, RegistrationCheck
 from pgt_check.verdict.status import FAILED, INCONCLUSIVE, NOT_CHECKED, PASSED
 from pgt_check.verdict.texture import texture_entry
 
@@ -64,7 +64,7 @@ class SharedChecks:
     registration: RegistrationCheck
     similarity: RegistrationCheck
     drift: DriftCheck
-    calibration: dict[str, dict[str, Any]]
+    calibration: dict[str, CalibrationCheck]
     drift_px: dict[str, float] = field(default_factory=dict)
     drift_flagged: frozenset[str] = frozenset()
     calibration_homographies: dict[str, np.ndarray] = field(default_factory=dict)
@@ -80,7 +80,7 @@ class SharedChecks:
     texture: dict[str, Any] = field(default_factory=dict)
     #: with ``--calibration-from``, per camera id: what is left of the calibration after
     #: removing the trusted run's (``calibration_change_entry``); a FAILED camera's frames FAIL
-    calibration_change: dict[str, dict[str, Any]] = field(default_factory=dict)
+    calibration_change: dict[str, CalibrationCheck] = field(default_factory=dict)
 
     def calibration_homography(self, frame_id: str, camera_id: str) -> np.ndarray | None:
         """The calibration error's photo_from_render for this frame (None if not estimated)."""
@@ -104,19 +104,19 @@ class SharedChecks:
             "registration": self.registration.to_json(),
             "similarity": self.similarity.to_json(),
             "drift": self.drift.to_json(),
-            "calibration": self.calibration,
+            "calibration": {cam: e.to_json() for cam, e in self.calibration.items()},
             **({"texture": self.texture} if self.texture else {}),
             **(
-                {"calibration_change": self.calibration_change}
+                {"calibration_change": {cam: e.to_json() for cam, e in self.calibration_change.items()}}
                 if self.calibration_change
                 else {}
             ),
         }
 
-    def calibration_changed(self, camera_id: str) -> dict[str, Any] | None:
+    def calibration_changed(self, camera_id: str) -> CalibrationCheck | None:
         """The calibration-change entry of this camera when it FAILED (else None)."""
         e = self.calibration_change.get(camera_id)
-        return e if e is not None and e.get("status") == FAILED else None
+        return e if e is not None and e.status == FAILED else None
 
 
 #: the drift check's threshold relative to the shared one. A drift window is fitted on a few
@@ -240,7 +240,7 @@ def _without(cals: Mapping[str, CameraCalibration], e: Any) -> Any:
 def _calibration_checks(
     ev: Sequence[Any], measurements: Sequence[FrameMeasurement], config: RunConfig,
     thr: float, frame_thr: float,
-) -> tuple[dict[str, dict[str, Any]], dict[str, CameraCalibration], dict[str, dict[str, Any]]]:
+) -> tuple[dict[str, CalibrationCheck], dict[str, CameraCalibration], dict[str, CalibrationCheck]]:
     """Per camera: the calibration entry, the calibration to remove (this run's estimate, or the
     trusted run's with ``calibration_from``) and, with ``calibration_from``, the change entry."""
     from pgt_check.geometry.shared_errors import estimate_calibration
@@ -254,12 +254,11 @@ def _calibration_checks(
         if cal is not None:
             cals[cam_id] = cal
     for cam_id in sorted({m.camera_id for m in measurements} - set(calib)):
-        calib[cam_id] = {
-            "status": NOT_CHECKED,
-            "reason": "no_absolute_evidence",
-            "message": "calibration not checked: no absolute evidence",
-        }
-    change: dict[str, dict[str, Any]] = {}
+        calib[cam_id] = CalibrationCheck(
+            NOT_CHECKED, "no_absolute_evidence", "calibration not checked: no absolute evidence",
+            estimated=False,
+        )
+    change: dict[str, CalibrationCheck] = {}
     if v.calibration_from:
         # a calibration known from a trusted run (same cameras): removed before judging, so
         # this run's own shared error cannot be taken for calibration; what is left of the

@@ -15,7 +15,12 @@ from typing import Any
 
 import numpy as np
 
-from pgt_check.verdict.shared_results import DriftCheck, DriftFrame, RegistrationCheck
+from pgt_check.verdict.shared_results import (
+    CalibrationCheck,
+    DriftCheck,
+    DriftFrame,
+    RegistrationCheck,
+)
 from pgt_check.verdict.status import FAILED, FINDING, INCONCLUSIVE, NOT_CHECKED, PASSED
 
 __all__ = [
@@ -114,37 +119,38 @@ def registration_message(e: RegistrationCheck, threshold: float) -> str:
     return f"{what} {verdict}: correction {nums}{amb}"
 
 
-def calibration_entry(est: Any, shared_thr: float, frame_thr: float) -> dict[str, Any]:
+def calibration_entry(est: Any, shared_thr: float, frame_thr: float) -> CalibrationCheck:
+    """The calibration check of one camera's ``CalibrationEstimate``: FAILED only above the
+    per-frame threshold ``frame_thr``, a FINDING between it and ``shared_thr``."""
     status = check_status(est.success, est.effect_px_ci, est.effect_px, shared_thr)
     if status == FAILED:
         lo = (finite_interval(est.effect_px_ci) or [est.effect_px])[0]
         status = FAILED if lo > frame_thr else FINDING
-    entry = {
-        "status": status,
-        "reason": est.reason,
-        "effect_px": finite_or_none(est.effect_px),
-        "effect_px_ci": finite_interval(est.effect_px_ci),
-        "principal_point_shift_px": finite_interval(est.principal_point_shift_px),
-        "rotation_deg": finite_or_none(est.equivalent_rotation_deg),
-        "rotation_deg_ci": finite_interval(est.equivalent_rotation_deg_ci),
-        "roll_deg": finite_or_none(est.roll_deg),
-        "focal_scale": finite_or_none(est.focal_scale),
-        "focal_scale_ci": finite_interval(est.focal_scale_ci),
-        "n_frames": est.n_frames,
-        "separable_from_registration": bool(est.separable),
+    check = CalibrationCheck(
+        status=status,
+        reason=est.reason,
+        effect_px=finite_or_none(est.effect_px),
+        effect_px_ci=finite_interval(est.effect_px_ci),
+        principal_point_shift_px=finite_interval(est.principal_point_shift_px),
+        rotation_deg=finite_or_none(est.equivalent_rotation_deg),
+        rotation_deg_ci=finite_interval(est.equivalent_rotation_deg_ci),
+        roll_deg=finite_or_none(est.roll_deg),
+        focal_scale=finite_or_none(est.focal_scale),
+        focal_scale_ci=finite_interval(est.focal_scale_ci),
+        n_frames=est.n_frames,
+        separable_from_registration=bool(est.separable),
         # true_cam_from_checked_cam: what --calibration-from applies to another run
-        "rotation": None if est.rotation is None else np.asarray(est.rotation).tolist(),
-        "translation": finite_interval(est.translation) if est.translation_fitted else None,
+        rotation=None if est.rotation is None else np.asarray(est.rotation).tolist(),
+        translation=finite_interval(est.translation) if est.translation_fitted else None,
         # (3, 2): the 95 % interval of each component
-        "translation_ci": (
+        translation_ci=(
             [finite_interval(row) for row in np.asarray(est.translation_ci)] if est.translation_fitted else None
         ),
-    }
+    )
     if status == NOT_CHECKED:
-        entry["message"] = f"calibration not checked: no absolute evidence ({est.reason})"
-        return entry
-    pp = entry["principal_point_shift_px"] or [float("nan")] * 2
-    entry["message"] = (
+        return replace(check, message=f"calibration not checked: no absolute evidence ({est.reason})")
+    pp = check.principal_point_shift_px or [float("nan")] * 2
+    message = (
         f"calibration {status}: every frame of this camera is displaced by "
         f"{est.effect_px:.1f} px: principal point off by ({pp[0]:+.1f}, {pp[1]:+.1f}) px or a "
         f"camera-to-rig rotation of {est.equivalent_rotation_deg:.2f} deg "
@@ -158,32 +164,33 @@ def calibration_entry(est: Any, shared_thr: float, frame_thr: float) -> dict[str
         )
         + ("" if est.separable else "; not separable from registration with these views")
     )
-    return entry
+    return replace(check, message=message)
 
 
-def calibration_change_entry(est: Any, threshold: float) -> dict[str, Any]:
+def calibration_change_entry(est: Any, threshold: float) -> CalibrationCheck:
     """This run's calibration against a trusted run's (``--calibration-from``): the estimate on
     the evidence after removing the trusted calibration. FAILED when it moves the images by
     more than the shared threshold with confidence: the camera changed (focal length,
     principal point, mounting) since the trusted run, and its frames are not PASS."""
     entry = calibration_entry(est, threshold, threshold)
-    if entry["status"] == NOT_CHECKED:
-        entry["message"] = f"calibration change not checked: no absolute evidence ({est.reason})"
-        return entry
-    entry["status"] = check_status(est.success, est.effect_px_ci, est.effect_px, threshold)
-    lo, hi = entry["effect_px_ci"] or (est.effect_px, est.effect_px)
+    if entry.status == NOT_CHECKED:
+        return replace(
+            entry, message=f"calibration change not checked: no absolute evidence ({est.reason})"
+        )
+    status = check_status(est.success, est.effect_px_ci, est.effect_px, threshold)
+    lo, hi = entry.effect_px_ci or (est.effect_px, est.effect_px)
     what = {
         FAILED: "calibration CHANGED since the trusted run",
         PASSED: "calibration as in the trusted run",
         INCONCLUSIVE: "calibration change since the trusted run inconclusive",
-    }[entry["status"]]
-    pp = entry["principal_point_shift_px"] or [float("nan")] * 2
-    entry["message"] = (
+    }[status]
+    pp = entry.principal_point_shift_px or [float("nan")] * 2
+    message = (
         f"{what}: what is left moves the images by {est.effect_px:.1f} px (95 % {lo:.1f}-"
         f"{hi:.1f}, threshold {threshold:.1f}): principal point ({pp[0]:+.1f}, {pp[1]:+.1f}) px, "
         f"roll {est.roll_deg:+.2f} deg, focal length x{est.focal_scale:.4f}"
     )
-    return entry
+    return replace(entry, status=status, message=message)
 
 
 def drift_coverage(

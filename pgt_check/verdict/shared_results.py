@@ -13,7 +13,7 @@ from typing import Any
 
 from pgt_check.verdict.status import NOT_CHECKED
 
-__all__ = ["DriftCheck", "DriftFrame", "RegistrationCheck", "Sensitivity"]
+__all__ = ["CalibrationCheck", "DriftCheck", "DriftFrame", "RegistrationCheck", "Sensitivity"]
 
 
 @dataclass(frozen=True)
@@ -152,5 +152,55 @@ class DriftCheck:
             "segments": [list(s) for s in self.segments],
             "n_windows": self.n_windows,
             "per_frame": [asdict(f) for f in self.per_frame],
+            "message": self.message,
+        }
+
+
+@dataclass(frozen=True)
+class CalibrationCheck:
+    """The calibration check of one camera (``shared_entries.calibration_entry``; also the
+    ``--calibration-from`` change entry). ``rotation``: (3, 3) ``true_cam_from_checked_cam`` as
+    nested lists; ``translation`` / ``translation_ci`` only where a camera-frame translation
+    was fitted. ``estimated`` False: no estimate for this camera at all (no absolute evidence);
+    its entry has only status, reason and message."""
+
+    status: str
+    reason: str
+    message: str = ""
+    effect_px: float | None = None
+    effect_px_ci: list[float] | None = None
+    principal_point_shift_px: list[float] | None = None
+    rotation_deg: float | None = None
+    rotation_deg_ci: list[float] | None = None
+    roll_deg: float | None = None
+    focal_scale: float | None = None
+    focal_scale_ci: list[float] | None = None
+    n_frames: int = 0
+    separable_from_registration: bool = True
+    rotation: list[list[float]] | None = None
+    translation: list[float] | None = None
+    translation_ci: list[list[float] | None] | None = None
+    estimated: bool = True
+
+    def to_json(self) -> dict[str, Any]:
+        """The summary.json entry (``shared_errors.calibration[camera]``)."""
+        if not self.estimated:
+            return {"status": self.status, "reason": self.reason, "message": self.message}
+        return {
+            "status": self.status,
+            "reason": self.reason,
+            "effect_px": self.effect_px,
+            "effect_px_ci": self.effect_px_ci,
+            "principal_point_shift_px": self.principal_point_shift_px,
+            "rotation_deg": self.rotation_deg,
+            "rotation_deg_ci": self.rotation_deg_ci,
+            "roll_deg": self.roll_deg,
+            "focal_scale": self.focal_scale,
+            "focal_scale_ci": self.focal_scale_ci,
+            "n_frames": self.n_frames,
+            "separable_from_registration": self.separable_from_registration,
+            "rotation": self.rotation,
+            "translation": self.translation,
+            "translation_ci": self.translation_ci,
             "message": self.message,
         }

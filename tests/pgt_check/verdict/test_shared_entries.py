@@ -132,13 +132,13 @@ def test_calibration_entry_failed_only_above_the_frame_threshold_else_finding():
     # a shared error above the shared threshold (2) but below the per-frame threshold (8):
     # a finding, not a failure of the frames
     e = calibration_entry(_calibration(4.0, (3.0, 5.0)), 2.0, 8.0)
-    assert e["status"] == FINDING
-    assert "principal point off by (+4.0, -1.0) px" in e["message"]
-    assert calibration_entry(_calibration(12.0, (10.0, 14.0)), 2.0, 8.0)["status"] == FAILED
-    assert calibration_entry(_calibration(1.0, (0.5, 1.5)), 2.0, 8.0)["status"] == PASSED
+    assert e.status == FINDING
+    assert "principal point off by (+4.0, -1.0) px" in e.message
+    assert calibration_entry(_calibration(12.0, (10.0, 14.0)), 2.0, 8.0).status == FAILED
+    assert calibration_entry(_calibration(1.0, (0.5, 1.5)), 2.0, 8.0).status == PASSED
     e = calibration_entry(_calibration(math.nan, (math.nan,) * 2, success=False), 2.0, 8.0)
-    assert e["status"] == NOT_CHECKED and "no absolute evidence (too_few_points)" in e["message"]
-    assert e["translation"] is None and e["translation_ci"] is None
+    assert e.status == NOT_CHECKED and "no absolute evidence (too_few_points)" in e.message
+    assert e.translation is None and e.translation_ci is None
 
 
 def test_calibration_entry_with_a_translation_and_not_separable():
@@ -151,10 +151,11 @@ def test_calibration_entry_with_a_translation_and_not_separable():
         translation_ci=np.array([[0.04, 0.06], [-0.01, 0.01], [-0.01, 0.01]]),
     )
     e = calibration_entry(est, 2.0, 8.0)
-    assert e["translation"] == [0.05, 0.0, 0.0] and e["translation_ci"][0] == [0.04, 0.06]
-    assert "camera-to-rig translation (+0.0500" in e["message"]
-    assert e["message"].endswith("not separable from registration with these views")
-    assert e["separable_from_registration"] is False
+    assert e.translation == [0.05, 0.0, 0.0] and e.translation_ci[0] == [0.04, 0.06]
+    assert "camera-to-rig translation (+0.0500" in e.message
+    assert e.message.endswith("not separable from registration with these views")
+    assert e.separable_from_registration is False
+    assert list(e.to_json())[-4:] == ["rotation", "translation", "translation_ci", "message"]
 
 
 def test_drift_entry_not_checked():
