@@ -85,6 +85,8 @@ class DetectionLimits:
     points_px_per_deg: float | None
     points_px_per_unit: float | None
     how: str
+    #: why the shared limits are not stated ("" when they are)
+    shared_note: str = ""
 
 
 @dataclass(frozen=True)
@@ -230,12 +232,25 @@ def pooled_detection_size(
     return math.exp(hi)
 
 
+#: why a run that removes a calibration estimated on its own frames states no shared limit
+NOT_SEPARABLE = (
+    "not stated: the calibration removed (--remove-calibration) is estimated on the same "
+    "frames, and with these views a misregistration moves the images as a calibration error "
+    "does (registration.ambiguous_with_calibration), so the removal absorbs it; calibrate on "
+    "a trusted run and pass --calibration-from"
+)
+
+
 def detection_limits(
     rows: Sequence[Mapping[str, Any]],
     threshold_px: float,
     shared: Mapping[str, Any] | None,
+    calibration_removed: bool = False,
 ) -> DetectionLimits:
-    """This run's detection limits from its own noise (module docstring)."""
+    """This run's detection limits from its own noise (module docstring). With
+    ``calibration_removed`` and a registration the views cannot tell from a calibration error,
+    no shared limit is stated (``NOT_SEPARABLE``): the self-test found a shared translation of
+    2x such a limit absorbed by the removal on 7-Scenes (reports/accuracy.md)."""
     noise_px = _median([r.get("acc_noise_px") for r in rows])
     # a single frame's limit: flagged in 95 % of (frame, error axis) pairs, each frame at its
     # own threshold + noise and sensitivities (a limit at the median frame and one axis was
@@ -256,7 +271,8 @@ def detection_limits(
     reg = (shared or {}).get("registration") or {}
     thr_shared = _num((shared or {}).get("threshold_px"))
     ci = _ci(reg.get("effect_px_ci"))
-    if thr_shared is not None and ci is not None:
+    note = NOT_SEPARABLE if calibration_removed and reg.get("ambiguous_with_calibration") else ""
+    if thr_shared is not None and ci is not None and not note:
         shared_px = thr_shared + 0.5 * (ci[1] - ci[0])
 
     def conv(px: float | None, per: float | None) -> float | None:
@@ -279,6 +295,7 @@ def detection_limits(
         "half-width of the registration fit's 95 % interval (px), turned with the image "
         "effect of a world rotation about the camera centroid / a world translation as the "
         "registration check measures it, about / along the world axis where it is smallest",
+        note,
     )  # fmt: skip
 
 
@@ -309,7 +326,7 @@ def run_accuracy(
         1 for a, b in zip(rot, tra, strict=True)
         if (x is None or a <= x) and (y is None or b <= y)
     )  # fmt: skip
-    limits = detection_limits(rows, threshold_px, shared)
+    limits = detection_limits(rows, threshold_px, shared, config.remove_calibration)
     sizes = shared_sizes(shared, limits.points_px_per_deg, limits.points_px_per_unit)
     acc = RunAccuracy(
         len(rows), len(bounded), x, y, src, n_within if bounded else 0,
@@ -432,7 +449,8 @@ def accuracy_sentences(acc: RunAccuracy) -> list[str]:
                 f"; an error shared by all frames above about {_fmt(lim.shared_deg, 2)} deg or "
                 f"{_fmt(lim.shared_units, 2)} scene units ({_fmt(lim.shared_px, 3)} px)"
                 if lim.shared_px is not None
-                else ""
+                else (f"; an error shared by all frames: {lim.shared_note}" if lim.shared_note
+                      else "")
             )
             + f"; one frame cannot tell {_fmt(lim.noise_deg, 2)} deg / "
             f"{_fmt(lim.noise_units, 2)} units from zero (median bootstrap noise)."
