@@ -209,6 +209,155 @@ def _fit(
     return r, t, scale
 
 
+def _evidence(
+    pts2d: np.ndarray, pts_cam: np.ndarray, K: np.ndarray, width: int, height: int
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Checked inputs -> (K (3, 3), p (N, 3), obs (N, 2)): the finite points in front."""
+    pts2d = np.asarray(pts2d, np.float64)
+    pts_cam = np.asarray(pts_cam, np.float64)
+    K = np.asarray(K, np.float64)
+    check_shape("pts2d", pts2d, (None, 2))
+    check_shape("pts_cam", pts_cam, (len(pts2d), 3))
+    check_shape("K", K, (3, 3))
+    if width <= 0 or height <= 0:
+        raise ValueError(f"image size must be positive, got {width} x {height}")
+    good = np.all(np.isfinite(pts2d), axis=1) & np.all(np.isfinite(pts_cam), axis=1)
+    good &= pts_cam[:, 2] > 0
+    return K, pts_cam[good], pts2d[good]
+
+
+def _image_blocks(
+    obs: np.ndarray, width: int, height: int, grid: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """(blocks (nb,), block_of (N,)): the ``grid x grid`` photo cells holding points of
+    ``obs`` (N, 2), and each point's index among them."""
+    cell = (
+        np.clip((obs[:, 0] / width * grid).astype(int), 0, grid - 1) * grid
+        + np.clip((obs[:, 1] / height * grid).astype(int), 0, grid - 1)
+    )
+    return np.unique(cell, return_inverse=True)
+
+
+def _block_equations(
+    jac: np.ndarray, r0: np.ndarray, w: np.ndarray, ok: np.ndarray, scale: float,
+    block_of: np.ndarray, nb: int,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per-block estimating equations at the estimate: (H (nb, 6, 6), g (nb, 6)).
+
+    Replicate b = block counts c_b: delta_b = -(sum c H_c)^-1 (sum c g_c), g = sum J^T psi(r)
+    with psi(r) = w(r) r (Cauchy); ``jac`` (N, 2, 6), ``r0`` (N, 2) residuals (0 where not
+    ``ok``), ``w`` (N,) weights."""
+    # H is the derivative of g (w I - 2 w^2 r r^T / s^2 per point), not the IRLS J^T W J: the
+    # IRLS matrix is larger and made the intervals ~1.5x too narrow on synthetic frames
+    wmat = w[:, None, None] * np.eye(2) - (2 * w**2 / scale**2)[:, None, None] * (
+        r0[:, :, None] * r0[:, None, :]
+    )
+    jtw = np.einsum("nki,nkl->nil", jac, wmat)  # (N, 6, 2)
+    hp = np.einsum("nil,nlj->nij", jtw, jac)  # (N, 6, 6)
+    gp = np.einsum("nki,nk->ni", jac, w[:, None] * r0)  # (N, 6)
+    hb = np.zeros((nb, 6, 6))
+    gb = np.zeros((nb, 6))
+    np.add.at(hb, block_of, np.where(ok[:, None, None], hp, 0.0))
+    np.add.at(gb, block_of, np.where(ok[:, None], gp, 0.0))
+    return hb, gb
+
+
+def _ill_conditioned(h_all: np.ndarray) -> bool:
+    """Whether the summed equations ``h_all`` (6, 6) leave the fit undetermined."""
+    if np.any(np.linalg.eigvalsh(0.5 * (h_all + h_all.T)) <= 0):
+        return True
+    d = np.sqrt(np.diag(h_all))
+    return not np.all(d > 0) or not np.linalg.cond(h_all / np.outer(d, d)) < 1e10
+
+
+def _bootstrap_steps(
+    hb: np.ndarray, gb: np.ndarray, h_all: np.ndarray, n_bootstrap: int, seed: int
+) -> np.ndarray:
+    """(B, 6) one Gauss-Newton step from the estimate per block-resampled replicate."""
+    nb = len(hb)
+    rng = np.random.default_rng(seed)
+    counts = rng.multinomial(nb, np.full(nb, 1.0 / nb), size=n_bootstrap).astype(np.float64)
+    hs = np.einsum("bc,cij->bij", counts, hb) + 1e-9 * np.eye(6) * np.trace(h_all) / 6
+    return -np.linalg.solve(hs, (counts @ gb)[..., None])[..., 0]  # (B, 6)
+
+
+def _sizes(
+    K: np.ndarray, pts: np.ndarray, ref: np.ndarray, rr: np.ndarray, tt: np.ndarray
+) -> tuple[float, float, float]:
+    """Rotation (deg), camera-centre distance, mean displacement (px) against ``ref`` (N, 2)
+    of ``pts`` (N, 3) of (R, t)."""
+    disp = _project(K, pts @ rr.T + tt) - ref
+    return _angle_deg(rr), float(np.linalg.norm(rr.T @ tt)), _mean_finite(
+        np.linalg.norm(disp, axis=1))
+
+
+def _replicates(
+    K: np.ndarray, pts: np.ndarray, ref: np.ndarray, r: np.ndarray, t: np.ndarray,
+    steps: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """(reps (B, 3), devs (B, 3)): each replicate's sizes (``_sizes``) and its distance to the
+    estimate (r, t) in the same three measures; ``pts`` (N, 3) inlier points, ``ref`` (N, 2)
+    their unmoved projections."""
+    reps = np.empty((len(steps), 3))
+    devs = np.empty((len(steps), 3))
+    for b, step in enumerate(steps):
+        dr = _exp(step[:3])
+        rb, tb = dr @ r, dr @ t + step[3:]
+        reps[b] = _sizes(K, pts, ref, rb, tb)
+        # distance of the replicate to the estimate (the noise, whatever the error's size)
+        rel_r = rb @ r.T
+        rel_t = tb - rel_r @ t
+        disp = _project(K, (pts @ r.T + t) @ rel_r.T + rel_t) - _project(K, pts @ r.T + t)
+        devs[b] = (
+            _angle_deg(rel_r),
+            float(np.linalg.norm(rb.T @ tb - r.T @ t)),
+            _mean_finite(np.linalg.norm(disp, axis=1)),
+        )
+    return reps, devs
+
+
+def _bounds(
+    est: tuple[float, float, float], reps: np.ndarray, devs: np.ndarray
+) -> dict[str, float]:
+    """The ``FrameAccuracy`` size, bound and noise fields from the estimate's sizes ``est``
+    and the replicates' sizes ``reps`` (B, 3) and distances to it ``devs`` (B, 3)."""
+    bound = np.nanpercentile(reps, 95, axis=0)
+    noise = np.nanpercentile(devs, 95, axis=0)
+    return dict(
+        rotation_deg=est[0],
+        rotation_bound_deg=float(max(bound[0], est[0])),
+        rotation_noise_deg=float(noise[0]),
+        translation=est[1],
+        translation_bound=float(max(bound[1], est[1])),
+        translation_noise=float(noise[1]),
+        effect_px=est[2],
+        effect_bound_px=float(max(bound[2], est[2])),
+        effect_noise_px=float(noise[2]),
+    )
+
+
+def _sensitivities(
+    K: np.ndarray, pts: np.ndarray, obs: np.ndarray, width: int, height: int
+) -> dict[str, float]:
+    """The ``FrameAccuracy`` sensitivity fields and depth of the inlier points ``pts`` (N, 3)
+    observed at ``obs`` (N, 2)."""
+    # mean |du| per degree about each camera axis and per unit along each at the frame's
+    # points; at the image corners as the check measures them, over error axes
+    _, j0 = _residuals_jac(K, pts, obs, np.eye(3), np.zeros(3))
+    per_axis = np.linalg.norm(j0, axis=1).mean(axis=0)  # (6,) px per rad / per unit
+    zc = float(np.median(pts[:, 2]))
+    rot_c, tra_c = corner_sensitivities(pts, K, width, height, sphere_axes())
+    return dict(
+        px_per_deg=float(np.median(rot_c) * math.pi / 180),
+        px_per_unit=float(np.median(tra_c)),
+        low_px_per_deg=float(np.quantile(rot_c, LOW_AXIS_QUANTILE) * math.pi / 180),
+        low_px_per_unit=float(np.quantile(tra_c, LOW_AXIS_QUANTILE)),
+        points_px_per_deg=float(per_axis[:3].mean() * math.pi / 180),
+        points_px_per_unit=float(per_axis[3:].mean()),
+        depth=zc,
+    )
+
+
 def frame_accuracy(
     pts2d: np.ndarray,
     pts_cam: np.ndarray,
@@ -227,25 +376,11 @@ def frame_accuracy(
 
     pts2d: (N, 2) photo pixels (OpenCV centres); pts_cam: (N, 3) points in the checked camera's
     frame; K: (3, 3) photo intrinsics; width, height: photo size (for the blocks)."""
-    pts2d = np.asarray(pts2d, np.float64)
-    pts_cam = np.asarray(pts_cam, np.float64)
-    K = np.asarray(K, np.float64)
-    check_shape("pts2d", pts2d, (None, 2))
-    check_shape("pts_cam", pts_cam, (len(pts2d), 3))
-    check_shape("K", K, (3, 3))
-    if width <= 0 or height <= 0:
-        raise ValueError(f"image size must be positive, got {width} x {height}")
-    good = np.all(np.isfinite(pts2d), axis=1) & np.all(np.isfinite(pts_cam), axis=1)
-    good &= pts_cam[:, 2] > 0
-    p, obs = pts_cam[good], pts2d[good]
+    K, p, obs = _evidence(pts2d, pts_cam, K, width, height)
     n = len(p)
     if n < min_points:
         return FrameAccuracy(False, "too_few_points", n_points=n)
-    cell = (
-        np.clip((obs[:, 0] / width * grid).astype(int), 0, grid - 1) * grid
-        + np.clip((obs[:, 1] / height * grid).astype(int), 0, grid - 1)
-    )
-    blocks, block_of = np.unique(cell, return_inverse=True)
+    blocks, block_of = _image_blocks(obs, width, height, grid)
     if len(blocks) < min_blocks:
         return FrameAccuracy(False, "too_few_blocks", n_points=n, n_blocks=len(blocks))
     r, t, scale = _fit(K, p, obs, loss_scale_px)
@@ -257,83 +392,21 @@ def frame_accuracy(
         return FrameAccuracy(False, "too_few_inliers", n_points=n, n_inliers=n_inl)
     r0 = np.where(ok[:, None], res, 0.0)
     w = np.where(ok, _weights(r0, scale), 0.0)
-    # per-block estimating equations at the estimate; replicate b = block counts c_b:
-    # delta_b = -(sum c H_c)^-1 (sum c g_c), g = sum J^T psi(r) with psi(r) = w(r) r (Cauchy).
-    # H is the derivative of g (w I - 2 w^2 r r^T / s^2 per point), not the IRLS J^T W J: the
-    # IRLS matrix is larger and made the intervals ~1.5x too narrow on synthetic frames
     nb = len(blocks)
-    wmat = w[:, None, None] * np.eye(2) - (2 * w**2 / scale**2)[:, None, None] * (
-        r0[:, :, None] * r0[:, None, :]
-    )
-    jtw = np.einsum("nki,nkl->nil", jac, wmat)  # (N, 6, 2)
-    hp = np.einsum("nil,nlj->nij", jtw, jac)  # (N, 6, 6)
-    gp = np.einsum("nki,nk->ni", jac, w[:, None] * r0)  # (N, 6)
-    hb = np.zeros((nb, 6, 6))
-    gb = np.zeros((nb, 6))
-    np.add.at(hb, block_of, np.where(ok[:, None, None], hp, 0.0))
-    np.add.at(gb, block_of, np.where(ok[:, None], gp, 0.0))
+    hb, gb = _block_equations(jac, r0, w, ok, scale, block_of, nb)
     h_all = hb.sum(axis=0)
-    if np.any(np.linalg.eigvalsh(0.5 * (h_all + h_all.T)) <= 0):
+    if _ill_conditioned(h_all):
         return FrameAccuracy(False, "ill_conditioned", n_points=n, n_inliers=n_inl, n_blocks=nb)
-    d = np.sqrt(np.diag(h_all))
-    if not np.all(d > 0) or not np.linalg.cond(h_all / np.outer(d, d)) < 1e10:
-        return FrameAccuracy(False, "ill_conditioned", n_points=n, n_inliers=n_inl, n_blocks=nb)
-    rng = np.random.default_rng(seed)
-    counts = rng.multinomial(nb, np.full(nb, 1.0 / nb), size=n_bootstrap).astype(np.float64)
-    hs = np.einsum("bc,cij->bij", counts, hb) + 1e-9 * np.eye(6) * np.trace(h_all) / 6
-    steps = -np.linalg.solve(hs, (counts @ gb)[..., None])[..., 0]  # (B, 6)
-
-    def sizes(rr: np.ndarray, tt: np.ndarray) -> tuple[float, float, float]:
-        """Rotation (deg), camera-centre distance, mean displacement (px) of (R, t)."""
-        disp = _project(K, p[inl] @ rr.T + tt) - obs_model[inl]
-        return _angle_deg(rr), float(np.linalg.norm(rr.T @ tt)), _mean_finite(
-            np.linalg.norm(disp, axis=1))
-
+    steps = _bootstrap_steps(hb, gb, h_all, n_bootstrap, seed)
     # the image displacement of a correction is measured against the unmoved projection
-    obs_model = _project(K, p)
-    est = sizes(r, t)
-    reps = np.empty((n_bootstrap, 3))
-    devs = np.empty((n_bootstrap, 3))
-    for b, step in enumerate(steps):
-        dr = _exp(step[:3])
-        rb, tb = dr @ r, dr @ t + step[3:]
-        reps[b] = sizes(rb, tb)
-        # distance of the replicate to the estimate (the noise, whatever the error's size)
-        rel_r = rb @ r.T
-        rel_t = tb - rel_r @ t
-        disp = _project(K, (p[inl] @ r.T + t) @ rel_r.T + rel_t) - _project(K, p[inl] @ r.T + t)
-        devs[b] = (
-            _angle_deg(rel_r),
-            float(np.linalg.norm(rb.T @ tb - r.T @ t)),
-            _mean_finite(np.linalg.norm(disp, axis=1)),
-        )
-    bound = np.nanpercentile(reps, 95, axis=0)
-    noise = np.nanpercentile(devs, 95, axis=0)
-    # sensitivities: mean |du| per degree about each camera axis and per unit along each at
-    # the frame's points; at the image corners as the check measures them, over error axes
-    _, j0 = _residuals_jac(K, p[inl], obs[inl], np.eye(3), np.zeros(3))
-    per_axis = np.linalg.norm(j0, axis=1).mean(axis=0)  # (6,) px per rad / per unit
-    zc = float(np.median(p[inl, 2]))
-    rot_c, tra_c = corner_sensitivities(p[inl], K, width, height, sphere_axes())
+    ref = _project(K, p)[inl]
+    est = _sizes(K, p[inl], ref, r, t)
+    reps, devs = _replicates(K, p[inl], ref, r, t, steps)
     fa = FrameAccuracy(
         True,
         "",
-        rotation_deg=est[0],
-        rotation_bound_deg=float(max(bound[0], est[0])),
-        rotation_noise_deg=float(noise[0]),
-        translation=est[1],
-        translation_bound=float(max(bound[1], est[1])),
-        translation_noise=float(noise[1]),
-        effect_px=est[2],
-        effect_bound_px=float(max(bound[2], est[2])),
-        effect_noise_px=float(noise[2]),
-        px_per_deg=float(np.median(rot_c) * math.pi / 180),
-        px_per_unit=float(np.median(tra_c)),
-        low_px_per_deg=float(np.quantile(rot_c, LOW_AXIS_QUANTILE) * math.pi / 180),
-        low_px_per_unit=float(np.quantile(tra_c, LOW_AXIS_QUANTILE)),
-        points_px_per_deg=float(per_axis[:3].mean() * math.pi / 180),
-        points_px_per_unit=float(per_axis[3:].mean()),
-        depth=zc,
+        **_bounds(est, reps, devs),
+        **_sensitivities(K, p[inl], obs[inl], width, height),
         n_points=n,
         n_inliers=n_inl,
         n_blocks=nb,
