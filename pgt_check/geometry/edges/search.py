@@ -210,6 +210,43 @@ def coarse_step(config: EdgeAlignConfig, diag: float, tau: float) -> int:
     return int(max(1, min(max(2, round(0.005 * diag)), math.floor(tau / 1.5))))
 
 
+def _fine_peaks(
+    maps: _ScoreMaps,
+    pf: np.ndarray,
+    bf: np.ndarray,
+    offs: np.ndarray,
+    best: tuple[int, int],
+    runner: tuple[int, int] | None,
+    step: int,
+    sep: float,
+    min_inside: float,
+) -> tuple[np.ndarray, float, np.ndarray | None, float]:
+    """The fine 1-px search around the coarse best (row, col) and the separated runner-up of
+    the coarse grid ``offs`` (None: none) on the points ``pf`` (N, 2) with bins ``bf`` (N,):
+    (best shift (2,), its score, second shift (2,) or None, its score)."""
+    by, bx = best
+    best_shift, best_score = _fine_search(
+        maps, pf, bf, np.array([offs[bx], offs[by]]), step, min_inside
+    )
+    second_shift, second_score = None, 0.0
+    if runner is not None:
+        s2, sc2 = _fine_search(
+            maps,
+            pf,
+            bf,
+            np.array([offs[runner[1]], offs[runner[0]]]),
+            step,
+            min_inside,
+            away_from=best_shift,
+            min_dist=sep,
+        )
+        if sc2 > best_score:  # the fine search can swap them
+            s2, sc2, best_shift, best_score = best_shift, best_score, s2, sc2
+        if sc2 > 0 and np.hypot(*(s2 - best_shift)) > sep:
+            second_shift, second_score = s2, sc2
+    return best_shift, best_score, second_shift, second_score
+
+
 def search_shifts(
     re: RenderEdges,
     pe: PhotoEdges,
@@ -243,26 +280,10 @@ def search_shifts(
     # fine 1-px search around the best and the runner-up
     t1 = time.perf_counter()
     sub_f = subset(len(re), config.fine_points)
-    pf, bf = re.points[sub_f], bins[sub_f]
-    best_shift, best_score = _fine_search(
-        maps, pf, bf, np.array([offs[bx], offs[by]]), step, config.min_inside
+    best_shift, best_score, second_shift, second_score = _fine_peaks(
+        maps, re.points[sub_f], bins[sub_f], offs, (int(by), int(bx)), runner, step, sep,
+        config.min_inside,
     )
-    second_shift, second_score = None, 0.0
-    if runner is not None:
-        s2, sc2 = _fine_search(
-            maps,
-            pf,
-            bf,
-            np.array([offs[runner[1]], offs[runner[0]]]),
-            step,
-            config.min_inside,
-            away_from=best_shift,
-            min_dist=sep,
-        )
-        if sc2 > best_score:  # the fine search can swap them
-            s2, sc2, best_shift, best_score = best_shift, best_score, s2, sc2
-        if sc2 > 0 and np.hypot(*(s2 - best_shift)) > sep:
-            second_shift, second_score = s2, sc2
     # ambiguity relative to the typical (median) score of a random shift: dense clutter lifts
     # every score, a true repeat brings the runner-up close to the best
     baseline = float(np.median(sc))
