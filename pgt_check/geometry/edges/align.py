@@ -273,6 +273,67 @@ def _accepted(decision: str, supported: bool, significant: bool) -> bool:
     return supported or significant  # "either"
 
 
+def _tau(re: RenderEdges, pe: PhotoEdges, config: EdgeAlignConfig) -> float:
+    """The chamfer truncation (px) of this alignment; raises ValueError for a model not in
+    ``MODELS`` or render and photo edges of different sizes."""
+    if config.model not in MODELS:
+        raise ValueError(f"model must be one of {', '.join(MODELS)}, got {config.model!r}")
+    if (re.width, re.height) != (pe.width, pe.height):
+        raise ValueError(
+            f"render edges are {re.width}x{re.height} but photo edges {pe.width}x{pe.height}"
+        )
+    return float(config.tau_px) if config.tau_px is not None else auto_tau(re.width, re.height)
+
+
+def _refine_found(
+    re: RenderEdges,
+    pe: PhotoEdges,
+    bins: np.ndarray,
+    found: ShiftSearch,
+    tau: float,
+    config: EdgeAlignConfig,
+    timings: dict[str, float],
+) -> tuple[np.ndarray, str, ShiftSearch]:
+    """(b) the refinement of the shift start and of the tile start (the lower robust cost
+    wins), with the ambiguity judged again where the search was spread: (hmat (3, 3), model,
+    search). Adds the "refine" time (s) to ``timings``."""
+    t2 = time.perf_counter()
+    hmat, model = _refined(re, pe, bins, found.best_shift, tau, config)
+    spread = found.ambiguous or (
+        config.decision == "significance" and not found.p_value <= config.alpha
+    )
+    if spread and config.tile_grid >= 2:
+        # with the tile start, a zoom no single shift fits is aligned: judge it again there
+        # (not by default: on shaded 7-Scenes renders it accepted wrong alignments that the
+        # shift search had called ambiguous, and a 2 deg + 4 % misregistration was flagged
+        # on 14/20 frames instead of 20/20; reports/shared_errors_tiles.md has it on)
+        found = _ambiguity_after(re, pe, bins, hmat, found, tau, config)
+    timings["refine"] = time.perf_counter() - t2
+    return hmat, model, found
+
+
+def _reason(
+    hmat: np.ndarray,
+    found: ShiftSearch,
+    support: float,
+    config: EdgeAlignConfig,
+    width: int,
+    height: int,
+) -> EdgeReason | None:
+    """Why the refined alignment ``hmat`` is not accepted (None: it is)."""
+    if check_homography(hmat, width, height) is not None:
+        return EdgeReason.ILL_CONDITIONED
+    if found.ambiguous:
+        return EdgeReason.AMBIGUOUS
+    if not _accepted(config.decision, support >= config.min_support,
+                     found.p_value <= config.alpha):
+        return (
+            EdgeReason.NOT_SIGNIFICANT if config.decision == "significance"
+            else EdgeReason.LOW_SUPPORT
+        )
+    return None
+
+
 def align_edges(
     render_edges: RenderEdges,
     photo_edges: PhotoEdges,
@@ -284,14 +345,8 @@ def align_edges(
     data: failures come back with ``success=False`` and an ``EdgeReason``.
     """
     re, pe = render_edges, photo_edges
-    if config.model not in MODELS:
-        raise ValueError(f"model must be one of {', '.join(MODELS)}, got {config.model!r}")
-    if (re.width, re.height) != (pe.width, pe.height):
-        raise ValueError(
-            f"render edges are {re.width}x{re.height} but photo edges {pe.width}x{pe.height}"
-        )
+    tau = _tau(re, pe, config)
     w, h = re.width, re.height
-    tau = float(config.tau_px) if config.tau_px is not None else auto_tau(w, h)
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     bins = bins_of(re.normals, pe.n_bins) if len(re) else np.zeros(0, dtype=np.int64)
@@ -310,34 +365,13 @@ def align_edges(
             EdgeReason.NO_OVERLAP, re, pe, tau, config, timings, support_identity=support_id
         )
     # (b) refinement of the shift start and of the tile start; the lower robust cost wins
-    t2 = time.perf_counter()
-    hmat, model = _refined(re, pe, bins, found.best_shift, tau, config)
-    spread = found.ambiguous or (
-        config.decision == "significance" and not found.p_value <= config.alpha
-    )
-    if spread and config.tile_grid >= 2:
-        # with the tile start, a zoom no single shift fits is aligned: judge it again there
-        # (not by default: on shaded 7-Scenes renders it accepted wrong alignments that the
-        # shift search had called ambiguous, and a 2 deg + 4 % misregistration was flagged
-        # on 14/20 frames instead of 20/20; reports/shared_errors_tiles.md has it on)
-        found = _ambiguity_after(re, pe, bins, hmat, found, tau, config)
-    timings["refine"] = time.perf_counter() - t2
+    hmat, model, found = _refine_found(re, pe, bins, found, tau, config, timings)
 
     support, matches = _evaluate(re, pe, bins, hmat, tau)
     timings["total"] = time.perf_counter() - t0
     out = _measured(found, hmat, support, support_id, matches, w, h)
     out["model"] = model
-    reason = None
-    if check_homography(hmat, w, h) is not None:
-        reason = EdgeReason.ILL_CONDITIONED
-    elif found.ambiguous:
-        reason = EdgeReason.AMBIGUOUS
-    elif not _accepted(config.decision, support >= config.min_support,
-                       found.p_value <= config.alpha):
-        reason = (
-            EdgeReason.NOT_SIGNIFICANT if config.decision == "significance"
-            else EdgeReason.LOW_SUPPORT
-        )
+    reason = _reason(hmat, found, support, config, w, h)
     if reason is not None:
         return _failure(reason, re, pe, tau, config, timings, **out)
     logger.debug(
