@@ -236,9 +236,8 @@ def pooled_detection_size(
 #: why a run that removes a calibration estimated on its own frames states no shared limit
 NOT_SEPARABLE = (
     "not stated: the calibration removed (--remove-calibration) is estimated on the same "
-    "frames, and with these views a misregistration moves the images as a calibration error "
-    "does (registration.ambiguous_with_calibration), so the removal absorbs it; calibrate on "
-    "a trusted run and pass --calibration-from"
+    "frames and absorbs the part of a shared error that moves the images as a calibration "
+    "error does; calibrate on a trusted run and pass --calibration-from"
 )
 
 
@@ -249,9 +248,9 @@ def detection_limits(
     calibration_removed: bool = False,
 ) -> DetectionLimits:
     """This run's detection limits from its own noise (module docstring). With
-    ``calibration_removed`` and a registration the views cannot tell from a calibration error,
-    no shared limit is stated (``NOT_SEPARABLE``): the self-test found a shared translation of
-    2x such a limit absorbed by the removal on 7-Scenes (reports/accuracy.md)."""
+    ``calibration_removed`` no shared limit is stated (``NOT_SEPARABLE``): on 7-Scenes the
+    self-test found a shared translation of twice the limit the registration check alone
+    supports absorbed by the removal (reports/accuracy.md)."""
     noise_px = _median([r.get("acc_noise_px") for r in rows])
     # a single frame's limit: flagged in 95 % of (frame, error axis) pairs, each frame at its
     # own threshold + noise and sensitivities (a limit at the median frame and one axis was
@@ -272,7 +271,7 @@ def detection_limits(
     reg = (shared or {}).get("registration") or {}
     thr_shared = _num((shared or {}).get("threshold_px"))
     ci = _ci(reg.get("effect_px_ci"))
-    note = NOT_SEPARABLE if calibration_removed and reg.get("ambiguous_with_calibration") else ""
+    note = NOT_SEPARABLE if calibration_removed else ""
     if thr_shared is not None and ci is not None and not note:
         shared_px = thr_shared + 0.5 * (ci[1] - ci[0])
 

@@ -134,21 +134,17 @@ def test_pooled_detection_size_is_the_95_percent_point_of_the_pooled_frames():
     assert pooled_detection_size([{}], 8.0, None, "acc_px_per_deg", "acc_low_px_per_deg") is None
 
 
-def test_no_shared_limit_when_the_removed_calibration_can_absorb_a_misregistration():
-    """With --remove-calibration the calibration is estimated on the same frames; where the
-    registration check says the views cannot tell the two apart, a shared limit would be a
-    promise the removal breaks: none is stated, and the sentence says why."""
+def test_no_shared_limit_when_the_run_removes_its_own_calibration():
+    """With --remove-calibration the calibration is estimated on the same frames and absorbs
+    the part of a shared error that looks like one: a shared limit would be a promise the
+    removal breaks, so none is stated, and the sentence says why."""
     from pgt_check.verdict.accuracy import NOT_SEPARABLE
 
-    alike = {**SHARED, "registration": {**SHARED["registration"],
-                                        "ambiguous_with_calibration": True}}
     removed = VerdictConfig(remove_calibration=True)
-    acc = run_accuracy(rows(), alike, removed, threshold_px=8.0)
+    acc = run_accuracy(rows(), SHARED, removed, threshold_px=8.0)
     assert acc.limits.shared_px is None and acc.limits.shared_deg is None
     assert acc.limits.shared_note == NOT_SEPARABLE
     assert any("--calibration-from" in s for s in acc.sentences)
     assert acc.limits.frame_deg == pytest.approx(0.85)  # the single-frame limit stands
-    # calibration kept, or separable views: the shared limit is stated as before
-    for shared, cfg in ((alike, VerdictConfig()), (SHARED, removed)):
-        lim = run_accuracy(rows(), shared, cfg, threshold_px=8.0).limits
-        assert lim.shared_px == pytest.approx(1.8) and lim.shared_note == ""
+    lim = run_accuracy(rows(), SHARED, VerdictConfig(), threshold_px=8.0).limits
+    assert lim.shared_px == pytest.approx(1.8) and lim.shared_note == ""
