@@ -291,6 +291,76 @@ def _measure_as(measure: MeasureFn, jobs: Sequence[tuple[str, Frame]],
 
 
 # -- the test ---------------------------------------------------------------------------------
+_Plan = dict[tuple[str, float], list[str]]  # (kind, k) -> keys; ("", 0.0): the given poses
+_Limits = Mapping[str, tuple[float | None, float | None]]
+
+
+def _single_jobs(chosen: Sequence[Frame], single: _Limits,
+                 rng: np.random.Generator) -> tuple[list[tuple[str, Frame]], _Plan]:
+    """Every chosen frame at its given pose and at each size and kind: (jobs, plan)."""
+    jobs: list[tuple[str, Frame]] = []
+    plan: _Plan = {}
+    for f in chosen:
+        jobs.append((f"{f.frame_id}#self-test:0", f))
+        plan.setdefault(("", 0.0), []).append(jobs[-1][0])
+        for kind, (lim, _) in single.items():
+            d = _unit(rng)  # one direction per frame and kind, grown through the sizes
+            for k in MULTIPLES:
+                if lim is None:
+                    continue
+                key = f"{f.frame_id}#self-test:{kind}:{k:g}"
+                jobs.append((key, moved_frame(f, kind, k * lim, d)))
+                plan.setdefault((kind, k), []).append(key)
+    return jobs, plan
+
+
+def _tally(ms: Mapping[str, FrameMeasurement], keys: Sequence[str], v: Any,
+           shared: Any) -> tuple[int, int, int, int, str, tuple[str, ...]]:
+    """The ``CurvePoint`` counts of the measurements ``keys`` judged as frames of the run."""
+    judged = {x: judge(ms[x], v, shared) for x in keys if x in ms}
+    got = [j.verdict for j in judged.values()]
+    fail = sum(g is Verdict.FAIL for g in got)
+    unv = sum(g is Verdict.UNVERIFIABLE for g in got)
+    missed = tuple(_missed(ms[x], j, v) for x, j in judged.items() if j.verdict is Verdict.PASS)
+    return len(keys), fail + unv + (len(keys) - len(got)), fail, unv, "", missed
+
+
+def _single_curves(single: _Limits, chosen: Sequence[Frame], plan: _Plan, v: Any, shared: Any,
+                   ms: Mapping[str, FrameMeasurement]) -> list[DetectionCurve]:
+    """The single-frame curve of each kind from the measurements ``ms`` of ``plan``."""
+    zero = _tally(ms, plan.get(("", 0.0), []), v, shared)
+    curves = []
+    for kind, (lim, lim_px) in single.items():
+        pts = [CurvePoint(0.0, 0.0, *zero)] if chosen else []
+        if lim is not None and chosen:
+            pts += [CurvePoint(k, k * lim, *_tally(ms, plan[(kind, k)], v, shared))
+                    for k in MULTIPLES]
+        curves.append(_curve(SINGLE, kind, lim, lim_px, pts))
+    return curves
+
+
+def _shared_curves(together: _Limits, chosen: Sequence[Frame], base: Sequence[FrameMeasurement],
+                   axes: Mapping[str, np.ndarray], measure: MeasureFn, ecfg: RunConfig,
+                   checks: Callable[[Sequence[FrameMeasurement], RunConfig], Any]
+                   ) -> list[DetectionCurve]:
+    """The shared curves: the chosen frames moved together along ``axes`` (k = 0: ``base``)."""
+    curves = []
+    for kind, (lim, lim_px) in together.items():
+        pts = []
+        if len(chosen) >= SHARED_MIN_FRAMES and base:
+            pts.append(_shared_point(0.0, 0.0, base, ecfg, checks))
+            d = axes[kind]  # one misregistration per kind, grown through the sizes
+            if lim is not None:
+                for k in MULTIPLES:
+                    move = shared_move(chosen, kind, k * lim, d)
+                    moved = [f.with_pose(move_pose(f.world_from_cam, move)) for f in chosen]
+                    got = _measure_as(measure, [(f.frame_id, f) for f in moved], ecfg)
+                    order = [got[f.frame_id] for f in moved if f.frame_id in got]
+                    pts.append(_shared_point(k, k * lim, order, ecfg, checks))
+        curves.append(_curve(SHARED, kind, lim, lim_px, pts))
+    return curves
+
+
 def run_self_test(
     frames: Sequence[Frame],
     rows: Sequence[Mapping[str, Any]],
@@ -313,57 +383,14 @@ def run_self_test(
               TRANSLATION: (limits.frame_units, limits.frame_px)}
     together = {ROTATION: (limits.shared_deg, limits.shared_px),
                 TRANSLATION: (limits.shared_units, limits.shared_px)}
-    # single frame: every chosen frame at its given pose and at each size and kind
-    jobs: list[tuple[str, Frame]] = []
-    plan: dict[tuple[str, float], list[str]] = {}
-    for f in chosen:
-        jobs.append((f"{f.frame_id}#self-test:0", f))
-        plan.setdefault(("", 0.0), []).append(jobs[-1][0])
-        for kind, (lim, _) in single.items():
-            d = _unit(rng)  # one direction per frame and kind, grown through the sizes
-            for k in MULTIPLES:
-                if lim is None:
-                    continue
-                key = f"{f.frame_id}#self-test:{kind}:{k:g}"
-                jobs.append((key, moved_frame(f, kind, k * lim, d)))
-                plan.setdefault((kind, k), []).append(key)
+    jobs, plan = _single_jobs(chosen, single, rng)
     logger.info("self-test: %d frames measured again at %d poses (single-frame limit)",
                 len(chosen), len(jobs))
     ms = _measure_as(measure, jobs, ecfg) if jobs else {}
-    v = config.verdict
-
-    def tally(keys: Sequence[str]) -> tuple[int, int, int, int, str, tuple[str, ...]]:
-        judged = {x: judge(ms[x], v, shared) for x in keys if x in ms}
-        got = [j.verdict for j in judged.values()]
-        fail = sum(g is Verdict.FAIL for g in got)
-        unv = sum(g is Verdict.UNVERIFIABLE for g in got)
-        missed = tuple(_missed(ms[x], j, v) for x, j in judged.items()
-                       if j.verdict is Verdict.PASS)
-        return len(keys), fail + unv + (len(keys) - len(got)), fail, unv, "", missed
-
-    zero = tally(plan.get(("", 0.0), []))
-    curves = []
-    for kind, (lim, lim_px) in single.items():
-        pts = [CurvePoint(0.0, 0.0, *zero)] if chosen else []
-        if lim is not None and chosen:
-            pts += [CurvePoint(k, k * lim, *tally(plan[(kind, k)])) for k in MULTIPLES]
-        curves.append(_curve(SINGLE, kind, lim, lim_px, pts))
-    # shared: the chosen frames moved together; their given poses are the k = 0 point
+    curves = _single_curves(single, chosen, plan, config.verdict, shared, ms)
     base = [ms[k] for k in plan.get(("", 0.0), []) if k in ms]
     axes = weakest_world_axes(base, rng)
-    for kind, (lim, lim_px) in together.items():
-        pts = []
-        if len(chosen) >= SHARED_MIN_FRAMES and base:
-            pts.append(_shared_point(0.0, 0.0, base, ecfg, run_shared_checks))
-            d = axes[kind]  # one misregistration per kind, grown through the sizes
-            if lim is not None:
-                for k in MULTIPLES:
-                    move = shared_move(chosen, kind, k * lim, d)
-                    moved = [f.with_pose(move_pose(f.world_from_cam, move)) for f in chosen]
-                    got = _measure_as(measure, [(f.frame_id, f) for f in moved], ecfg)
-                    order = [got[f.frame_id] for f in moved if f.frame_id in got]
-                    pts.append(_shared_point(k, k * lim, order, ecfg, run_shared_checks))
-        curves.append(_curve(SHARED, kind, lim, lim_px, pts))
+    curves += _shared_curves(together, chosen, base, axes, measure, ecfg, run_shared_checks)
     st = SelfTest(n, tuple(f.frame_id for f in chosen), MULTIPLES, tuple(curves),
                   time.perf_counter() - t0)
     return replace(st, sentence=self_test_sentence(st))
