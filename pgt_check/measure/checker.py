@@ -212,45 +212,13 @@ class FrameChecker:
             self.matcher, self.config.homography,
             w.render.rgb, w.photo, w.render.coverage, w.size, w.scale, w.camera, clock
         )
-        why, detail = self._enhance_decision(raw, threshold)
-        if edges is None:
-            edges = self._edge_path(w, raw, threshold, clock)
-        if (
-            why in ENHANCE
-            and why is not EnhanceWhy.MODE_ALWAYS
-            and edges is not None
-            and edges_decisive(edges.measurement, threshold, self.config.enhance)
-        ):
-            # the geometric edges already decide with absolute evidence: leave out the
-            # enhancement (colourless meshes where the edges line up clearly)
-            why, detail = EnhanceWhy.EDGES_DECISIVE, ""
-        enh = ref_id = None
-        others: list[tuple[str, PathResult]] = []
-        if why in ENHANCE:
-            view = View(w.render, w.cam_w, frame.world_from_cam)
-            enh, ref_id, enh_img, n_tried, others = self._enhanced_path(
-                frame, view, w.photo, w.size, w.scale, w.camera, clock
-            )
-            if n_tried == 0:
-                why, detail = EnhanceWhy.NO_REFERENCE, ""
-            if keep is not None:
-                keep.enhanced = enh_img
-        chosen, path_name = raw, "raw"
-        if enh is not None and enh.success and (not raw.success or enh.n_inliers >= raw.n_inliers):
-            chosen, path_name = enh, "enhanced"  # the path with more geometric support decides
-        if not chosen.success and edges is not None and edges.measurement.success:
-            path_name = "edges"  # no feature path aligned: the geometric edges decide
-        if keep is not None:
-            keep.kpts_render, keep.kpts_photo = chosen.kpts_render, chosen.kpts_photo
-            keep.inliers = chosen.inliers
-            for name, res in (("raw", raw), ("enhanced", enh)):
-                if res is not None:
-                    keep.paths[name] = res.images(w.scale)
+        edges, enh, ref_id, others, why, detail = self._enhancement(
+            frame, w, raw, edges, threshold, keep, clock
+        )
+        chosen, path_name = _chosen_path(raw, enh, edges, keep, w.scale)
         pose = None
         if chosen.success and self.config.pose.enabled:
-            pose = pose_estimate(
-                chosen, w.render.depth, w.cam_w, frame, self.config.pose, clock
-            )
+            pose = pose_estimate(chosen, w.render.depth, w.cam_w, frame, self.config.pose, clock)
         method = self.config.enhance.method
         absolute = [(raw, "raw")]
         if enh is not None and self.enhancer.evidence is Evidence.ABSOLUTE:
@@ -275,6 +243,38 @@ class FrameChecker:
             pose=pose,
             auto_threshold_px=threshold if self.config.enhance.mode == "auto" else None,
         )
+
+    def _enhancement(
+        self, frame: Frame, w: Working, raw: PathResult, edges: EdgePath | None,
+        threshold: float, keep: FrameImages | None, clock: Clock,
+    ) -> tuple[EdgePath | None, PathResult | None, str | None, list[tuple[str, PathResult]],
+               EnhanceWhy, str]:
+        """After the raw path: the edge path (where it did not lead), the enhancement decision, the
+        enhanced path: (edges, enhanced, reference id, other references' results, why, detail)."""
+        why, detail = self._enhance_decision(raw, threshold)
+        if edges is None:
+            edges = self._edge_path(w, raw, threshold, clock)
+        if (
+            why in ENHANCE
+            and why is not EnhanceWhy.MODE_ALWAYS
+            and edges is not None
+            and edges_decisive(edges.measurement, threshold, self.config.enhance)
+        ):
+            # the geometric edges already decide with absolute evidence: leave out the
+            # enhancement (colourless meshes where the edges line up clearly)
+            why, detail = EnhanceWhy.EDGES_DECISIVE, ""
+        enh = ref_id = None
+        others: list[tuple[str, PathResult]] = []
+        if why in ENHANCE:
+            view = View(w.render, w.cam_w, frame.world_from_cam)
+            enh, ref_id, enh_img, n_tried, others = self._enhanced_path(
+                frame, view, w.photo, w.size, w.scale, w.camera, clock
+            )
+            if n_tried == 0:
+                why, detail = EnhanceWhy.NO_REFERENCE, ""
+            if keep is not None:
+                keep.enhanced = enh_img
+        return edges, enh, ref_id, others, why, detail
 
     def _edges_lead(self, w: Working) -> bool:
         """The edge path runs first: a render without colours (the raw path matches shading,
@@ -412,6 +412,24 @@ class FrameChecker:
                 best, best_id, best_img = res, ref.frame_id, out.image
         others = [(rid, r) for rid, r in tried if rid != best_id and r.success]
         return best, best_id, best_img, len(refs), others
+
+
+def _chosen_path(raw: PathResult, enh: PathResult | None, edges: EdgePath | None,
+                 keep: FrameImages | None, scale: tuple[float, float]) -> tuple[PathResult, str]:
+    """The deciding feature path and the verdict path's name; matches and images go to ``keep``."""
+    chosen, path_name = raw, "raw"
+    if enh is not None and enh.success and (not raw.success or enh.n_inliers >= raw.n_inliers):
+        chosen, path_name = enh, "enhanced"  # the path with more geometric support decides
+    if not chosen.success and edges is not None and edges.measurement.success:
+        path_name = "edges"  # no feature path aligned: the geometric edges decide
+    if keep is not None:
+        keep.kpts_render, keep.kpts_photo = chosen.kpts_render, chosen.kpts_photo
+        keep.inliers = chosen.inliers
+        for name, res in (("raw", raw), ("enhanced", enh)):
+            if res is not None:
+                keep.paths[name] = res.images(scale)
+    return chosen, path_name
+
 
 def _edge_extra(edges: EdgePath) -> list[tuple[np.ndarray, np.ndarray, str]]:
     """The edge path's matched points as the ``extra`` evidence source of ``absolute_evidence``."""
