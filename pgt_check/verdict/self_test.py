@@ -36,8 +36,8 @@ reaches q; None when it never does up to the largest size. A stated limit **held
 ``k_50`` or ``k_95`` lies within ``HELD_TOLERANCE`` (30 %) of it: ``|k_q - 1| <= 0.3``.
 Otherwise the curve says how it missed: *conservative* (already 95 % flagged below 0.7 x: the
 limit is larger than needed), *understated* (not even 50 % flagged at 1.3 x: errors beyond the
-stated limit pass), *shallow* (50 % below 0.7 x, 95 % above 1.3 x), *untested* (no frame, or
-the given poses are already flagged in half the cases). See docs/outputs.md#self-test.
+stated limit pass), *shallow* (50 % below 0.7 x, 95 % above 1.3 x), *untested* (no limit
+stated, no frame, or the given poses flagged in half the cases). See docs/outputs.md#self-test.
 """
 
 from __future__ import annotations
@@ -209,7 +209,7 @@ def _curve(test: str, kind: str, stated: float | None, stated_px: float | None,
     base = None if zero is None or zero.unverifiable >= zero.n else zero.share
     k50, k95 = detection_point(ks, shares, 0.5), detection_point(ks, shares, 0.95)
     return DetectionCurve(test, kind, stated, stated_px, tuple(points), k50, k95,
-                          judge_curve(k50, k95, base) if points else "untested")
+                          judge_curve(k50, k95, base) if points and stated else "untested")
 
 
 # -- the moves --------------------------------------------------------------------------------

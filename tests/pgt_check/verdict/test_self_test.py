@@ -148,3 +148,15 @@ def test_self_test_is_off_by_default_and_validated(tmp_path):
     with pytest.raises((ConfigError, ValueError)):
         RunConfig.from_dict({"self_test": -1})
 
+
+
+def test_a_limit_not_stated_is_untested_not_understated():
+    """With no stated limit (the shared limits under --remove-calibration) nothing is moved:
+    the curve has only its k = 0 point and says 'untested', which does not count as held."""
+    from pgt_check.verdict.self_test import CurvePoint, _curve
+
+    c = _curve("shared", "translation", None, None, [CurvePoint(0.0, 0.0, 1, 0, 0, 0)])
+    assert c.judgement == "untested" and c.held is None
+    stated = _curve("shared", "translation", 0.02, 2.7,
+                    [CurvePoint(0.0, 0.0, 1, 0, 0, 0), CurvePoint(2.0, 0.04, 1, 0, 0, 0)])
+    assert stated.judgement == "understated"
