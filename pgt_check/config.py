@@ -383,7 +383,9 @@ PRESETS: dict[str, dict[str, Any]] = {
         # the edge path (where the raw one is not decisive) at 640 px: about half the cost of
         # the default 1024 on large photos; shared errors of a few px are still flagged,
         # their size underestimated (reports/shared_errors.md, Presets)
-        "edges": {"resize_max": 640},
+        # and no cross-validated refit of the frames the fixed model does not pass (on a
+        # failing run that is every frame)
+        "edges": {"resize_max": 640, "select_model": "never"},
         # a failing run pays only for what it reports: the registration refinement is left to
         # an explicit --registration-rounds N (the first estimate is reported; with --resume
         # a rerun measures only the rounds); reports/pipeline_timing.md
