@@ -55,12 +55,11 @@ ACCURACY_COLUMNS: dict[str, str] = {
 _MAX_POINTS = 400  # per frame (evenly spaced): the fit's cost stays a few ms
 
 #: the bound rests on the feature paths' points alone (raw, enhanced) when they have at least
-#: this many and give a bound (unbiased; with 20 on 7-Scenes at 320 px the raw-only fits were
-#: so noisy that the median noise, and with it the stated single-frame limit, doubled: 9.6
-#: instead of 0.6 deg; reports/accuracy.md): the geometric-edge points' photo positions come from a 2D alignment model and
-#: carry no parallax, so their fit turns a camera shift into a rotation (sample scene, 0.2
-#: units moved, reports/accuracy.md: edges alone 0.04-0.43 of the shift plus 2-5 deg of
-#: rotation; raw alone 0.98-1.04; pooled 0.65-0.96)
+#: this many and give a bound: the geometric-edge points' photo positions come from a 2D
+#: alignment model and carry no parallax, so their fit turns a camera shift into a rotation;
+#: fewer feature points alone were so noisy on 7-Scenes at 320 px that the run's median noise,
+#: and the stated single-frame limit with it, grew many times (reports/accuracy.md, "Translation
+#: bound bias")
 FEATURE_ONLY_MIN_POINTS = 40
 
 

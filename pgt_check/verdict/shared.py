@@ -120,9 +120,9 @@ class SharedChecks:
 
 
 #: the drift check's threshold relative to the shared one. A drift window is fitted on a few
-#: frames, where view-dependent errors the model lacks show as a local correction of a few px:
-#: on the 100 given 7-Scenes frames (RGB photos with depth-camera poses) up to 3.5 px where
-#: the camera looks at near surfaces or turns fast, against 2.4 px of shared threshold
+#: frames, where view-dependent errors the model lacks show as a local correction of a few px
+#: (on 7-Scenes above the shared threshold where the camera looks at near surfaces or turns
+#: fast: reports/shared_errors.md)
 DRIFT_THRESHOLD_FACTOR = 2.0
 
 

@@ -305,8 +305,8 @@ def _refine_found(
     if spread and config.tile_grid >= 2:
         # with the tile start, a zoom no single shift fits is aligned: judge it again there
         # (not by default: on shaded 7-Scenes renders it accepted wrong alignments that the
-        # shift search had called ambiguous, and a 2 deg + 4 % misregistration was flagged
-        # on 14/20 frames instead of 20/20; reports/shared_errors_tiles.md has it on)
+        # shift search had called ambiguous, and fewer frames of a misregistered trajectory
+        # were flagged; reports/shared_errors_tiles.md has it on)
         found = _ambiguity_after(re, pe, bins, hmat, found, tau, config)
     timings["refine"] = time.perf_counter() - t2
     return hmat, model, found

@@ -100,7 +100,7 @@ class EdgeAlignConfig:
     polish_radius_px: int = 3
     #: the refinement also starts from the best shift turned by these in-plane angles (deg,
     #: about the image centre): the shift search cannot see a roll, and from the shift alone
-    #: the refinement followed a 4.5 deg roll of a castle view by less than half
+    #: the refinement followed a castle view's roll by less than half (reports/edge_evidence.md)
     roll_starts_deg: tuple[float, ...] = (-6.0, -4.0, -2.0, 2.0, 4.0, 6.0)
     #: a third start (``tiles.tile_start``): the affine map fitting the best shifts of a
     #: tile_grid x tile_grid split of the render edges, each searched within +- tile_radius x
