@@ -254,8 +254,7 @@ def detection_limits(
     noise_px = _median([r.get("acc_noise_px") for r in rows])
     # a single frame's limit: flagged in 95 % of (frame, error axis) pairs, each frame at its
     # own threshold + the median noise, with its own sensitivities (a limit at the median
-    # frame and one axis was
-    # met well above 1x by the self-test: reports/accuracy.md)
+    # frame and one axis was met well above 1x by the self-test: reports/accuracy.md)
     frame_deg = pooled_detection_size(rows, threshold_px, noise_px, "acc_px_per_deg",
                                       "acc_low_px_per_deg")
     frame_units = pooled_detection_size(rows, threshold_px, noise_px, "acc_px_per_unit",
