@@ -123,8 +123,8 @@ def select_model(
 
 
 #: shift radius (px) searched around each rolled start, on this many render edge points
-ROLL_POLISH_RADIUS_PX = 12
-ROLL_POLISH_POINTS = 500
+ROLL_POLISH_RADIUS_PX = 10
+ROLL_POLISH_POINTS = 300
 
 
 def _roll(width: int, height: int, angle_deg: float) -> np.ndarray:
@@ -157,10 +157,10 @@ def _refined(
     # scores compare on the same points)
     wide = dataclasses.replace(config, polish_radius_px=ROLL_POLISH_RADIUS_PX,
                                refine_points=min(config.refine_points, ROLL_POLISH_POINTS))
-    for a in config.roll_starts_deg:
-        h_roll = translation_matrix(*shift) @ _roll(re.width, re.height, a)
-        polished.append(polish(re, pe, bins, polish(re, pe, bins, h_roll, tau, wide)[0], tau,
-                               config))
+    rolled = [polish(re, pe, bins, translation_matrix(*shift) @ _roll(re.width, re.height, a),
+                     tau, wide) for a in config.roll_starts_deg]
+    if rolled:  # the best of them (same points) competes with the other starts
+        polished.append(polish(re, pe, bins, max(rolled, key=lambda hs: hs[1])[0], tau, config))
     h_start = max(polished, key=lambda hs: hs[1])[0]
     if config.select_model:
         config = dataclasses.replace(
