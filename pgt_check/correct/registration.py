@@ -123,9 +123,15 @@ def refine_frames(
 
 
 def evidence_config(config: RunConfig) -> RunConfig:
-    """The main config for absolute evidence only: no enhancement, no report panels (the
-    verdict settings, calibration handling included, stay)."""
-    return replace(config, enhance=replace(config.enhance, mode="never"), report_details=0)
+    """The main config for absolute evidence only: no enhancement, no report panels, and no
+    cross-validated edge refit where the fixed model fails (``edges.select_model`` fallback
+    changes a frame's verdict, not the evidence the rounds' pooled fit uses wherever the fixed
+    alignment is accepted). The verdict settings, calibration handling included, stay."""
+    edges = config.edges
+    if edges.select_model == "fallback":
+        edges = replace(edges, select_model="never")
+    return replace(config, enhance=replace(config.enhance, mode="never"), edges=edges,
+                   report_details=0)
 
 
 def refine_fingerprint(config: RunConfig) -> str:

@@ -467,3 +467,17 @@ def test_growth_within_the_noise_does_not_stop_the_rounds(moved_case, monkeypatc
     refined = refine_registration(checked.frames, ms, judged.shared.summary(), config,
                                   FakeMeasure(true))
     assert refined.stopped.startswith("not converging") and len(refined.rounds) == 3
+
+
+def test_evidence_config_measures_evidence_only():
+    """The refinement rounds measure what the pooled fit uses: absolute paths, no enhancement,
+    and no verdict-only edge refit (fallback -> never); an explicit 'always' stays."""
+    from pgt_check.config import RunConfig
+    from pgt_check.correct.registration import evidence_config
+
+    cfg = evidence_config(RunConfig())
+    assert cfg.enhance.mode == "never" and cfg.edges.select_model == "never"
+    assert cfg.report_details == 0
+    always = evidence_config(RunConfig.from_dict({"edges": {"select_model": "always"}}))
+    assert always.edges.select_model == "always"
+    assert evidence_config(RunConfig()).verdict == RunConfig().verdict
