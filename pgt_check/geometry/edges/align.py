@@ -127,6 +127,13 @@ ROLL_POLISH_RADIUS_PX = 10
 ROLL_POLISH_POINTS = 300
 
 
+def _score_margin(score: float, n: int) -> float:
+    """Three standard errors of a narrow score (a mean of ``n`` values in [0, 1] near
+    ``score``): a rolled start that wins by less is clutter matching as well by chance (on
+    cluttered near views such wins biased the pooled registration estimate)."""
+    return 3.0 * math.sqrt(max(score * (1.0 - score), 0.0) / max(n, 1))
+
+
 def _roll(width: int, height: int, angle_deg: float) -> np.ndarray:
     """(3, 3) in-plane rotation by ``angle_deg`` about the image centre."""
     c, s = math.cos(math.radians(angle_deg)), math.sin(math.radians(angle_deg))
@@ -159,9 +166,11 @@ def _refined(
                                refine_points=min(config.refine_points, ROLL_POLISH_POINTS))
     rolled = [polish(re, pe, bins, translation_matrix(*shift) @ _roll(re.width, re.height, a),
                      tau, wide) for a in config.roll_starts_deg]
-    if rolled:  # the best of them (same points) competes with the other starts
-        polished.append(polish(re, pe, bins, max(rolled, key=lambda hs: hs[1])[0], tau, config))
-    h_start = max(polished, key=lambda hs: hs[1])[0]
+    h_start, score = max(polished, key=lambda hs: hs[1])
+    if rolled:  # the best of them (same points) replaces the others only by a clear margin
+        h_roll, s_roll = polish(re, pe, bins, max(rolled, key=lambda hs: hs[1])[0], tau, config)
+        if s_roll > score + _score_margin(score, min(len(re), config.refine_points)):
+            h_start = h_roll
     if config.select_model:
         config = dataclasses.replace(
             config, model=select_model(re, pe, bins, h_start, tau, config)[0]
