@@ -154,7 +154,9 @@ def _refined(
     refined; replaced by the refined affine map of the tile shifts (``tiles.tile_start``) where
     that has the lower robust cost. (Choosing between the shift and rotation starts by their
     refined cost instead made the castle's 2 deg rotation test off by 6.6 px at the corners.)
-    With ``select_model``, refined with the model ``select_model`` picks (returned)."""
+    The best of the rolled starts (``config.roll_starts_deg``) replaces that start when its
+    narrow score is higher by ``_score_margin``. With ``select_model``, refined with the model
+    ``select_model`` picks (returned)."""
     starts = [translation_matrix(*shift)]
     if re.camera_K is not None and np.hypot(*shift) > 0.5:
         starts.append(rotation_homography(re.camera_K, *shift))
