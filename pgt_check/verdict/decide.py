@@ -260,7 +260,7 @@ def _paths_decision(
         return confident, True
     d = _deciding_path(m, out, base)
     if ref_off and d[2] == Evidence.RELATIVE.value:
-        d, final = _without_reference(m, config, shared, out, ref_off, d)
+        d, final = _without_reference(m, config, out, ref_off, d)
         if final:
             return d, True
     d = _edges_if_unverifiable(out, d)
@@ -291,7 +291,6 @@ def _deciding_path(m: FrameMeasurement, out: _Outcomes, base: tuple[Verdict, str
 def _without_reference(
     m: FrameMeasurement,
     config: VerdictConfig,
-    shared: Any,
     out: _Outcomes,
     ref_off: str,
     d: _Decision,
