@@ -219,12 +219,14 @@ def pooled_detection_size(
         sigmas.append(max(math.log(mid / low), 0.0) / _Z95)
     if not mus:
         return None
+    from scipy.special import ndtr
+
     mu, sg = np.asarray(mus), np.asarray(sigmas)
 
     def share(log_size: float) -> float:
         z = np.where(sg > 0, (log_size - mu) / np.where(sg > 0, sg, 1.0),
                      np.where(log_size >= mu, np.inf, -np.inf))
-        return float(np.mean([0.5 * math.erfc(-zi / math.sqrt(2)) for zi in z]))
+        return float(np.mean(ndtr(z)))  # the standard normal CDF, elementwise
 
     lo, hi = float(np.min(mu - 6 * sg)) - 1.0, float(np.max(mu + 6 * sg)) + 1.0
     for _ in range(60):
