@@ -33,7 +33,11 @@ The detection curve of each (test, kind) is the share flagged against k (k = 0: 
 poses). Its empirical q-detection point ``k_q`` (q = 50 %, 95 %) is where the curve, made
 monotone by its running maximum and linearly interpolated between the measured sizes, first
 reaches q; None when it never does up to the largest size. A stated limit **held** when
-``k_50`` or ``k_95`` lies within ``HELD_TOLERANCE`` (30 %) of it: ``|k_q - 1| <= 0.3``.
+``k_50`` or ``k_95`` lies within ``HELD_TOLERANCE`` (30 %) of it: ``|k_q - 1| <= 0.3``, or
+when ``k_95`` lies above the band only by sampling noise: ``k_50 <= 1.3`` and the count flagged
+at the band's upper end (the largest measured k <= 1.3) is consistent with a 95 % detection
+rate (one-sided exact binomial test, p >= ``NOISE_ALPHA``; on 16 frames one frame still passing
+at 1.3 x has p = 0.56, so the empirical 95 % point alone would fail a true limit that often).
 Otherwise the curve says how it missed: *conservative* (already 95 % flagged below 0.7 x: the
 limit is larger than needed), *understated* (not even 50 % flagged at 1.3 x: errors beyond the
 stated limit pass), *shallow* (50 % below 0.7 x, 95 % above 1.3 x), *untested* (no limit
@@ -67,6 +71,9 @@ MULTIPLES: tuple[float, ...] = (0.5, 0.7, 1.0, 1.3, 2.0)
 #: a stated limit holds when its empirical 50 % or 95 % detection point lies within this
 #: fraction of it
 HELD_TOLERANCE = 0.3
+#: significance level of the binomial test that tells a 95 % point above the band from the
+#: sampling noise of a few frames (module docstring)
+NOISE_ALPHA = 0.05
 #: the random directions are drawn from this seed (the same run gives the same self-test)
 SEED = 0
 #: the shared test needs as many frames as the registration check (``estimate_registration``)
@@ -110,6 +117,9 @@ class DetectionCurve:
     k50: float | None
     k95: float | None
     judgement: str  # held, conservative, understated, shallow, untested
+    #: p-value of the count flagged at the band's upper end under a 95 % detection rate
+    #: (None when not needed: k_95 within the band, or no point measured there)
+    upper_p: float | None = None
 
     @property
     def held(self) -> bool | None:
@@ -143,7 +153,8 @@ class SelfTest:
         "the weakest world axis, the one the limit is derived for), registration check on "
         "them; flagged = failed. k_q: where the "
         "monotone (running maximum), linearly interpolated share flagged first reaches q; "
-        "held: k_50 or k_95 within 30 % of 1"
+        "held: k_50 or k_95 within 30 % of 1, or k_50 <= 1.3 and the count flagged at 1.3 x "
+        "consistent with 95 % detection (one-sided binomial, p >= 0.05: upper_p)"
     ))
 
     @property
@@ -186,13 +197,30 @@ def detection_point(ks: Sequence[float], shares: Sequence[float | None], q: floa
     return None
 
 
-def judge_curve(k50: float | None, k95: float | None, baseline: float | None) -> str:
-    """held / conservative / understated / shallow / untested (module docstring)."""
+def upper_end_p(points: Sequence[CurvePoint]) -> float | None:
+    """P(this few flagged or fewer | 95 % detection) at the largest measured k in [1, 1.3]
+    (exact binomial, one-sided); None when no point with trials lies there."""
+    from scipy.stats import binom
+
+    band = [p for p in points if 1.0 <= p.k <= 1.0 + HELD_TOLERANCE + 1e-9 and p.n > 0]
+    if not band:
+        return None
+    p = max(band, key=lambda q: q.k)
+    return float(binom.cdf(p.flagged, p.n, 0.95))
+
+
+def judge_curve(k50: float | None, k95: float | None, baseline: float | None,
+                upper_p: float | None = None) -> str:
+    """held / conservative / understated / shallow / untested (module docstring);
+    ``upper_p``: ``upper_end_p`` of the curve (None: no sampling-noise allowance)."""
     if baseline is None or baseline >= 0.5:
         return "untested"
     lo, hi = 1.0 - HELD_TOLERANCE, 1.0 + HELD_TOLERANCE
     if any(k is not None and lo <= k <= hi for k in (k50, k95)):
         return "held"
+    if (k50 is not None and k50 <= hi and (k95 is None or k95 > hi) and upper_p is not None
+            and upper_p >= NOISE_ALPHA):
+        return "held"  # the 95 % point is above the band by the sampling noise of few trials
     if k95 is not None and k95 < lo:
         return "conservative"
     if k50 is None or k50 > hi:
@@ -208,8 +236,11 @@ def _curve(test: str, kind: str, stated: float | None, stated_px: float | None,
     # the given poses must be judged (and mostly not flagged) for the curve to mean anything
     base = None if zero is None or zero.unverifiable >= zero.n else zero.share
     k50, k95 = detection_point(ks, shares, 0.5), detection_point(ks, shares, 0.95)
-    return DetectionCurve(test, kind, stated, stated_px, tuple(points), k50, k95,
-                          judge_curve(k50, k95, base) if points and stated else "untested")
+    hi = 1.0 + HELD_TOLERANCE
+    p_up = upper_end_p(points) if k95 is None or k95 > hi else None
+    judgement = judge_curve(k50, k95, base, p_up) if points and stated else "untested"
+    return DetectionCurve(test, kind, stated, stated_px, tuple(points), k50, k95, judgement,
+                          p_up)
 
 
 # -- the moves --------------------------------------------------------------------------------
@@ -433,8 +464,14 @@ def curve_phrase(c: DetectionCurve) -> str:
     """``single-frame rotation held (50 % at 0.82x, 95 % at 1.1x)``."""
     if c.judgement == "untested":
         return f"{curve_label(c)} untested"
+    noise = ""
+    if c.judgement == "held" and c.upper_p is not None:
+        end = max((p for p in c.points if 1.0 <= p.k <= 1.0 + HELD_TOLERANCE + 1e-9),
+                  key=lambda p: p.k)
+        noise = (f"; {end.flagged}/{end.n} flagged at {end.k:g}x is within the sampling noise "
+                 f"of 95 % detection, p = {c.upper_p:.2f}")
     return (f"{curve_label(c)} {c.judgement} (50 % at {_g(c.k50)}x, 95 % at {_g(c.k95)}x"
-            f" the stated {_g(c.stated)} {'deg' if c.kind == ROTATION else 'units'})")
+            f" the stated {_g(c.stated)} {'deg' if c.kind == ROTATION else 'units'}{noise})")
 
 
 def self_test_sentence(st: SelfTest) -> str:

@@ -150,6 +150,31 @@ def test_self_test_is_off_by_default_and_validated(tmp_path):
 
 
 
+def test_a_95_point_above_the_band_by_sampling_noise_still_holds():
+    """16 frames, one still passing at 1.3x: the empirical 95 % point lies at 1.44x, but 15/16
+    is what a 95 % detection rate gives more often than not (p = 0.56): held, and the phrase
+    says so. Three of 16 passing there is not noise (p = 0.04): shallow, as before."""
+    from pgt_check.verdict.self_test import CurvePoint, _curve, curve_phrase, upper_end_p
+
+    def curve(at13: int):
+        counts = {0.0: 0, 0.5: 2, 0.7: 10, 1.0: 15 if at13 == 15 else 13, 1.3: at13, 2.0: 16}
+        pts = [CurvePoint(k, 0.1 * k, 16, f, f, 0) for k, f in counts.items()]
+        return _curve("single_frame", "translation", 0.1, 8.0, pts)
+
+    noisy = curve(15)
+    assert noisy.k95 > 1.3 and noisy.judgement == "held"
+    assert noisy.upper_p == pytest.approx(1 - 0.95 ** 16, rel=1e-6)  # P(15 or fewer of 16)
+    assert "15/16 flagged at 1.3x is within the sampling noise" in curve_phrase(noisy)
+    short = curve(13)
+    assert short.judgement == "shallow" and short.upper_p < 0.05
+    # one trial (the shared test) cannot tell: a miss at 1.3x leaves k_50 above the band
+    one = _curve("shared", "rotation", 0.5, 2.0,
+                 [CurvePoint(k, k, 1, int(k >= 2.0), int(k >= 2.0), 0)
+                  for k in (0.0, 0.5, 0.7, 1.0, 1.3, 2.0)])
+    assert one.judgement == "understated"
+    assert upper_end_p([CurvePoint(2.0, 1.0, 4, 4, 4, 0)]) is None  # nothing in [1, 1.3]
+
+
 def test_a_limit_not_stated_is_untested_not_understated():
     """With no stated limit (the shared limits under --remove-calibration) nothing is moved:
     the curve has only its k = 0 point and says 'untested', which does not count as held."""
