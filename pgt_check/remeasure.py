@@ -32,7 +32,8 @@ def correct_stage(
     checker_factory: Callable[[], Any],
 ) -> tuple[list[dict[str, Any]], dict[str, Any], Any]:
     """The correction stage (``pgt_check.correct``) after the verdicts: a failed registration
-    check's estimate refined, then the corrected poses of the chosen frames; the rows (with
+    check's estimate refined, a significant calibration estimate written as a rig
+    (``calibrated/``), then the corrected poses of the chosen frames; the rows (with
     correction columns), the corrections' summary and the run-level checks as reported
     (``judged.shared`` with the refined registration correction; the verdicts keep
     ``judged.shared``)."""
@@ -55,10 +56,17 @@ def correct_stage(
         finally:
             measure.close()
     corrections: dict[str, Any] = {}
+    # a significant calibration estimate written exactly, as a rig (``correct.calibration``)
+    from pgt_check.correct.calibration import write_calibrated_rig
+
+    rig = write_calibrated_rig(traj, judged.shared, out)
+    if rig is not None:
+        corrections["calibrated_rig"] = rig
     if config.correct.frames != "none":  # corrected poses (pgt_check.correct.frames)
         from pgt_check.correct.frames import correct_run
 
-        rows, corrections = correct_run(traj, measurements, rows, config, checker_factory, out)
+        rows, part = correct_run(traj, measurements, rows, config, checker_factory, out)
+        corrections.update(part)
     return rows, corrections, shared
 
 

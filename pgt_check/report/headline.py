@@ -13,6 +13,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from pgt_check.correct.calibration import CALIBRATED_DIR
 from pgt_check.report.calibrated_sensors import CALIBRATED_SENSORS
 
 logger = logging.getLogger(__name__)
@@ -68,14 +69,18 @@ def failure_headline(summary: Mapping[str, Any], out: str | Path) -> list[str]:
 
 
 def _calibration_fixes(out: Path, traj: Any, mesh: Any) -> list[str]:
-    """The re-judge-as-calibration command, and the re-run with the run's calibrated sensors
-    file when it wrote one."""
+    """The re-judge-as-calibration command, and the re-run with the run's calibration written
+    out: exactly (the ``calibrated/`` rig session) and as intrinsics (calibrated sensors)."""
     lines = [f"re-judge as calibration: pgt-check report {_q(out)} --remove-calibration true"]
+    rig = out / CALIBRATED_DIR / "trajectories.txt"
+    if rig.is_file():
+        lines.append(f"fix (the estimate as a camera-to-sensor rig): pgt-check {_q(rig)} --mesh "
+                     f"{_q(mesh)} --out {_q(str(out) + '-calibrated')}")
     sensors_file = out / CALIBRATED_SENSORS
     if sensors_file.is_file():
         lines.append(
-            f"fix: pgt-check {_q(traj)} --mesh {_q(mesh)} --sensors {_q(sensors_file)} "
-            f"--out {_q(str(out) + '-calibrated')}"
+            f"{'or, as intrinsics only' if rig.is_file() else 'fix'}: pgt-check {_q(traj)} "
+            f"--mesh {_q(mesh)} --sensors {_q(sensors_file)} --out {_q(str(out) + '-calibrated')}"
         )
     return lines
 

@@ -30,6 +30,13 @@ def test_ambiguous_registration_reads_as_calibration_with_the_commands(tmp_path)
     assert lines[1].startswith("most likely: the photo camera's calibration")
     assert any("--remove-calibration true" in x for x in lines)
     assert any("--sensors" in x and "calibrated_sensors.txt" in x for x in lines)
+    # with the exact form written too, it is the fix; the sensors file the alternative
+    (tmp_path / "calibrated").mkdir()
+    (tmp_path / "calibrated" / "trajectories.txt").write_text("x")
+    lines = failure_headline(_summary(REG, CAL), tmp_path)
+    fix = [x for x in lines if x.startswith("fix")]
+    assert len(fix) == 1 and "calibrated/trajectories.txt" in fix[0] and "rig" in fix[0]
+    assert any(x.startswith("or, as intrinsics only") and "--sensors" in x for x in lines)
 
 
 def test_plain_misregistration_and_quiet_cases(tmp_path):

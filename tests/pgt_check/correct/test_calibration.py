@@ -1,0 +1,102 @@
+"""The calibration estimate written exactly as a LaMAR rig session (``correct.calibration``):
+read back, every frame sits where the estimate says the photo camera is."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+from numpy.testing import assert_allclose
+
+from pgt_check.correct.calibration import (
+    CALIBRATED_DIR,
+    rig_from_cam,
+    with_focal_scale,
+    write_calibrated_rig,
+)
+from pgt_check.geometry.transforms import axis_angle_to_rotmat, invert_rigid, make_rigid, quat_to_rotmat
+from pgt_check.io import read_trajectory
+from pgt_check.measure.record import camera_key
+from pgt_check.types import Camera, Frame, Trajectory
+from pgt_check.verdict.shared_results import CalibrationCheck
+
+CAM = Camera.pinhole(640, 480, 525.0, 525.0, 319.5, 239.5)
+OTHER = Camera("OPENCV", 320, 240, (250.0, 251.0, 160.1, 119.9, -0.1, 0.01, 1e-4, -2e-4))
+
+
+@pytest.fixture
+def random_rigid():
+    rng = np.random.default_rng(3)
+
+    def draw() -> np.ndarray:
+        q = rng.normal(size=4)
+        return make_rigid(quat_to_rotmat(q / np.linalg.norm(q)), rng.uniform(-5, 5, size=3))
+
+    return draw
+
+
+def _trajectory(tmp_path: Path, random_rigid) -> Trajectory:
+    frames = [
+        Frame(f"{10 * i}/cam", CAM if i % 3 else OTHER, random_rigid(), f"img/{i}.png",
+              tmp_path / "data" / "img" / f"{i}.png", timestamp=float(10 * i))
+        for i in range(6)
+    ]
+    return Trajectory(tuple(frames), "t.txt", "lamar")
+
+
+def _estimate(status: str = "finding", translation=(0.025, -0.004, 0.001)) -> CalibrationCheck:
+    r = axis_angle_to_rotmat(np.array([0.2, -0.9, 0.3]), 0.8)
+    return CalibrationCheck(status=status, reason="", rotation=r.tolist(), focal_scale=0.9989,
+                            translation=None if translation is None else list(translation))
+
+
+def test_the_rig_session_reads_back_as_the_calibrated_cameras(tmp_path, random_rigid):
+    traj = _trajectory(tmp_path, random_rigid)
+    est = _estimate()
+    shared = SimpleNamespace(calibration={camera_key(CAM): est,
+                                          camera_key(OTHER): _estimate("passed")})
+    entry = write_calibrated_rig(traj, shared, tmp_path / "out")
+    assert entry is not None and list(entry["cameras"]) == [camera_key(CAM)]
+    back = read_trajectory(tmp_path / "out" / entry["trajectory_file"])
+    assert [f.frame_id.split("/")[0] for f in back] == [f.frame_id.split("/")[0] for f in traj]
+    true_from_checked = np.eye(4)
+    true_from_checked[:3, :3] = np.asarray(est.rotation)
+    true_from_checked[:3, 3] = est.translation
+    for given, read in zip(traj, back, strict=True):
+        assert read.image_file.resolve() == given.image_file.resolve()
+        if given.camera == OTHER:  # its calibration passed: written as given
+            assert read.camera == OTHER
+            assert_allclose(read.world_from_cam, given.world_from_cam, atol=1e-12)
+            continue
+        # the photo camera = the posed sensor moved by the estimate: a point x in the checked
+        # camera is at true_from_checked @ x in the read one
+        assert_allclose(invert_rigid(read.world_from_cam) @ given.world_from_cam,
+                        true_from_checked, atol=1e-9)
+        assert read.camera.focal == pytest.approx((525.0 * 0.9989, 525.0 * 0.9989))
+        assert read.camera.principal_point == pytest.approx(CAM.principal_point)
+    assert entry["cameras"][camera_key(CAM)]["translation"] == pytest.approx(
+        np.linalg.norm(est.translation))
+
+
+def test_no_significant_estimate_removes_an_earlier_folder(tmp_path, random_rigid):
+    traj = _trajectory(tmp_path, random_rigid)
+    shared = SimpleNamespace(calibration={camera_key(CAM): _estimate(translation=None)})
+    assert write_calibrated_rig(traj, shared, tmp_path) is not None
+    assert (tmp_path / CALIBRATED_DIR / "rigs.txt").is_file()
+    shared = SimpleNamespace(calibration={camera_key(CAM): _estimate("passed")})
+    assert write_calibrated_rig(traj, shared, tmp_path) is None
+    assert not (tmp_path / CALIBRATED_DIR).exists()
+    assert write_calibrated_rig(traj, None, tmp_path) is None
+
+
+def test_rig_from_cam_inverts_the_estimate_and_focal_scale_keeps_the_rest():
+    est = _estimate()
+    m = rig_from_cam(est)
+    assert_allclose(m[:3, :3], np.asarray(est.rotation).T, atol=1e-12)
+    assert_allclose(m[:3, 3], -np.asarray(est.rotation).T @ est.translation, atol=1e-12)
+    with pytest.raises(ValueError, match="no rotation"):
+        rig_from_cam(CalibrationCheck(status="finding", reason=""))
+    scaled = with_focal_scale(OTHER, 2.0)
+    assert scaled.params[:2] == (500.0, 502.0) and scaled.params[2:] == OTHER.params[2:]
