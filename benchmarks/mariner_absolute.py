@@ -55,6 +55,9 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--translation", type=float, default=0.04)
     p.add_argument("--methods", default="mariner,reproject")
     p.add_argument("--matcher", default="sift")
+    p.add_argument("--resize-max", type=int, default=640,
+                   help="longest side the render (and the enhanced image) is matched at; "
+                   "213 matches MaRINeR's 160-px output without upsampling it")
     p.add_argument("--out", default="mariner_absolute", help="report name under reports/")
     a = p.parse_args(argv)
     data = shared_data()
@@ -72,7 +75,7 @@ def main(argv: list[str] | None = None) -> int:
         moved = move_trajectory(traj, shared_transform(traj, a.rotation, a.translation * span))
         for method in a.methods.split(","):
             for label, tr in (("given", traj), ("moved", moved)):
-                cfg, recs, spf = measure(tr, mesh, shading, a.matcher, method, thr)
+                cfg, recs, spf = measure(tr, mesh, shading, a.matcher, method, thr, a.resize_max)
                 for path in ("raw", "enhanced"):
                     if path == "raw" and method != a.methods.split(",")[0]:
                         continue  # the raw path does not depend on the method
@@ -90,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
         f"Command: `{command_line()}`  ",
         f"Machine: {machine()}",
         "",
-        f"Matcher {a.matcher}; moved = every pose moved by one rigid transform ({a.rotation} deg "
+        f"Matcher {a.matcher} at a longest side of {a.resize_max} px; moved = every pose moved by one rigid transform ({a.rotation} deg "
         f"about the camera centroid + {a.translation:.0%} of the camera path's span). "
         "'within' = corner error within the threshold (would PASS on this path); 'flagged' = "
         "a valid homography with the error above it. An enhancement that keeps the render's "

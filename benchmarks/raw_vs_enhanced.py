@@ -48,11 +48,11 @@ def cases(data: Path, step: int):
     ]
 
 
-def measure(traj, mesh, shading, matcher, method, threshold):
+def measure(traj, mesh, shading, matcher, method, threshold, resize_max=640):
     cfg = RunConfig.from_dict({
         "input": {"trajectory": traj.source, "mesh": str(mesh)},
         "render": {"shading": shading},
-        "match": {"method": matcher},
+        "match": {"method": matcher, "resize_max": resize_max},
         "enhance": {"mode": "always", "method": method},
         "verdict": {"threshold_px": threshold},
     })
