@@ -7,11 +7,13 @@ moved together by 0.5-2x the stated shared limit. Writes ``reports/accuracy_self
 
 Datasets: ``boxes`` (the generated textureless scene, ``pgt_eval.textureless_scene``, 16
 frames, default settings), ``7s`` (7-Scenes redkitchen, ``--frames`` evenly spaced, ``--preset
-fast --remove-calibration``: its given poses carry the RGB-vs-depth camera offset), ``castle``
+fast --remove-calibration``: its given poses carry the RGB-vs-depth camera offset), ``7s-rig``
+(the same frames posed through the rig a first run writes, ``calibrated/``: the shared limits
+are stated there), ``castle``
 (Sceaux castle, all 10 frames, ``--preset fast``).
 
     nice -n 10 python benchmarks/self_test.py [--frames 30] [--self-test 20]
-        [--datasets boxes,castle,7s]
+        [--datasets boxes,castle,7s,7s-rig]
 """
 
 from __future__ import annotations
@@ -52,6 +54,24 @@ def datasets(names: list[str], n: int) -> dict[str, tuple[Trajectory, Path, dict
             out[name] = (_subset(read_trajectory(r / "trajectories.txt"), n), r / "mesh.ply",
                          merge(fast, {"verdict": {"remove_calibration": True}}),
                          f"--preset fast --remove-calibration, {n} frames evenly spaced")
+        elif name == "7s-rig":
+            # the 7-Scenes frames with their RGB-vs-depth offset written as a rig by a first run
+            # (out/calibrated/): judged without removing a calibration, so the shared limits
+            # are stated and tested on this data too
+            # judged on the mesh's geometry (shaded renders): its colours were painted with the
+            # depth camera's poses, so texture matches show the offset the other way once the
+            # photos sit where the RGB camera is (the run's texture finding says so)
+            r = shared_data() / "7scenes_redkitchen"
+            first = _subset(read_trajectory(r / "trajectories.txt"), n)
+            shaded = merge(fast, {"render": {"shading": "shaded"}})
+            cfg = RunConfig.from_dict(merge(shaded, {
+                "input": {"trajectory": str(first.source), "mesh": str(r / "mesh.ply")},
+                "out": str(OUT / "7s-first"), "overwrite": True, "report_details": 0}))
+            run_trajectory(first, cfg)
+            rig = read_trajectory(OUT / "7s-first" / "calibrated" / "trajectories.txt")
+            out[name] = (rig, r / "mesh.ply", shaded,
+                         f"--preset fast --shading shaded, {n} frames evenly spaced, posed "
+                         "through the rig (calibrated/) a first run wrote")
         elif name == "castle":
             r = shared_data() / "sceaux_castle"
             out[name] = (read_trajectory(r / "trajectories.txt"), r / "mesh.ply", fast,
@@ -122,7 +142,7 @@ def main() -> None:
         r = run_dataset(name, traj, mesh, cfgd, args.self_test)
         r.update(settings=words, command=command_line(), machine=machine())
         results = [x for x in results if x["dataset"] != name] + [r]
-        results.sort(key=lambda x: ["7s", "castle", "boxes"].index(x["dataset"]))
+        results.sort(key=lambda x: ["7s", "7s-rig", "castle", "boxes"].index(x["dataset"]))
         path.write_text(json.dumps(json_safe(results), indent=1))
         (REPORTS / "accuracy_self_test.md").write_text(markdown(results))
         print(r["self_test"]["sentence"], flush=True)

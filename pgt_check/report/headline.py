@@ -68,14 +68,17 @@ def failure_headline(summary: Mapping[str, Any], out: str | Path) -> list[str]:
     return _drift_lines(summary, drift)
 
 
-def _calibration_fixes(out: Path, traj: Any, mesh: Any) -> list[str]:
+def _calibration_fixes(out: Path, traj: Any, mesh: Any, texture: bool = False) -> list[str]:
     """The re-judge-as-calibration command, and the re-run with the run's calibration written
-    out: exactly (the ``calibrated/`` rig session) and as intrinsics (calibrated sensors)."""
+    out: exactly (the ``calibrated/`` rig session) and as intrinsics (calibrated sensors).
+    ``texture``: the mesh colours sit off its geometry like the photos (painted with these
+    poses): the re-run judges on the geometry alone, or the colours show the offset back."""
     lines = [f"re-judge as calibration: pgt-check report {_q(out)} --remove-calibration true"]
     rig = out / CALIBRATED_DIR / "trajectories.txt"
     if rig.is_file():
         lines.append(f"fix (the estimate as a camera-to-sensor rig): pgt-check {_q(rig)} --mesh "
-                     f"{_q(mesh)} --out {_q(str(out) + '-calibrated')}")
+                     f"{_q(mesh)} --out {_q(str(out) + '-calibrated')}"
+                     + (" --shading shaded" if texture else ""))
     sensors_file = out / CALIBRATED_SENSORS
     if sensors_file.is_file():
         lines.append(
@@ -125,7 +128,7 @@ def _calibration_or_registration(
         "views cannot tell the two apart"
         + ("; the mesh colours sit off its geometry too, as such an offset makes them"
            if texture else ""),
-        *_calibration_fixes(out, traj, mesh),
+        *_calibration_fixes(out, traj, mesh, texture),
         "or, if it is a misregistration: "
         + (f"{_q(out / REGISTERED_TRAJECTORY)} holds the registered poses"
            if (out / REGISTERED_TRAJECTORY).is_file()

@@ -37,6 +37,12 @@ def test_ambiguous_registration_reads_as_calibration_with_the_commands(tmp_path)
     fix = [x for x in lines if x.startswith("fix")]
     assert len(fix) == 1 and "calibrated/trajectories.txt" in fix[0] and "rig" in fix[0]
     assert any(x.startswith("or, as intrinsics only") and "--sensors" in x for x in lines)
+    assert "--shading shaded" not in fix[0]
+    # mesh colours painted with these poses: the re-run judges on the geometry
+    textured = {**_summary(REG, CAL), "shared_errors": {**_summary(REG, CAL)["shared_errors"],
+                                                         "texture": {"status": "finding"}}}
+    fix = [x for x in failure_headline(textured, tmp_path) if x.startswith("fix")]
+    assert fix[0].endswith("--shading shaded")
 
 
 def test_plain_misregistration_and_quiet_cases(tmp_path):
