@@ -49,6 +49,12 @@ class MarinerEnhancer:
                 raise InputError(f"MaRINeR weights not found: {err}") from err
         return self._enhancer
 
+    @property
+    def detail_short_side(self) -> int:
+        """The enhanced image carries detail up to this short side (its working size): the
+        enhanced path matches it there (``measure.steps.match_path_at_detail``)."""
+        return self.short_side
+
     name = "mariner"
     #: the reference's appearance is placed by matching image content to the render, so the
     #: result keeps the render's own geometry (this frame's pose only)
