@@ -52,7 +52,7 @@ class MarinerEnhancer:
     @property
     def detail_short_side(self) -> int:
         """The enhanced image carries detail up to this short side (its working size): the
-        enhanced path matches it there (``measure.steps.match_path_at_detail``)."""
+        enhanced path matches it there (``measure.steps.match_path``)."""
         return self.short_side
 
     name = "mariner"

@@ -44,7 +44,6 @@ from pgt_check.measure.steps import (  # format_exception, pick_references: re-e
     enhance_decision,
     format_exception,
     match_path,
-    match_path_at_detail,
     pick_references,
     pose_estimate,
     replace_measurement,
@@ -404,7 +403,7 @@ class FrameChecker:
             clock.add("enhance", time.perf_counter() - t)
             # keypoints are detected where the mesh covers the render (the reference may
             # leave holes, which keep the render's own colour)
-            res = match_path_at_detail(
+            res = match_path(
                 self.matcher, self.config.homography, out.image, photo_w,
                 view.render.coverage, size, scale, camera, clock,
                 getattr(self.enhancer, "detail_short_side", None),

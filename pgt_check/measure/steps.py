@@ -147,48 +147,6 @@ def pick_references(
     return refs
 
 
-def match_path_at_detail(
-    matcher: Any,
-    homography: HomographyConfig,
-    image: np.ndarray,
-    photo_w: np.ndarray,
-    mask: np.ndarray,
-    size: tuple[int, int],
-    scale: tuple[float, float],
-    camera: Camera,
-    clock: Clock,
-    short_side: int | None,
-) -> PathResult:
-    """``match_path`` at a smaller size where ``image`` carries detail only up to a short side
-    of ``short_side`` px (an enhancement made at that size and resized up: matched at the
-    working size it gives a detector few repeatable keypoints; reports/mariner_absolute.md).
-    Keypoints come back in working pixels, the homography in original pixels as always; None
-    or a ``short_side`` not below the working one: ``match_path`` itself."""
-    from dataclasses import replace
-
-    import cv2
-
-    w, h = size
-    if short_side is None or short_side >= min(w, h):
-        return match_path(matcher, homography, image, photo_w, mask, size, scale, camera, clock)
-    f = short_side / min(w, h)
-    small = (max(1, round(w * f)), max(1, round(h * f)))
-    fx, fy = small[0] / w, small[1] / h
-
-    def down(a: np.ndarray, interp: int) -> np.ndarray:
-        return cv2.resize(a, small, interpolation=interp)
-
-    res = match_path(
-        matcher, homography, down(image, cv2.INTER_AREA), down(photo_w, cv2.INTER_AREA),
-        None if mask is None else down(mask.astype(np.uint8), cv2.INTER_NEAREST).astype(bool),
-        small,
-        (scale[0] * fx, scale[1] * fy), camera, clock,
-    )  # fmt: skip
-    up = np.array([1.0 / fx, 1.0 / fy])
-    return replace(res, kpts_render=np.asarray(res.kpts_render) * up,
-                   kpts_photo=np.asarray(res.kpts_photo) * up)
-
-
 def match_path(
     matcher: Any,
     homography: HomographyConfig,
@@ -199,9 +157,18 @@ def match_path(
     scale: tuple[float, float],
     camera: Camera,
     clock: Clock,
+    detail_short_side: int | None = None,
 ) -> PathResult:
     """Match ``image`` (render or enhanced, working size) to the photo and fit the homography;
-    the homography and corner error in original photo pixels."""
+    the homography and corner error in original photo pixels, keypoints in working pixels.
+
+    ``detail_short_side``: ``image`` carries detail only up to this short side (an enhancement
+    made at that size and resized up, where a detector finds few repeatable keypoints:
+    reports/mariner_absolute.md); both images are then matched at that size."""
+    w, h = size
+    if detail_short_side is not None and detail_short_side < min(w, h):
+        return _match_smaller(matcher, homography, image, photo_w, mask, size, scale, camera,
+                              clock, detail_short_side / min(w, h))
     from pgt_check.geometry.homography import (
         corner_error,
         estimate_homography,
@@ -238,6 +205,29 @@ def match_path(
         t_match,
         t_h,
     )
+
+
+def _match_smaller(
+    matcher: Any, homography: HomographyConfig, image: np.ndarray, photo_w: np.ndarray,
+    mask: np.ndarray | None, size: tuple[int, int], scale: tuple[float, float], camera: Camera,
+    clock: Clock, f: float,
+) -> PathResult:
+    """``match_path`` with both images (and the mask) resized by ``f`` < 1; keypoints back in
+    working pixels."""
+    from dataclasses import replace
+
+    import cv2
+
+    small = (max(1, round(size[0] * f)), max(1, round(size[1] * f)))
+    fx, fy = small[0] / size[0], small[1] / size[1]
+    area = [cv2.resize(a, small, interpolation=cv2.INTER_AREA) for a in (image, photo_w)]
+    if mask is not None:
+        mask = cv2.resize(mask.astype(np.uint8), small, interpolation=cv2.INTER_NEAREST) > 0
+    res = match_path(matcher, homography, *area, mask, small, (scale[0] * fx, scale[1] * fy),
+                     camera, clock)
+    up = np.array([1.0 / fx, 1.0 / fy])
+    return replace(res, kpts_render=np.asarray(res.kpts_render) * up,
+                   kpts_photo=np.asarray(res.kpts_photo) * up)
 
 
 def pose_estimate(

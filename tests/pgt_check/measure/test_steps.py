@@ -10,7 +10,7 @@ import pytest
 
 from pgt_check.config import HomographyConfig
 from pgt_check.match.opencv import OpenCVMatcher
-from pgt_check.measure.steps import Clock, match_path, match_path_at_detail
+from pgt_check.measure.steps import Clock, match_path
 from pgt_check.types import Camera
 
 SHIFT = (6.0, -4.0)  # px, working = original size here
@@ -37,7 +37,7 @@ def test_matching_at_the_detail_size_measures_in_working_and_original_pixels(sho
     args = (OpenCVMatcher(), HomographyConfig(), render, photo, np.ones((480, 640), bool),
             (640, 480), (1.0, 1.0), cam, Clock())
     full = match_path(*args)
-    small = match_path_at_detail(*args, short_side)
+    small = match_path(*args, short_side)
     assert full.success and small.success
     # both measure the same shift in original pixels (corner error = its length)
     assert full.corner_error_px == pytest.approx(np.hypot(*SHIFT), abs=0.5)
@@ -55,6 +55,6 @@ def test_no_smaller_detail_size_is_plain_matching():
             (640, 480), (1.0, 1.0), cam, Clock())
     plain = match_path(*args)
     for side in (None, 480, 1000):
-        same = match_path_at_detail(*args, side)
+        same = match_path(*args, side)
         assert same.n_matches == plain.n_matches
         assert same.corner_error_px == pytest.approx(plain.corner_error_px)
