@@ -131,25 +131,24 @@ def _f(x, spec=".3g"):
     return "-" if x is None or (isinstance(x, float) and not math.isfinite(x)) else format(x, spec)
 
 
-def run_dataset(name: str, traj, mesh, cfgd, truth0) -> dict:
-    t0 = time.perf_counter()
-    cfg, ms = measure(traj, mesh, cfgd, f"{name}-given-{len(traj.frames)}")
-    rows, shared, acc = judge(ms, cfg)
-    res: dict = {"dataset": name, "n_frames": len(rows), "given": acc.to_json()}
-    # the given run's coverage where the truth is known (sample scene)
-    if truth0 is not None and name == "sample":
-        cov = []
-        for r in rows:
-            rot, t = truth0.get(r["frame_id"], (0.0, 0.0))
-            if r.get("acc_rot_bound_deg") is not None:
-                cov.append((r["acc_rot_bound_deg"] >= rot, r["acc_t_bound"] >= t,
-                            r["frame_id"] in truth0))
-        c = np.array(cov, bool)
-        res["given_coverage"] = {
-            "rotation": float(c[:, 0].mean()), "translation": float(c[:, 1].mean()),
-            "perturbed_rotation": float(c[c[:, 2], 0].mean()) if c[:, 2].any() else None,
-            "perturbed_translation": float(c[c[:, 2], 1].mean()) if c[:, 2].any() else None,
-        }
+def _given_coverage(rows: list, truth0: dict) -> dict:
+    """Share of the given run's frames whose 95 % bounds cover the known true errors."""
+    cov = []
+    for r in rows:
+        rot, t = truth0.get(r["frame_id"], (0.0, 0.0))
+        if r.get("acc_rot_bound_deg") is not None:
+            cov.append((r["acc_rot_bound_deg"] >= rot, r["acc_t_bound"] >= t,
+                        r["frame_id"] in truth0))
+    c = np.array(cov, bool)
+    return {
+        "rotation": float(c[:, 0].mean()), "translation": float(c[:, 1].mean()),
+        "perturbed_rotation": float(c[c[:, 2], 0].mean()) if c[:, 2].any() else None,
+        "perturbed_translation": float(c[c[:, 2], 1].mean()) if c[:, 2].any() else None,
+    }
+
+
+def _judged_config(name: str, cfgd: dict, shared) -> dict:
+    """Config the injected copies are judged with (7-Scenes: the given run's calibration)."""
     judged_cfg = cfgd
     if name == "7s":
         # judge the copies against the given run's calibration (a trusted run)
@@ -157,8 +156,12 @@ def run_dataset(name: str, traj, mesh, cfgd, truth0) -> dict:
         path.write_text(json.dumps({"shared_errors": shared}))
         judged_cfg = merge(cfgd, {"verdict": {"remove_calibration": False,
                                               "calibration_from": str(path)}})
-    lim = acc.limits
-    res["per_frame"] = []
+    return judged_cfg
+
+
+def _per_frame_injections(name: str, traj, mesh, judged_cfg: dict, lim, truth0) -> list[dict]:
+    """Per-frame errors of k x the stated single-frame limit: flagged and covered shares."""
+    out = []
     for k in (0.5, 1.0, 1.5, 2.0):
         if lim.frame_deg is None:
             break
@@ -174,7 +177,7 @@ def run_dataset(name: str, traj, mesh, cfgd, truth0) -> dict:
             bound = "acc_rot_bound_deg" if kind == "rot" else "acc_t_bound"
             covered = [r[bound] >= truth[r["frame_id"]][1] for r in sel
                        if r.get(bound) is not None]
-            res["per_frame"].append({
+            out.append({
                 "k": k, "kind": kind,
                 "injected": k * (lim.frame_deg if kind == "rot" else lim.frame_units),
                 "flagged": float(np.mean(flagged)) if flagged else None,
@@ -183,7 +186,12 @@ def run_dataset(name: str, traj, mesh, cfgd, truth0) -> dict:
                 "n_bounded": len(covered),
                 "unmoved_flagged": float(np.mean(clean)) if clean else None,
             })
-    res["shared"] = []
+    return out
+
+
+def _shared_injections(name: str, traj, mesh, judged_cfg: dict, lim) -> list[dict]:
+    """Whole trajectory moved by k x the stated shared limits: the registration check's result."""
+    out = []
     depth_ok = lim.shared_deg is not None
     for kind in ("rot", "t"):
         for k in (0.5, 1.0, 2.0):
@@ -196,72 +204,84 @@ def run_dataset(name: str, traj, mesh, cfgd, truth0) -> dict:
                                   f"{name}-shared-{kind}-{k}-{len(traj.frames)}")
             _, sh, _ = judge(ms_k, cfg_k)
             reg = (sh or {}).get("registration") or {}
-            res["shared"].append({
+            out.append({
                 "k": k, "kind": kind, "injected_deg": deg, "injected_units": units,
                 "status": reg.get("status"), "angle_deg": reg.get("angle_deg"),
                 "translation": reg.get("translation"), "effect_px": reg.get("effect_px"),
                 "effect_px_ci": reg.get("effect_px_ci"),
             })
+    return out
+
+
+def run_dataset(name: str, traj, mesh, cfgd, truth0) -> dict:
+    t0 = time.perf_counter()
+    cfg, ms = measure(traj, mesh, cfgd, f"{name}-given-{len(traj.frames)}")
+    rows, shared, acc = judge(ms, cfg)
+    res: dict = {"dataset": name, "n_frames": len(rows), "given": acc.to_json()}
+    # the given run's coverage where the truth is known (sample scene)
+    if truth0 is not None and name == "sample":
+        res["given_coverage"] = _given_coverage(rows, truth0)
+    judged_cfg = _judged_config(name, cfgd, shared)
+    lim = acc.limits
+    res["per_frame"] = _per_frame_injections(name, traj, mesh, judged_cfg, lim, truth0)
+    res["shared"] = _shared_injections(name, traj, mesh, judged_cfg, lim)
     res["seconds"] = time.perf_counter() - t0
     return res
 
 
-def markdown(results: list[dict]) -> str:
-    out = [
-        "# Stated accuracy and detection limits vs injected errors (#27)",
-        "",
-        f"Command: `{command_line()}`",
-        "",
-        f"Machine: {machine()}. Settings: sample scene defaults; 7-Scenes and castle "
-        "`--preset fast`; 7-Scenes judged after removing the calibration estimated on its "
-        "given run.",
-        "",
-    ]
-    for r in results:
-        g = r["given"]
-        lim = g["limits"]
-        out += [f"## {r['dataset']} ({r['n_frames']} frames, {r['seconds']:.0f} s)", ""]
-        out += [f"* {s}" for s in g["sentences"]]
-        out.append("")
-        if "given_coverage" in r:
-            c = r["given_coverage"]
-            out.append(
-                f"Given run, truth known (`perturbed.txt`): the 95 % bound covers the true "
-                f"rotation in {c['rotation']:.0%} and the true centre error in "
-                f"{c['translation']:.0%} of the frames; on the perturbed frames alone "
-                f"{_f(c['perturbed_rotation'], '.0%')} / {_f(c['perturbed_translation'], '.0%')}."
-            )
-            out.append("")
+def _markdown_dataset(r: dict) -> list[str]:
+    """Report lines of one dataset: stated limits and the injected errors' results."""
+    out: list[str] = []
+    g = r["given"]
+    lim = g["limits"]
+    out += [f"## {r['dataset']} ({r['n_frames']} frames, {r['seconds']:.0f} s)", ""]
+    out += [f"* {s}" for s in g["sentences"]]
+    out.append("")
+    if "given_coverage" in r:
+        c = r["given_coverage"]
         out.append(
-            f"Stated single-frame limit: {_f(lim['frame_deg'])} deg or {_f(lim['frame_units'])} "
-            f"units ({_f(lim['frame_px'])} px). Injected per-frame errors (every third "
-            "frame, alternately a rotation alone about a random axis or a translation alone in "
-            "a random direction):"
+            f"Given run, truth known (`perturbed.txt`): the 95 % bound covers the true "
+            f"rotation in {c['rotation']:.0%} and the true centre error in "
+            f"{c['translation']:.0%} of the frames; on the perturbed frames alone "
+            f"{_f(c['perturbed_rotation'], '.0%')} / {_f(c['perturbed_translation'], '.0%')}."
         )
         out.append("")
-        out.append(md_table(
-            ["x limit", "kind", "injected", "moved frames", "flagged", "bound covers injected",
-             "unmoved flagged"],
-            [[p["k"], "rotation (deg)" if p["kind"] == "rot" else "translation (units)",
-              _f(p["injected"]), p["n"], _f(p["flagged"], ".0%"),
-              f"{_f(p['bound_covers'], '.0%')} of {p['n_bounded']}",
-              _f(p["unmoved_flagged"], ".0%")] for p in r["per_frame"]],
-        ))
-        out.append("")
-        out.append(
-            f"Stated shared limit: {_f(lim['shared_deg'])} deg or {_f(lim['shared_units'])} "
-            f"units ({_f(lim['shared_px'])} px). Whole trajectory moved:"
-        )
-        out.append("")
-        out.append(md_table(
-            ["x limit", "injected", "registration", "estimate", "effect px (95 %)"],
-            [[s["k"], f"{_f(s['injected_deg'])} deg" if s["kind"] == "rot"
-              else f"{_f(s['injected_units'])} units", s["status"],
-              f"{_f(s['angle_deg'])} deg, {_f(s['translation'])} units",
-              f"{_f(s['effect_px'])} ({'-'.join(_f(x) for x in s['effect_px_ci'] or [])})"]
-             for s in r["shared"]],
-        ))
-        out.append("")
+    out.append(
+        f"Stated single-frame limit: {_f(lim['frame_deg'])} deg or {_f(lim['frame_units'])} "
+        f"units ({_f(lim['frame_px'])} px). Injected per-frame errors (every third "
+        "frame, alternately a rotation alone about a random axis or a translation alone in "
+        "a random direction):"
+    )
+    out.append("")
+    out.append(md_table(
+        ["x limit", "kind", "injected", "moved frames", "flagged", "bound covers injected",
+         "unmoved flagged"],
+        [[p["k"], "rotation (deg)" if p["kind"] == "rot" else "translation (units)",
+          _f(p["injected"]), p["n"], _f(p["flagged"], ".0%"),
+          f"{_f(p['bound_covers'], '.0%')} of {p['n_bounded']}",
+          _f(p["unmoved_flagged"], ".0%")] for p in r["per_frame"]],
+    ))
+    out.append("")
+    out.append(
+        f"Stated shared limit: {_f(lim['shared_deg'])} deg or {_f(lim['shared_units'])} "
+        f"units ({_f(lim['shared_px'])} px). Whole trajectory moved:"
+    )
+    out.append("")
+    out.append(md_table(
+        ["x limit", "injected", "registration", "estimate", "effect px (95 %)"],
+        [[s["k"], f"{_f(s['injected_deg'])} deg" if s["kind"] == "rot"
+          else f"{_f(s['injected_units'])} units", s["status"],
+          f"{_f(s['angle_deg'])} deg, {_f(s['translation'])} units",
+          f"{_f(s['effect_px'])} ({'-'.join(_f(x) for x in s['effect_px_ci'] or [])})"]
+         for s in r["shared"]],
+    ))
+    out.append("")
+    return out
+
+
+def _markdown_appendices() -> list[str]:
+    """Report sections included from the companion reports, where they exist."""
+    out: list[str] = []
     st = REPORTS / "accuracy_self_test.md"
     if st.is_file():
         out += ["## Self-test", "", st.read_text().strip(), ""]
@@ -292,6 +312,23 @@ def markdown(results: list[dict]) -> str:
             "```",
             "",
         ]
+    return out
+
+
+def markdown(results: list[dict]) -> str:
+    out = [
+        "# Stated accuracy and detection limits vs injected errors (#27)",
+        "",
+        f"Command: `{command_line()}`",
+        "",
+        f"Machine: {machine()}. Settings: sample scene defaults; 7-Scenes and castle "
+        "`--preset fast`; 7-Scenes judged after removing the calibration estimated on its "
+        "given run.",
+        "",
+    ]
+    for r in results:
+        out += _markdown_dataset(r)
+    out += _markdown_appendices()
     return "\n".join(out) + "\n"
 
 

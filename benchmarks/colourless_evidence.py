@@ -188,12 +188,9 @@ def _pct(x) -> str:
     return "" if x is None else f"{x:.0%}"
 
 
-def write_reports(results: dict) -> None:
-    results["command"] = results.get("command") or command_line()
-    results["machine"] = results.get("machine") or machine()
-    REPORTS.mkdir(exist_ok=True)
-    (REPORTS / "colourless_evidence.json").write_text(json.dumps(results, indent=1, default=str))
-    lines = [
+def _report_intro(results: dict) -> list[str]:
+    """The report's title, command, machine and how to read the tables."""
+    return [
         "# Absolute evidence on colourless meshes: learned matchers vs the edge path\n",
         f"Command: `{results['command']}`\n",
         f"Machine: {results['machine']}. The 2 cores were shared with another job: absolute "
@@ -209,43 +206,58 @@ def write_reports(results: dict) -> None:
         "frame (median, given poses; the edge row also holds SIFT's raw inliers). s/frame = "
         "median of `FrameChecker.measure` per frame (render, match, homography, PnP, edges).\n",
     ]
+
+
+def _dataset_section(name: str, ds: dict, results: dict) -> list[str]:
+    """Report lines of one dataset: the per-method table and the path outcomes."""
+    lines: list[str] = []
+    thr = next((r["given"].get("threshold_px") for r in ds["rows"].values()
+                if r.get("given", {}).get("threshold_px")), None)
+    lines.append(f"\n## {name} ({ds['frames']} frames, median depth {ds['depth']:.3g}, "
+                 f"per-frame threshold {_f(thr, '.1f')} px, "
+                 f"config `{json.dumps(ds['config'])}`)\n")
+    rows = []
+    for method, row in ds["rows"].items():
+        g, p = row.get("given", {}), row.get("per-frame", {})
+        rows.append([
+            results["methods"][method]["label"],
+            f"{g.get('frames', '')}+{p.get('frames', '')}",
+            _pct(g.get("verifiable")),
+            _pct(p.get("verifiable")),
+            _f(g.get("median_inliers"), ".0f"),
+            _f(g.get("median_corner_err"), ".1f"),
+            _pct(g.get("pass")),
+            _f(p.get("auc")),
+            p.get("flagged_bad", ""),
+            p.get("flagged_good", ""),
+            _f(g.get("median_evidence"), ".0f"),
+            _f(g.get("median_s_frame")),
+            g.get("error") or p.get("error") or "; ".join(g.get("errors", [])),
+        ])
+    lines.append(md_table(
+        ["method", "frames (given+perturbed)", "verifiable (given)", "verifiable (perturbed)", "median inliers (given)",
+         "median corner error px (given)", "PASS (given)", "per-frame AUC", "perturbed: bad flagged", "good flagged",
+         "evidence pts/frame", "s/frame", "errors"],
+        rows,
+    ))
+    lines.append("\nReasons on the given poses (path outcome):\n")
+    lines.append(md_table(
+        ["method", "outcomes"],
+        [[results["methods"][m]["label"],
+          ", ".join(f"{k} {v}" for k, v in r.get("given", {}).get("reasons", {}).items())]
+         for m, r in ds["rows"].items()],
+    ))
+    return lines
+
+
+def write_reports(results: dict) -> None:
+    results["command"] = results.get("command") or command_line()
+    results["machine"] = results.get("machine") or machine()
+    REPORTS.mkdir(exist_ok=True)
+    (REPORTS / "colourless_evidence.json").write_text(json.dumps(results, indent=1, default=str))
+    lines = _report_intro(results)
     for name, ds in results["datasets"].items():
-        thr = next((r["given"].get("threshold_px") for r in ds["rows"].values()
-                    if r.get("given", {}).get("threshold_px")), None)
-        lines.append(f"\n## {name} ({ds['frames']} frames, median depth {ds['depth']:.3g}, "
-                     f"per-frame threshold {_f(thr, '.1f')} px, "
-                     f"config `{json.dumps(ds['config'])}`)\n")
-        rows = []
-        for method, row in ds["rows"].items():
-            g, p = row.get("given", {}), row.get("per-frame", {})
-            rows.append([
-                results["methods"][method]["label"],
-                f"{g.get('frames', '')}+{p.get('frames', '')}",
-                _pct(g.get("verifiable")),
-                _pct(p.get("verifiable")),
-                _f(g.get("median_inliers"), ".0f"),
-                _f(g.get("median_corner_err"), ".1f"),
-                _pct(g.get("pass")),
-                _f(p.get("auc")),
-                p.get("flagged_bad", ""),
-                p.get("flagged_good", ""),
-                _f(g.get("median_evidence"), ".0f"),
-                _f(g.get("median_s_frame")),
-                g.get("error") or p.get("error") or "; ".join(g.get("errors", [])),
-            ])
-        lines.append(md_table(
-            ["method", "frames (given+perturbed)", "verifiable (given)", "verifiable (perturbed)", "median inliers (given)",
-             "median corner error px (given)", "PASS (given)", "per-frame AUC", "perturbed: bad flagged", "good flagged",
-             "evidence pts/frame", "s/frame", "errors"],
-            rows,
-        ))
-        lines.append("\nReasons on the given poses (path outcome):\n")
-        lines.append(md_table(
-            ["method", "outcomes"],
-            [[results["methods"][m]["label"],
-              ", ".join(f"{k} {v}" for k, v in r.get("given", {}).get("reasons", {}).items())]
-             for m, r in ds["rows"].items()],
-        ))
+        lines += _dataset_section(name, ds, results)
     failed = {m: d["load_error"] for m, d in results["methods"].items() if d["load_error"]}
     if failed:
         lines.append("\n## Matchers that did not load\n")

@@ -85,18 +85,29 @@ def run_point(traj, bad, mesh, base, point):
     return recs
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--frames7", type=int, default=12)
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--only", default=None, help="run only grid points containing this text")
-    ap.add_argument("--append", action="store_true",
-                    help="merge with reports/error_vs_runtime.json (replacing equal points)")
-    args = ap.parse_args()
-    data = shared_data()
-    has_w = (Path(__file__).resolve().parents[1] / "mariner_core/weights/mariner.pt").is_file()
+def _summarise_point(dname: str, label: str, good: list, pert: list, inj: dict) -> dict:
+    """One grid point's result: times, detection AUC, given-pose error and PnP error."""
+    allr = good + pert
+    times = [r["time_s"] for r in allr if r.get("time_s") is not None]
+    err = np.array([math.inf if r["corner_error_px"] is None else r["corner_error_px"]
+                    for r in allr])
+    labels = np.array([False] * len(good) + [True] * len(pert))
+    auc = roc_auc(err, labels)
+    ge = [r["corner_error_px"] for r in good if r["corner_error_px"] is not None]
+    rel = [abs(r["pose_drot_deg"] - inj[r["frame_id"]].rotation_deg)
+           / inj[r["frame_id"]].rotation_deg for r in pert if r.get("pose_drot_deg") is not None]
+    stages = {s: float(np.median([r[s] or 0.0 for r in allr])) for s in STAGES}
+    return {"dataset": dname, "point": label, "auc": auc,
+            "median_s": float(np.median(times)), "p90_s": float(np.percentile(times, 90)),
+            "given_error_median": float(np.median(ge)) if ge else None,
+            "given_verifiable": len(ge) / len(good),
+            "pnp_rot_rel_err_median": float(np.median(rel)) if rel else None,
+            "stages": stages}
+
+
+def _run_grid(args: argparse.Namespace, data: Path, has_w: bool) -> list[dict]:
+    """Every dataset x grid point measured at the given and the perturbed poses."""
     results = []
-    t_start = time.perf_counter()
     for dname, traj, mesh, trans, base in datasets(data, args.frames7):
         bad, injected = perturb_trajectory(traj, 1.0, (1.0, 4.0), trans, seed=5)
         inj = {p.frame_id: p for p in injected}
@@ -104,35 +115,24 @@ def main() -> None:
             if args.only and args.only not in label:
                 continue
             good, pert = run_point(traj, bad, mesh, base, point)
-            allr = good + pert
-            times = [r["time_s"] for r in allr if r.get("time_s") is not None]
-            err = np.array([math.inf if r["corner_error_px"] is None else r["corner_error_px"]
-                            for r in allr])
-            labels = np.array([False] * len(good) + [True] * len(pert))
-            auc = roc_auc(err, labels)
-            ge = [r["corner_error_px"] for r in good if r["corner_error_px"] is not None]
-            rel = [abs(r["pose_drot_deg"] - inj[r["frame_id"]].rotation_deg)
-                   / inj[r["frame_id"]].rotation_deg for r in pert if r.get("pose_drot_deg") is not None]
-            stages = {s: float(np.median([r[s] or 0.0 for r in allr])) for s in STAGES}
-            res = {"dataset": dname, "point": label, "auc": auc,
-                   "median_s": float(np.median(times)), "p90_s": float(np.percentile(times, 90)),
-                   "given_error_median": float(np.median(ge)) if ge else None,
-                   "given_verifiable": len(ge) / len(good),
-                   "pnp_rot_rel_err_median": float(np.median(rel)) if rel else None,
-                   "stages": stages}
+            res = _summarise_point(dname, label, good, pert, inj)
             results.append(res)
             print(json.dumps(res), flush=True)
-    if args.append and (REPORTS / "error_vs_runtime.json").is_file():
-        old = json.loads((REPORTS / "error_vs_runtime.json").read_text())
-        new_keys = {(r["dataset"], r["point"]) for r in results}
-        results = [r for r in old if (r["dataset"], r["point"]) not in new_keys] + results
-    # Pareto front per dataset: no other point is both faster and more accurate
+    return results
+
+
+def _mark_pareto(results: list[dict]) -> None:
+    """Pareto front per dataset: no other point is both faster and more accurate."""
     for d in {r["dataset"] for r in results}:
         pts = [r for r in results if r["dataset"] == d]
         for r in pts:
             r["pareto"] = not any(
                 (o["median_s"] <= r["median_s"] and o["auc"] >= r["auc"])
                 and (o["median_s"] < r["median_s"] or o["auc"] > r["auc"]) for o in pts)
+
+
+def _plot(results: list[dict]) -> None:
+    """AUC against median seconds per frame, one panel per dataset (Pareto front in red)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -155,6 +155,10 @@ def main() -> None:
     fig.tight_layout()
     REPORTS.mkdir(exist_ok=True)
     fig.savefig(REPORTS / "error_vs_runtime.png", dpi=110)
+
+
+def _write_report(results: list[dict], t_start: float) -> None:
+    """Write reports/error_vs_runtime.md and .json and print the Markdown."""
     rows = [[r["dataset"], r["point"], r["median_s"], r["p90_s"], r["auc"],
              "-" if r["given_error_median"] is None else f"{r['given_error_median']:.2f}",
              f"{r['given_verifiable']:.2f}",
@@ -185,6 +189,27 @@ def main() -> None:
     (REPORTS / "error_vs_runtime.md").write_text(text)
     (REPORTS / "error_vs_runtime.json").write_text(json.dumps(results, indent=2))
     print(text)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--frames7", type=int, default=12)
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--only", default=None, help="run only grid points containing this text")
+    ap.add_argument("--append", action="store_true",
+                    help="merge with reports/error_vs_runtime.json (replacing equal points)")
+    args = ap.parse_args()
+    data = shared_data()
+    has_w = (Path(__file__).resolve().parents[1] / "mariner_core/weights/mariner.pt").is_file()
+    t_start = time.perf_counter()
+    results = _run_grid(args, data, has_w)
+    if args.append and (REPORTS / "error_vs_runtime.json").is_file():
+        old = json.loads((REPORTS / "error_vs_runtime.json").read_text())
+        new_keys = {(r["dataset"], r["point"]) for r in results}
+        results = [r for r in old if (r["dataset"], r["point"]) not in new_keys] + results
+    _mark_pareto(results)
+    _plot(results)
+    _write_report(results, t_start)
 
 
 if __name__ == "__main__":

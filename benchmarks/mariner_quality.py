@@ -206,7 +206,8 @@ def fmt_table(table: dict[str, dict[str, float]], prefix: str) -> list[str]:
     return lines
 
 
-def main() -> int:
+def _parse_args() -> argparse.Namespace:
+    """The command line."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument(
         "--checkpoint", action="append", default=None, metavar="NAME=PATH",
@@ -222,60 +223,32 @@ def main() -> int:
     parser.add_argument("--gt-k-colourless", type=int, default=1)
     parser.add_argument("--threads", type=int, default=2)
     parser.add_argument("--out", default=str(REPORTS / "mariner_quality"))
-    args = parser.parse_args()
-    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
-    torch.set_num_threads(args.threads)
-    data = shared_data()
-    root = Path(args.cache)
-    t_start = time.perf_counter()
-    specs = args.checkpoint or [f"shipped={DEFAULT_CHECKPOINT}"]
+    return parser.parse_args()
+
+
+def _load_models(
+    specs: list[str],
+) -> tuple[dict[str, torch.nn.Module], dict[str, tuple[str, dict]]]:
+    """``NAME=PATH`` specs -> (name -> model in eval mode, name -> (path, training meta))."""
     models: dict[str, torch.nn.Module] = {}
     metas: dict[str, tuple[str, dict]] = {}
     for spec in specs:
         name, _, path = spec.partition("=")
         models[name] = load_checkpoint(path).eval()
         metas[name] = (path, torch.load(path, map_location="cpu", weights_only=True)["meta"])
-    kitchen = ensure_cache(root, data, "redkitchen", ["photo", "render", "render_colourless"])
-    castle = ensure_cache(root, data, "castle", ["photo", "render"])
-    scorer = Scorer()
-    ex: dict = {}
-    n = min(args.frames, len(kitchen))
-    k, ko = args.max_k, args.k_other
-    nc = min(args.castle_frames or len(castle), len(castle))
-    evaluate_set(
-        models,
-        scorer,
-        "7-Scenes coloured",
-        kitchen,
-        "render",
-        [(1, ko), (2, k), (4, ko)],
-        args.gt_k,
-        n,
-        ex,
-    )
-    evaluate_set(
-        models,
-        scorer,
-        "7-Scenes colourless",
-        kitchen,
-        "render_colourless",
-        [(2, ko)],
-        args.gt_k_colourless,
-        n,
-        ex,
-    )
-    evaluate_set(models, scorer, "castle", castle, "render", [(1, k)], args.gt_k, nc, ex)
-    table = scorer.table()
-    elapsed = time.perf_counter() - t_start
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.with_suffix(".json").write_text(json.dumps(table, indent=1))
-    save_grid(
-        ex,
-        out.parent / (out.name + "_examples.png"),
-        {"7-Scenes coloured": [5, 40, 75], "7-Scenes colourless": [20, 60], "castle": [2, 7]},
-        k_show=1,
-    )
+    return models, metas
+
+
+def _report_lines(
+    models: dict[str, torch.nn.Module],
+    metas: dict[str, tuple[str, dict]],
+    table: dict[str, dict[str, float]],
+    elapsed: float,
+    n: int,
+    nc: int,
+    out: Path,
+) -> list[str]:
+    """The Markdown report: models, one table per evaluation set, the paper's numbers."""
     lines = [
         "# MaRINeR enhancer quality",
         "",
@@ -318,6 +291,60 @@ def main() -> int:
         "photo).",
         "",
     ]
+    return lines
+
+
+def main() -> int:
+    args = _parse_args()
+    logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
+    torch.set_num_threads(args.threads)
+    data = shared_data()
+    root = Path(args.cache)
+    t_start = time.perf_counter()
+    specs = args.checkpoint or [f"shipped={DEFAULT_CHECKPOINT}"]
+    models, metas = _load_models(specs)
+    kitchen = ensure_cache(root, data, "redkitchen", ["photo", "render", "render_colourless"])
+    castle = ensure_cache(root, data, "castle", ["photo", "render"])
+    scorer = Scorer()
+    ex: dict = {}
+    n = min(args.frames, len(kitchen))
+    k, ko = args.max_k, args.k_other
+    nc = min(args.castle_frames or len(castle), len(castle))
+    evaluate_set(
+        models,
+        scorer,
+        "7-Scenes coloured",
+        kitchen,
+        "render",
+        [(1, ko), (2, k), (4, ko)],
+        args.gt_k,
+        n,
+        ex,
+    )
+    evaluate_set(
+        models,
+        scorer,
+        "7-Scenes colourless",
+        kitchen,
+        "render_colourless",
+        [(2, ko)],
+        args.gt_k_colourless,
+        n,
+        ex,
+    )
+    evaluate_set(models, scorer, "castle", castle, "render", [(1, k)], args.gt_k, nc, ex)
+    table = scorer.table()
+    elapsed = time.perf_counter() - t_start
+    out = Path(args.out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.with_suffix(".json").write_text(json.dumps(table, indent=1))
+    save_grid(
+        ex,
+        out.parent / (out.name + "_examples.png"),
+        {"7-Scenes coloured": [5, 40, 75], "7-Scenes colourless": [20, 60], "castle": [2, 7]},
+        k_show=1,
+    )
+    lines = _report_lines(models, metas, table, elapsed, n, nc, out)
     out.with_suffix(".md").write_text("\n".join(lines))
     logger.info("wrote %s (%.1f min)", out.with_suffix(".md"), elapsed / 60)
     return 0

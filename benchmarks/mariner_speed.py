@@ -68,22 +68,8 @@ def run_size(w: int, h: int, iters: list[int], repeats: int, threads: int) -> di
     return out
 
 
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser()
-    p.add_argument("--sizes", default="160x160,320x240,640x480")
-    p.add_argument("--iters", default="1,2,3,4")
-    p.add_argument("--repeats", type=int, default=3)
-    p.add_argument("--threads", type=int, default=os.cpu_count() or 1)
-    p.add_argument("--out", type=Path, default=Path("reports/mariner_speed_spec.md"))
-    p.add_argument("--_child", default=None, help=argparse.SUPPRESS)
-    a = p.parse_args(argv)
-    iters = [int(v) for v in a.iters.split(",")]
-    if a._child:
-        w, h = (int(v) for v in a._child.split("x"))
-        print(json.dumps(run_size(w, h, iters, a.repeats, a.threads)))
-        return 0
-    import torch
-
+def _run_sizes(a: argparse.Namespace) -> list[dict]:
+    """Each size measured in a fresh subprocess (its own peak RSS); results printed as JSON."""
     results = []
     for size in a.sizes.split(","):
         load = os.getloadavg()
@@ -93,24 +79,18 @@ def main(argv: list[str] | None = None) -> int:
         res["loadavg_before"] = load
         results.append(res)
         print(json.dumps(res), flush=True)
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
-                            text=True).stdout.strip()  # fmt: skip
-    meta = {
-        "commit": commit,
-        "torch": torch.__version__,
-        "python": platform.python_version(),
-        "cpu": platform.processor() or platform.machine(),
-        "cpu_count": os.cpu_count(),
-        "threads": a.threads,
-        "repeats": a.repeats,
-        "device": "cpu (no GPU available in this session)",
-    }
-    a.out.parent.mkdir(parents=True, exist_ok=True)
-    a.out.with_suffix(".json").write_text(json.dumps({"meta": meta, "results": results}, indent=2))
+    return results
+
+
+def _report_lines(
+    a: argparse.Namespace, iters: list[int], meta: dict, results: list[dict]
+) -> list[str]:
+    """The Markdown report: times per size and iteration count, then the one-iteration split."""
+    commit = meta["commit"]
     lines = [
         "# MaRINeR generator speed",
         "",
-        f"`python benchmarks/mariner_speed.py` at commit {commit}; torch {torch.__version__}, "
+        f"`python benchmarks/mariner_speed.py` at commit {commit}; torch {meta['torch']}, "
         f"CPU ({meta['cpu_count']} cores, torch threads = {a.threads}); batch 1, render and "
         f"reference of the same size, random weights, `inference_mode`, median of {a.repeats} "
         "after one warm-up (min-max in brackets). No GPU was available in this session.",
@@ -139,6 +119,41 @@ def main(argv: list[str] | None = None) -> int:
         lines.append(
             f"| {r['size']} | " + " | ".join(f"{v:.0f}" for v in r["split_ms"].values()) + " |"
         )
+    return lines
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser()
+    p.add_argument("--sizes", default="160x160,320x240,640x480")
+    p.add_argument("--iters", default="1,2,3,4")
+    p.add_argument("--repeats", type=int, default=3)
+    p.add_argument("--threads", type=int, default=os.cpu_count() or 1)
+    p.add_argument("--out", type=Path, default=Path("reports/mariner_speed_spec.md"))
+    p.add_argument("--_child", default=None, help=argparse.SUPPRESS)
+    a = p.parse_args(argv)
+    iters = [int(v) for v in a.iters.split(",")]
+    if a._child:
+        w, h = (int(v) for v in a._child.split("x"))
+        print(json.dumps(run_size(w, h, iters, a.repeats, a.threads)))
+        return 0
+    import torch
+
+    results = _run_sizes(a)
+    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], capture_output=True,
+                            text=True).stdout.strip()  # fmt: skip
+    meta = {
+        "commit": commit,
+        "torch": torch.__version__,
+        "python": platform.python_version(),
+        "cpu": platform.processor() or platform.machine(),
+        "cpu_count": os.cpu_count(),
+        "threads": a.threads,
+        "repeats": a.repeats,
+        "device": "cpu (no GPU available in this session)",
+    }
+    a.out.parent.mkdir(parents=True, exist_ok=True)
+    a.out.with_suffix(".json").write_text(json.dumps({"meta": meta, "results": results}, indent=2))
+    lines = _report_lines(a, iters, meta, results)
     a.out.write_text("\n".join(lines) + "\n")
     print(a.out.read_text())
     return 0

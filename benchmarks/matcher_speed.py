@@ -35,9 +35,66 @@ def load(path: Path, size: tuple[int, int]) -> np.ndarray:
         sys.exit(str(err))
 
 
-def main(argv: list[str] | None = None) -> int:
+def _load_pairs(args: argparse.Namespace, size: tuple[int, ...]) -> tuple[list, list]:
+    """Disjoint photo pairs of the 7-Scenes folder -> (pairs of paths, pairs of images)."""
+    folder = shared_data() / "7scenes_redkitchen" / "images"
+    names = sorted(p.name for p in folder.glob("frame-*.color.jpg"))
+    # pair k: file 2*step*k vs file 2*step*k + step (disjoint pairs)
+    idx = [(2 * args.step * k, 2 * args.step * k + args.step) for k in range(args.pairs + 1)]
+    pairs = [(folder / names[a], folder / names[b]) for a, b in idx if b < len(names)]
+    if len(pairs) < args.pairs + 1:
+        sys.exit(f"only {len(pairs)} pairs available in {folder}")
+    images = [(load(a, size), load(b, size)) for a, b in pairs]
+    return pairs, images
+
+
+def _time_matcher(matcher, images: list) -> tuple[list, list, list]:
+    """Match every pair after the first (an untimed warm-up) -> (seconds, matches, F-inlier
+    shares) per pair."""
     import cv2
 
+    matcher.match(*images[0])  # warm-up, not timed
+    times, counts, ratios = [], [], []
+    for im0, im1 in images[1:]:
+        t0 = time.perf_counter()
+        m = matcher.match(im0, im1)
+        times.append(time.perf_counter() - t0)
+        counts.append(len(m))
+        ratio = 0.0
+        if len(m) >= 8:
+            _, inl = cv2.findFundamentalMat(m.kpts0, m.kpts1, cv2.FM_RANSAC, 1.5, 0.999, 2000)
+            ratio = float(inl.mean()) if inl is not None else 0.0
+        ratios.append(ratio)
+    return times, counts, ratios
+
+
+def _write_report(args: argparse.Namespace, meta: dict, pairs: list, rows: list,
+                  threads: int) -> None:
+    """Write reports/matcher_speed.md."""
+    table = md_table(
+        ["matcher", "median s/pair", "range s", "median matches", "range", "median F-inlier share"],
+        rows,
+    )
+    text = f"""# Matcher speed on 7-Scenes redkitchen photo pairs
+
+- Machine: {meta["machine"]}; torch {meta["torch"]}, {threads} torch threads, CPU.
+- **The machine was shared** with other jobs (a network training in the background), so the
+  absolute times are pessimistic and noisy; compare matchers within this table only. Load
+  average (1/5/15 min) at the end of the run: {meta["load_average_at_end"]}.
+- Command: `{meta["command"]}`
+- {len(pairs) - 1} pairs at {args.size} (file i vs file i + {args.step} of the folder, i.e. frame
+  n vs n + {10 * args.step}; first pair = untimed
+  warm-up): {", ".join(f"{a.stem.split('.')[0]}/{b.stem.split('.')[0]}" for a, b in pairs[1:])}.
+- Photo vs photo (no render): timings cover matching only (detection of both images + matching),
+  not rendering. `max_keypoints` 2048 for the learned matchers, defaults otherwise. F-inlier share:
+  matches consistent with a fundamental matrix (OpenCV RANSAC, 1.5 px).
+
+{table}
+"""
+    (REPORTS / "matcher_speed.md").write_text(text)
+
+
+def main(argv: list[str] | None = None) -> int:
     from pgt_check.match import make_matcher
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -54,14 +111,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     logging.basicConfig(level=logging.WARNING)
     size = tuple(int(v) for v in args.size.split("x"))
-    folder = shared_data() / "7scenes_redkitchen" / "images"
-    names = sorted(p.name for p in folder.glob("frame-*.color.jpg"))
-    # pair k: file 2*step*k vs file 2*step*k + step (disjoint pairs)
-    idx = [(2 * args.step * k, 2 * args.step * k + args.step) for k in range(args.pairs + 1)]
-    pairs = [(folder / names[a], folder / names[b]) for a, b in idx if b < len(names)]
-    if len(pairs) < args.pairs + 1:
-        sys.exit(f"only {len(pairs)} pairs available in {folder}")
-    images = [(load(a, size), load(b, size)) for a, b in pairs]
+    pairs, images = _load_pairs(args, size)
 
     import torch
 
@@ -72,18 +122,7 @@ def main(argv: list[str] | None = None) -> int:
     for name in args.matchers.split(","):
         options = {} if name in ("sift", "orb", "akaze") else {"max_keypoints": 2048}
         matcher = make_matcher(name, **options)
-        matcher.match(*images[0])  # warm-up, not timed
-        times, counts, ratios = [], [], []
-        for im0, im1 in images[1:]:
-            t0 = time.perf_counter()
-            m = matcher.match(im0, im1)
-            times.append(time.perf_counter() - t0)
-            counts.append(len(m))
-            ratio = 0.0
-            if len(m) >= 8:
-                _, inl = cv2.findFundamentalMat(m.kpts0, m.kpts1, cv2.FM_RANSAC, 1.5, 0.999, 2000)
-                ratio = float(inl.mean()) if inl is not None else 0.0
-            ratios.append(ratio)
+        times, counts, ratios = _time_matcher(matcher, images)
         med = statistics.median(times)
         results[name] = {"seconds": times, "matches": counts, "f_inlier_ratio": ratios}
         rows.append(
@@ -109,27 +148,7 @@ def main(argv: list[str] | None = None) -> int:
     }
     REPORTS.mkdir(exist_ok=True)
     (REPORTS / "matcher_speed.json").write_text(json.dumps({**meta, "results": results}, indent=1))
-    table = md_table(
-        ["matcher", "median s/pair", "range s", "median matches", "range", "median F-inlier share"],
-        rows,
-    )
-    text = f"""# Matcher speed on 7-Scenes redkitchen photo pairs
-
-- Machine: {meta["machine"]}; torch {meta["torch"]}, {threads} torch threads, CPU.
-- **The machine was shared** with other jobs (a network training in the background), so the
-  absolute times are pessimistic and noisy; compare matchers within this table only. Load
-  average (1/5/15 min) at the end of the run: {meta["load_average_at_end"]}.
-- Command: `{meta["command"]}`
-- {len(pairs) - 1} pairs at {args.size} (file i vs file i + {args.step} of the folder, i.e. frame
-  n vs n + {10 * args.step}; first pair = untimed
-  warm-up): {", ".join(f"{a.stem.split('.')[0]}/{b.stem.split('.')[0]}" for a, b in pairs[1:])}.
-- Photo vs photo (no render): timings cover matching only (detection of both images + matching),
-  not rendering. `max_keypoints` 2048 for the learned matchers, defaults otherwise. F-inlier share:
-  matches consistent with a fundamental matrix (OpenCV RANSAC, 1.5 px).
-
-{table}
-"""
-    (REPORTS / "matcher_speed.md").write_text(text)
+    _write_report(args, meta, pairs, rows, threads)
     print(f"wrote {REPORTS / 'matcher_speed.md'}")
     return 0
 

@@ -233,6 +233,65 @@ def main() -> None:
     print(text)
 
 
+def _end_to_end_rows(results: dict[str, dict]) -> list[list]:
+    """One row per case: the run against the bare loop, medians over the A B pairs."""
+    rows = []
+    for case, r in results.items():
+        pairs = r.get("pairs") or []
+
+        def med(key: str, pairs=pairs) -> float:
+            return statistics.median(p[key] for p in pairs) if pairs else float("nan")
+
+        def ratio(a: str, b: str, pairs=pairs) -> str:
+            if not pairs:
+                return "-"
+            return f"{statistics.median(p[a] / p[b] for p in pairs):.2f}x"
+
+        ref = r.get("refinement")
+        rows.append([
+            CASES[case][3], r["n_frames"], len(pairs),
+            f"{med('bare_wall_s'):.1f} / {med('bare_cpu_s'):.1f}",
+            f"{med('run_wall_s'):.1f} / {med('run_cpu_s'):.1f}",
+            ratio("run_wall_s", "bare_wall_s"), ratio("run_cpu_s", "bare_cpu_s"),
+            "-" if ref is None else f"{ref['rounds']} ({ref['stopped'].split(':')[0]})",
+            r.get("corrections", 0), r["load_before"] + " -> " + r["load_after_pairs"],
+        ])
+    return rows
+
+
+def _stage_section(case: str, r: dict, stage_names: list[str]) -> list[str]:
+    """One case's per-stage table: CPU seconds per phase, totals, share, CPU ms per frame."""
+    table: dict[str, dict[str, float]] = defaultdict(lambda: defaultdict(float))
+    walls: dict[str, float] = defaultdict(float)
+    for phase, stage, secs, _, cpu in r["stages"]:
+        table[stage][phase] += cpu
+        walls[stage] += secs
+    n = r["n_frames"] or 1
+    total = sum(st[4] for st in r["stages"])
+    rows = []
+    for stage in stage_names:
+        if stage not in table:
+            continue
+        vals = [table[stage].get(p, 0.0) for p in PHASE_ORDER]
+        rows.append([stage, *(f"{v:.2f}" if v else "" for v in vals),
+                     f"{sum(vals):.2f} / {walls[stage]:.2f}",
+                     f"{100 * sum(vals) / total:.0f} %", f"{1000 * sum(vals) / n:.0f}"])
+    rows.append(["**timed total**", *[""] * len(PHASE_ORDER),
+                 f"{total:.2f} / {sum(walls.values()):.2f}", "100 %",
+                 f"{1000 * total / n:.0f}"])
+    rows.append([f"**whole process** (load {r['load_before']})",
+                 *[""] * len(PHASE_ORDER),
+                 f"{r['process_cpu_s']:.1f} / {r['process_wall_s']:.1f}", "", ""])
+    ref = r.get("refinement")
+    return [f"### {CASES[case][3]}", "",
+            f"{r['n_frames']} frames, counts {r['counts']}, gate "
+            f"{'passed' if r['gate'] else 'failed'}"
+            + ("" if ref is None else f"; refinement: {ref['rounds']} round(s), "
+               f"{ref['rounds_kept']} kept, stopped: {ref['stopped']}") + ".", "",
+            md_table(["stage", *PHASE_ORDER, "CPU / wall s", "share",
+                      "CPU ms per frame"], rows), ""]
+
+
 def render(meta: dict, results: dict[str, dict]) -> str:
     stage_names = [*STAGES, "other"]
     lines = [
@@ -255,27 +314,7 @@ def render(meta: dict, results: dict[str, dict]) -> str:
         "pair, then the median.",
         "",
     ]
-    rows = []
-    for case, r in results.items():
-        pairs = r.get("pairs") or []
-
-        def med(key: str, pairs=pairs) -> float:
-            return statistics.median(p[key] for p in pairs) if pairs else float("nan")
-
-        def ratio(a: str, b: str, pairs=pairs) -> str:
-            if not pairs:
-                return "-"
-            return f"{statistics.median(p[a] / p[b] for p in pairs):.2f}x"
-
-        ref = r.get("refinement")
-        rows.append([
-            CASES[case][3], r["n_frames"], len(pairs),
-            f"{med('bare_wall_s'):.1f} / {med('bare_cpu_s'):.1f}",
-            f"{med('run_wall_s'):.1f} / {med('run_cpu_s'):.1f}",
-            ratio("run_wall_s", "bare_wall_s"), ratio("run_cpu_s", "bare_cpu_s"),
-            "-" if ref is None else f"{ref['rounds']} ({ref['stopped'].split(':')[0]})",
-            r.get("corrections", 0), r["load_before"] + " -> " + r["load_after_pairs"],
-        ])
+    rows = _end_to_end_rows(results)
     lines.append(md_table(["case", "frames", "pairs", "bare s (wall / CPU)", "run s (wall / CPU)",
                            "ratio wall", "ratio CPU", "refinement rounds", "corrections",
                            "load"], rows))
@@ -284,35 +323,7 @@ def render(meta: dict, results: dict[str, dict]) -> str:
               "CPU and wall seconds, its share of the timed CPU and CPU ms per frame checked. "
               "The profiled process's own wall / CPU are in the last row.", ""]
     for case, r in results.items():
-        table: dict[str, dict[str, float]] = defaultdict(lambda: defaultdict(float))
-        walls: dict[str, float] = defaultdict(float)
-        for phase, stage, secs, _, cpu in r["stages"]:
-            table[stage][phase] += cpu
-            walls[stage] += secs
-        n = r["n_frames"] or 1
-        total = sum(st[4] for st in r["stages"])
-        rows = []
-        for stage in stage_names:
-            if stage not in table:
-                continue
-            vals = [table[stage].get(p, 0.0) for p in PHASE_ORDER]
-            rows.append([stage, *(f"{v:.2f}" if v else "" for v in vals),
-                         f"{sum(vals):.2f} / {walls[stage]:.2f}",
-                         f"{100 * sum(vals) / total:.0f} %", f"{1000 * sum(vals) / n:.0f}"])
-        rows.append(["**timed total**", *[""] * len(PHASE_ORDER),
-                     f"{total:.2f} / {sum(walls.values()):.2f}", "100 %",
-                     f"{1000 * total / n:.0f}"])
-        rows.append([f"**whole process** (load {r['load_before']})",
-                     *[""] * len(PHASE_ORDER),
-                     f"{r['process_cpu_s']:.1f} / {r['process_wall_s']:.1f}", "", ""])
-        ref = r.get("refinement")
-        lines += [f"### {CASES[case][3]}", "",
-                  f"{r['n_frames']} frames, counts {r['counts']}, gate "
-                  f"{'passed' if r['gate'] else 'failed'}"
-                  + ("" if ref is None else f"; refinement: {ref['rounds']} round(s), "
-                     f"{ref['rounds_kept']} kept, stopped: {ref['stopped']}") + ".", "",
-                  md_table(["stage", *PHASE_ORDER, "CPU / wall s", "share",
-                            "CPU ms per frame"], rows), ""]
+        lines += _stage_section(case, r, stage_names)
     return "\n".join(lines) + "\n"
 
 

@@ -99,61 +99,50 @@ def summarise_given(recs):
     return out
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser()
-    ap.add_argument("--step", type=int, default=3, help="use every n-th 7-Scenes frame")
-    ap.add_argument("--matchers", default="sift,xfeat")
-    ap.add_argument("--methods", default="reproject,mariner")
-    ap.add_argument("--fraction", type=float, default=0.34)
-    ap.add_argument("--out", default="raw_vs_enhanced", help="report name under reports/")
-    args = ap.parse_args()
-    data = shared_data()
-    methods = args.methods.split(",")
-    weights = Path(__file__).resolve().parents[1] / "mariner_core" / "weights" / "mariner.pt"
-    if "mariner" in methods and not weights.is_file():
-        print("no shipped MaRINeR weights: skipping method 'mariner'")
-        methods.remove("mariner")
-    rows_given, rows_auc, rows_pnp, raw_json = [], [], [], []
-    for name, traj, mesh, shading, trans, thr in cases(data, args.step):
-        bad, injected = perturb_trajectory(traj, args.fraction, (1.0, 4.0), trans, seed=11)
-        inj = {p.frame_id: p for p in injected}
-        for matcher in args.matchers.split(","):
-            for method in methods:
-                cfg, good, t_good = measure(traj, mesh, shading, matcher, method, thr)
-                _, recs, t_bad = measure(bad, mesh, shading, matcher, method, thr)
-                g = summarise_given(good)
-                rows_given.append([name, matcher, method,
-                                   f"{g['raw']['matches']:.1f} -> {g['enhanced']['matches']:.1f}",
-                                   f"{100*g['raw']['inlier_ratio']:.1f} % -> {100*g['enhanced']['inlier_ratio']:.1f} %",
-                                   f"{g['raw']['corner_error_median'] if g['raw']['corner_error_median'] is not None else float('nan'):.2f} -> "
-                                   f"{g['enhanced']['corner_error_median'] if g['enhanced']['corner_error_median'] is not None else float('nan'):.2f}",
-                                   f"{g['raw']['success']:.2f} -> {g['enhanced']['success']:.2f}",
-                                   f"{t_good:.2f}"])
-                labels = np.array([r["frame_id"] in inj for r in recs])
-                aucs = {}
-                for key, fn in (("raw", lambda r: _err(r, "corner_error_px_raw")),
-                                ("enhanced", lambda r: _err(r, "corner_error_px_enhanced")),
-                                ("always", lambda r: _err(r, "corner_error_px")),
-                                ("auto", lambda r, cfg=cfg: auto_error(r, cfg))):
-                    aucs[key] = roc_auc(np.array([fn(r) for r in recs]), labels)
-                n_auto = sum(1 for r in recs if auto_error(r, cfg) != _err(r, "corner_error_px_raw")
-                             or r.get("corner_error_px_raw") is None)
-                rows_auc.append([name, matcher, method, aucs["raw"], aucs["enhanced"],
-                                 aucs["always"], aucs["auto"], f"{n_auto}/{len(recs)}"])
-                rot_ok, tr_ok, n = 0, 0, 0
-                for r in recs:
-                    p = inj.get(r["frame_id"])
-                    if p is None or r.get("pose_drot_deg") is None:
-                        continue
-                    n += 1
-                    rot_ok += abs(r["pose_drot_deg"] - p.rotation_deg) <= 0.3 * p.rotation_deg
-                    tr_ok += abs(r["pose_dt"] - p.translation) <= 0.3 * p.translation
-                rows_pnp.append([name, matcher, method, f"{n}/{len(inj)}",
-                                 f"{rot_ok}/{n}" if n else "-", f"{tr_ok}/{n}" if n else "-"])
-                raw_json.append({"case": name, "matcher": matcher, "method": method,
-                                 "given": g, "auc": aucs, "s_per_frame": t_good})
-                print(rows_given[-1], rows_auc[-1], rows_pnp[-1], flush=True)
-    text = "\n".join([
+def _given_row(name: str, matcher: str, method: str, g: dict, t_good: float) -> list:
+    """Report row of the given poses: raw -> enhanced matches, inliers, errors, success."""
+    return [name, matcher, method,
+            f"{g['raw']['matches']:.1f} -> {g['enhanced']['matches']:.1f}",
+            f"{100*g['raw']['inlier_ratio']:.1f} % -> {100*g['enhanced']['inlier_ratio']:.1f} %",
+            f"{g['raw']['corner_error_median'] if g['raw']['corner_error_median'] is not None else float('nan'):.2f} -> "
+            f"{g['enhanced']['corner_error_median'] if g['enhanced']['corner_error_median'] is not None else float('nan'):.2f}",
+            f"{g['raw']['success']:.2f} -> {g['enhanced']['success']:.2f}",
+            f"{t_good:.2f}"]
+
+
+def _detection_aucs(recs: list, inj: dict, cfg) -> tuple[dict, int]:
+    """ROC-AUC of the raw, enhanced, always and auto paths on the perturbed copy, and the
+    number of frames the auto policy took from the enhanced path."""
+    labels = np.array([r["frame_id"] in inj for r in recs])
+    aucs = {}
+    for key, fn in (("raw", lambda r: _err(r, "corner_error_px_raw")),
+                    ("enhanced", lambda r: _err(r, "corner_error_px_enhanced")),
+                    ("always", lambda r: _err(r, "corner_error_px")),
+                    ("auto", lambda r, cfg=cfg: auto_error(r, cfg))):
+        aucs[key] = roc_auc(np.array([fn(r) for r in recs]), labels)
+    n_auto = sum(1 for r in recs if auto_error(r, cfg) != _err(r, "corner_error_px_raw")
+                 or r.get("corner_error_px_raw") is None)
+    return aucs, n_auto
+
+
+def _pnp_row(name: str, matcher: str, method: str, recs: list, inj: dict) -> list:
+    """Report row of the PnP recovery: injected frames whose estimate is within 30 %."""
+    rot_ok, tr_ok, n = 0, 0, 0
+    for r in recs:
+        p = inj.get(r["frame_id"])
+        if p is None or r.get("pose_drot_deg") is None:
+            continue
+        n += 1
+        rot_ok += abs(r["pose_drot_deg"] - p.rotation_deg) <= 0.3 * p.rotation_deg
+        tr_ok += abs(r["pose_dt"] - p.translation) <= 0.3 * p.translation
+    return [name, matcher, method, f"{n}/{len(inj)}",
+            f"{rot_ok}/{n}" if n else "-", f"{tr_ok}/{n}" if n else "-"]
+
+
+def _report_text(args: argparse.Namespace, data: Path, rows_given: list, rows_auc: list,
+                 rows_pnp: list) -> str:
+    """The Markdown report."""
+    return "\n".join([
         "# Raw vs enhanced matching on the real datasets",
         "",
         f"Machine: {machine()}; the 2 cores were shared with a training job while this ran, so "
@@ -192,6 +181,40 @@ def main() -> None:
                   "translation within 30 %"], rows_pnp),
         "",
     ])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--step", type=int, default=3, help="use every n-th 7-Scenes frame")
+    ap.add_argument("--matchers", default="sift,xfeat")
+    ap.add_argument("--methods", default="reproject,mariner")
+    ap.add_argument("--fraction", type=float, default=0.34)
+    ap.add_argument("--out", default="raw_vs_enhanced", help="report name under reports/")
+    args = ap.parse_args()
+    data = shared_data()
+    methods = args.methods.split(",")
+    weights = Path(__file__).resolve().parents[1] / "mariner_core" / "weights" / "mariner.pt"
+    if "mariner" in methods and not weights.is_file():
+        print("no shipped MaRINeR weights: skipping method 'mariner'")
+        methods.remove("mariner")
+    rows_given, rows_auc, rows_pnp, raw_json = [], [], [], []
+    for name, traj, mesh, shading, trans, thr in cases(data, args.step):
+        bad, injected = perturb_trajectory(traj, args.fraction, (1.0, 4.0), trans, seed=11)
+        inj = {p.frame_id: p for p in injected}
+        for matcher in args.matchers.split(","):
+            for method in methods:
+                cfg, good, t_good = measure(traj, mesh, shading, matcher, method, thr)
+                _, recs, t_bad = measure(bad, mesh, shading, matcher, method, thr)
+                g = summarise_given(good)
+                rows_given.append(_given_row(name, matcher, method, g, t_good))
+                aucs, n_auto = _detection_aucs(recs, inj, cfg)
+                rows_auc.append([name, matcher, method, aucs["raw"], aucs["enhanced"],
+                                 aucs["always"], aucs["auto"], f"{n_auto}/{len(recs)}"])
+                rows_pnp.append(_pnp_row(name, matcher, method, recs, inj))
+                raw_json.append({"case": name, "matcher": matcher, "method": method,
+                                 "given": g, "auc": aucs, "s_per_frame": t_good})
+                print(rows_given[-1], rows_auc[-1], rows_pnp[-1], flush=True)
+    text = _report_text(args, data, rows_given, rows_auc, rows_pnp)
     REPORTS.mkdir(exist_ok=True)
     (REPORTS / f"{args.out}.md").write_text(text)
     (REPORTS / f"{args.out}.json").write_text(json.dumps(raw_json, indent=2))

@@ -129,19 +129,10 @@ def plot(results: list[dict], path: Path) -> None:
     plt.close(fig)
 
 
-def main(argv: list[str] | None = None) -> int:
+def _bench_scenes(args: argparse.Namespace, widths: list[int]) -> tuple[list[dict], list[dict]]:
+    """Every scene x width x backend timed -> (result rows, loaded meshes)."""
     from pgt_check.io import read_trajectory
     from pgt_check.render import load_mesh
-
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--frames", type=int, default=20, help="timed frames per backend and size")
-    ap.add_argument("--sizes", default="320,640", help="image widths in px")
-    ap.add_argument("--no-shared", action="store_true", help="sample scene only")
-    ap.add_argument("--out", type=Path, default=REPORTS / "renderer_speed.md")
-    args = ap.parse_args(argv)
-    logging.basicConfig(level=logging.WARNING)
-    widths = [int(w) for w in args.sizes.split(",")]
-    load_start = os.getloadavg()
 
     results = []
     meshes = []
@@ -174,17 +165,11 @@ def main(argv: list[str] | None = None) -> int:
                     f"start-up {row['startup_s']:.2f} s",
                     flush=True,
                 )
-    load_end = os.getloadavg()
+    return results, meshes
 
-    from importlib import metadata
 
-    versions = {p: metadata.version(p) for p in ("moderngl", "pyrender", "PyOpenGL")}
-    out: Path = args.out
-    png = out.with_suffix(".png")
-    plot(results, png)
-    out.with_suffix(".json").write_text(
-        json.dumps({"meshes": meshes, "results": results, "versions": versions}, indent=1) + "\n"
-    )
+def _results_table(results: list[dict]) -> str:
+    """The Markdown table of the timings and the agreement with moderngl."""
     rows = [
         [
             r["scene"],
@@ -199,7 +184,7 @@ def main(argv: list[str] | None = None) -> int:
         ]
         for r in results
     ]
-    table = md_table(
+    return md_table(
         [
             "scene",
             "size",
@@ -213,11 +198,17 @@ def main(argv: list[str] | None = None) -> int:
         ],
         rows,
     )
+
+
+def _report_text(args: argparse.Namespace, results: list[dict], meshes: list[dict],
+                 versions: dict[str, str], load_start, load_end, png: Path) -> str:
+    """The Markdown report."""
+    table = _results_table(results)
     mesh_lines = "\n".join(
         f"- {m['scene']}: {m['faces']} faces, shading `{m['shading']}`, loaded in {m['load_s']:.2f} s"
         for m in meshes
     )
-    text = f"""# Renderer speed: moderngl vs pyrender
+    return f"""# Renderer speed: moderngl vs pyrender
 
 - Machine: {machine()}; Mesa llvmpipe (CPU) through EGL; moderngl {versions["moderngl"]},
   pyrender {versions["pyrender"]}, PyOpenGL {versions["PyOpenGL"]}.
@@ -237,6 +228,32 @@ def main(argv: list[str] | None = None) -> int:
 
 ![ms per frame]({png.name})
 """
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--frames", type=int, default=20, help="timed frames per backend and size")
+    ap.add_argument("--sizes", default="320,640", help="image widths in px")
+    ap.add_argument("--no-shared", action="store_true", help="sample scene only")
+    ap.add_argument("--out", type=Path, default=REPORTS / "renderer_speed.md")
+    args = ap.parse_args(argv)
+    logging.basicConfig(level=logging.WARNING)
+    widths = [int(w) for w in args.sizes.split(",")]
+    load_start = os.getloadavg()
+
+    results, meshes = _bench_scenes(args, widths)
+    load_end = os.getloadavg()
+
+    from importlib import metadata
+
+    versions = {p: metadata.version(p) for p in ("moderngl", "pyrender", "PyOpenGL")}
+    out: Path = args.out
+    png = out.with_suffix(".png")
+    plot(results, png)
+    out.with_suffix(".json").write_text(
+        json.dumps({"meshes": meshes, "results": results, "versions": versions}, indent=1) + "\n"
+    )
+    text = _report_text(args, results, meshes, versions, load_start, load_end, png)
     out.write_text(text)
     print(f"wrote {out}, {png}")
     return 0

@@ -151,6 +151,47 @@ def metadata() -> dict:
     return out
 
 
+def _frames_and_factory(args: argparse.Namespace) -> tuple[list, functools.partial, dict]:
+    """(frames, checker factory, base config dict): synthetic stand-ins or the real data."""
+    from pgt_check.config import RunConfig
+
+    if args.synthetic:
+        frames = list(synthetic_frames(args.frames or 200))
+        factory = functools.partial(SyntheticChecker, iterations=calibrate(args.work_ms))
+        base: dict = {}
+    else:
+        from pgt_check import runner
+
+        base = real_config_dict(args.data)
+        frames = list(runner.load_trajectory(RunConfig.from_dict(base)).frames)
+        if args.frames:
+            frames = frames[: args.frames]
+        factory = functools.partial(runner.build_frame_checker, RunConfig.from_dict(base))
+    return frames, factory, base
+
+
+def _add_efficiency(results: dict) -> None:
+    """Each mode's steady rate over workers x the rate of one process worker (if measured)."""
+    one = results.get("process1", {}).get("median", {}).get("fps_steady")
+    if one:
+        for r in results.values():
+            m = r["median"]
+            m["efficiency"] = (m["fps_steady"] or 0) / (m["workers"] * one)
+
+
+def _print_table(results: dict) -> None:
+    """Print the Markdown table of the modes' medians."""
+    print("| mode | workers | startup s | steady frames/s | end-to-end frames/s | efficiency |")
+    print("|---|---|---|---|---|---|")
+    for mode, r in results.items():
+        m = r["median"]
+        eff = f"{m['efficiency']:.2f}" if "efficiency" in m else "-"
+        print(
+            f"| {mode} | {m['workers']} | {m['startup_s']:.2f} | {m['fps_steady'] or 0:.2f} "
+            f"| {m['fps_end_to_end']:.2f} | {eff} |"
+        )
+
+
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     default_data = Path(os.environ.get("PGT_SHARED_DATA", REPO.parent / "shared" / "data"))
@@ -166,18 +207,7 @@ def main(argv=None) -> int:
 
     from pgt_check.config import RunConfig
 
-    if args.synthetic:
-        frames = list(synthetic_frames(args.frames or 200))
-        factory = functools.partial(SyntheticChecker, iterations=calibrate(args.work_ms))
-        base: dict = {}
-    else:
-        from pgt_check import runner
-
-        base = real_config_dict(args.data)
-        frames = list(runner.load_trajectory(RunConfig.from_dict(base)).frames)
-        if args.frames:
-            frames = frames[: args.frames]
-        factory = functools.partial(runner.build_frame_checker, RunConfig.from_dict(base))
+    frames, factory, base = _frames_and_factory(args)
 
     results = {}
     for mode in args.modes.split(","):
@@ -199,11 +229,7 @@ def main(argv=None) -> int:
             f"steady={m['fps_steady'] or 0:.2f} fps end-to-end={m['fps_end_to_end']:.2f} fps",
             flush=True,
         )
-    one = results.get("process1", {}).get("median", {}).get("fps_steady")
-    if one:
-        for r in results.values():
-            m = r["median"]
-            m["efficiency"] = (m["fps_steady"] or 0) / (m["workers"] * one)
+    _add_efficiency(results)
     doc = {
         "benchmark": "scaling",
         "synthetic": args.synthetic,
@@ -216,15 +242,7 @@ def main(argv=None) -> int:
     if args.out:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(text + "\n")
-    print("| mode | workers | startup s | steady frames/s | end-to-end frames/s | efficiency |")
-    print("|---|---|---|---|---|---|")
-    for mode, r in results.items():
-        m = r["median"]
-        eff = f"{m['efficiency']:.2f}" if "efficiency" in m else "-"
-        print(
-            f"| {mode} | {m['workers']} | {m['startup_s']:.2f} | {m['fps_steady'] or 0:.2f} "
-            f"| {m['fps_end_to_end']:.2f} | {eff} |"
-        )
+    _print_table(results)
     return 0
 
 

@@ -476,12 +476,9 @@ def run_dataset(
     return res
 
 
-def write_reports(results: list[dict], args: argparse.Namespace) -> None:
-    head = (
-        f"Command: `{command_line()}`\n\nMachine: {machine()} (other jobs shared the cores; "
-        "absolute times are pessimistic).\n"
-    )
-    lines = [
+def _report_intro(args: argparse.Namespace, head: str) -> list[str]:
+    """The report's title, command and machine, and how to read the numbers."""
+    return [
         "# Errors that neighbouring frames share: detection"
         + (f" (edge tile start on, `--edges-tile-grid {args.edges_tile_grid}`)\n"
            if _suffix(args) else "\n"),
@@ -526,65 +523,82 @@ def write_reports(results: list[dict], args: argparse.Namespace) -> None:
         "these frames) is flagged. s/frame: measured while other jobs shared the 2 cores "
         "(the quiet default-run timings are in the README).\n",
     ]
-    for res in results:
-        lines.append(
-            f"\n## {res['dataset']} ({res['frames']} frames, median depth "
-            f"{res['depth']:.3g}, {res['s_per_frame']:.2f} s/frame measured)\n"
-        )
-        rows = [
+
+
+def _dataset_row(r: dict) -> list:
+    """One case's row of a dataset's table."""
+    return [
+        r["case"],
+        r["flagged"],
+        f"{r['verdicts'].get('FAIL', 0)} / {r['verdicts'].get('UNVERIFIABLE', 0)}",
+        r.get("flagged_bad", ""),
+        r.get("flagged_good", ""),
+        r.get("registration", ""),
+        _f(r.get("reg_deg")),
+        _f(r.get("reg_t"), ".3g"),
+        _f(r.get("reg_px")),
+        _f(r.get("true_px")),
+        _f(r.get("left_px")),
+        _errs(r),
+        _f(r.get("sim_scale"), ".4f"),
+        r.get("drift", ""),
+        _f(r.get("drift_auc")),
+        _f(r.get("frame_auc")),
+        _f(r.get("verdict_auc")),
+        r.get("calibration", ""),
+        ", ".join(f"{k} {v}" for k, v in r["evidence"].items()),
+        _f(r.get("s_per_frame")),
+        _f(r.get("t_run_checks_s")),
+    ]
+
+
+def _dataset_section(res: dict) -> list[str]:
+    """One dataset's heading and its table of cases."""
+    lines: list[str] = []
+    lines.append(
+        f"\n## {res['dataset']} ({res['frames']} frames, median depth "
+        f"{res['depth']:.3g}, {res['s_per_frame']:.2f} s/frame measured)\n"
+    )
+    rows = [_dataset_row(r) for r in res["rows"]]
+    lines.append(
+        md_table(
             [
-                r["case"],
-                r["flagged"],
-                f"{r['verdicts'].get('FAIL', 0)} / {r['verdicts'].get('UNVERIFIABLE', 0)}",
-                r.get("flagged_bad", ""),
-                r.get("flagged_good", ""),
-                r.get("registration", ""),
-                _f(r.get("reg_deg")),
-                _f(r.get("reg_t"), ".3g"),
-                _f(r.get("reg_px")),
-                _f(r.get("true_px")),
-                _f(r.get("left_px")),
-                _errs(r),
-                _f(r.get("sim_scale"), ".4f"),
-                r.get("drift", ""),
-                _f(r.get("drift_auc")),
-                _f(r.get("frame_auc")),
-                _f(r.get("verdict_auc")),
-                r.get("calibration", ""),
-                ", ".join(f"{k} {v}" for k, v in r["evidence"].items()),
-                _f(r.get("s_per_frame")),
-                _f(r.get("t_run_checks_s")),
-            ]
-            for r in res["rows"]
-        ]
-        lines.append(
-            md_table(
-                [
-                    "case",
-                    "flagged",
-                    "FAIL / UNV.",
-                    "bad flagged",
-                    "good flagged",
-                    "registration",
-                    "deg",
-                    "transl.",
-                    "px",
-                    "true px",
-                    "px left after correction",
-                    "estimate off by (deg / transl.)",
-                    "scale",
-                    "drift",
-                    "drift AUC",
-                    "frame AUC",
-                    "verdict AUC",
-                    "calibration",
-                    "evidence",
-                    "s/frame",
-                    "run checks s",
-                ],
-                rows,
-            )
+                "case",
+                "flagged",
+                "FAIL / UNV.",
+                "bad flagged",
+                "good flagged",
+                "registration",
+                "deg",
+                "transl.",
+                "px",
+                "true px",
+                "px left after correction",
+                "estimate off by (deg / transl.)",
+                "scale",
+                "drift",
+                "drift AUC",
+                "frame AUC",
+                "verdict AUC",
+                "calibration",
+                "evidence",
+                "s/frame",
+                "run checks s",
+            ],
+            rows,
         )
+    )
+    return lines
+
+
+def write_reports(results: list[dict], args: argparse.Namespace) -> None:
+    head = (
+        f"Command: `{command_line()}`\n\nMachine: {machine()} (other jobs shared the cores; "
+        "absolute times are pessimistic).\n"
+    )
+    lines = _report_intro(args, head)
+    for res in results:
+        lines += _dataset_section(res)
     lines += _calibration_from_section(results)
     lines += _independent_section(results)
     lines += _preset_section(results)

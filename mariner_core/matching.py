@@ -258,23 +258,31 @@ def transfer(
             out += vals * mask
     out = out / (count_y[:, None] * count_x[None, :])[None, :, :, None]
     out = out.permute(0, 3, 1, 2)
-    if s == 1:
-        weight = score
-    else:
-        nh, nw = h3 // block, w3 // block
-        blk = score.view(n, 1, nh, block, nw, block).permute(0, 2, 4, 1, 3, 5)
-        blk = F.interpolate(
-            blk.reshape(n * nh * nw, 1, block, block),
-            scale_factor=s,
-            mode="bilinear",
-            align_corners=False,
-        )
-        weight = (
-            blk.view(n, nh, nw, 1, block * s, block * s)
-            .permute(0, 3, 1, 4, 2, 5)
-            .reshape(n, 1, hs, ws)
-        )
+    weight = _score_weight(score, n, h3, w3, s, block)
     return out * weight.to(out.dtype)
+
+
+def _score_weight(
+    score: torch.Tensor, n: int, h3: int, w3: int, s: int, block: int
+) -> torch.Tensor:
+    """Stage-B scores (N, 1, H3, W3) at level scale ``s``: as they are for ``s == 1``, else
+    upsampled bilinearly within each block -> (N, 1, s*H3, s*W3)."""
+    if s == 1:
+        return score
+    hs, ws = h3 * s, w3 * s
+    nh, nw = h3 // block, w3 // block
+    blk = score.view(n, 1, nh, block, nw, block).permute(0, 2, 4, 1, 3, 5)
+    blk = F.interpolate(
+        blk.reshape(n * nh * nw, 1, block, block),
+        scale_factor=s,
+        mode="bilinear",
+        align_corners=False,
+    )
+    return (
+        blk.view(n, nh, nw, 1, block * s, block * s)
+        .permute(0, 3, 1, 4, 2, 5)
+        .reshape(n, 1, hs, ws)
+    )
 
 
 class MEM(nn.Module):

@@ -25,6 +25,7 @@ import logging
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -252,28 +253,16 @@ def _validate(model: FrozenMariner, imgs, scores, k: int, jobs: list) -> dict[st
     return {g: float(np.mean(v)) for g, v in groups.items()}
 
 
-def train(
-    out: str | Path, max_minutes: float, settings: TrainSettings, resume: bool,
-    init: str | Path | None = None,
-) -> Path:
-    """Train the fusion decoder on the cached triples; returns the path of ``best.pt``.
-
-    ``init``: start from these weights (e.g. the shipped checkpoint, whose decoder size must
-    match ``settings``) instead of a zero-initialised head; ignored when resuming ``last.pt``.
-    """
-    from .enhancer import load_checkpoint, save_checkpoint
-    from .losses import PerceptualLoss
-    from .pretrained import backbone_state_dict
-
-    out = Path(out)
-    torch.set_num_threads(settings.threads)
-    torch.manual_seed(settings.seed)
+def _load_triples(
+    out: Path, settings: TrainSettings,
+) -> tuple[dict, FrozenMarinerConfig, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The cached triples of ``out``: (meta, model config, train images, train scores,
+    validation images, validation scores); the training arrays are read into memory."""
     meta = json.loads((out / "triples.json").read_text())
     # the decoder's size does not change the cached matching: it may differ from the cache's
     cfg = FrozenMarinerConfig.from_dict(
         {**meta["config"], "channels": settings.channels, "blocks": list(settings.blocks)}
     )
-    k = cfg.top_k
     n_done = json.loads((out / "train_done.json").read_text())["n"]
     imgs = np.load(out / "train_images.npy", mmap_mode="r")
     scores = np.load(out / "train_scores.npy", mmap_mode="r")
@@ -281,7 +270,17 @@ def train(
     scores = np.ascontiguousarray(scores[:n_done])
     v_imgs = np.load(out / "val_images.npy")
     v_scores = np.load(out / "val_scores.npy")
-    val_jobs = meta["val_jobs"]
+    return meta, cfg, imgs, scores, v_imgs, v_scores
+
+
+def _initial_model(
+    cfg: FrozenMarinerConfig, out: Path, init: str | Path | None, resume: bool,
+) -> FrozenMariner:
+    """The model to train, in training mode: ImageNet VGG in the matcher, and the ``init``
+    weights unless ``last.pt`` will be resumed."""
+    from .enhancer import load_checkpoint
+    from .pretrained import backbone_state_dict
+
     model = FrozenMariner(cfg)
     model.load_vgg(backbone_state_dict("vgg16"))
     if init is not None and not (resume and (out / "last.pt").is_file()):
@@ -291,19 +290,24 @@ def train(
         model.load_state_dict(start.state_dict(), strict=True)
         logger.info("initialised from %s", init)
     model.train()
-    params = [p for n, p in model.named_parameters() if not n.startswith("vgg.")]
-    opt = torch.optim.Adam(params, lr=settings.lr)
-    per = PerceptualLoss.pretrained(("relu1_2", "relu2_2"))
-    rng = np.random.default_rng(settings.seed)
-    state = {"step": 0, "elapsed": 0.0, "best": -1e9, "samples": 0}
-    last = out / "last.pt"
-    if resume and last.is_file():
-        ck = torch.load(last, weights_only=False)
-        model.load_state_dict(ck["model"])
-        opt.load_state_dict(ck["opt"])
-        state = ck["state"]
-        rng = np.random.default_rng(settings.seed + state["step"])
-        logger.info("resumed at step %d (%.1f min)", state["step"], state["elapsed"] / 60)
+    return model
+
+
+def _resume(
+    last: Path, model: FrozenMariner, opt: torch.optim.Optimizer, settings: TrainSettings,
+) -> tuple[dict, np.random.Generator]:
+    """Load ``last.pt`` into the model and optimiser -> (training state, batch generator)."""
+    ck = torch.load(last, weights_only=False)
+    model.load_state_dict(ck["model"])
+    opt.load_state_dict(ck["opt"])
+    state = ck["state"]
+    rng = np.random.default_rng(settings.seed + state["step"])
+    logger.info("resumed at step %d (%.1f min)", state["step"], state["elapsed"] / 60)
+    return state, rng
+
+
+def _open_log(out: Path, resume: bool) -> tuple[Any, csv.DictWriter]:
+    """``log.csv``: appended to when resuming an existing one, else written anew with a header."""
     log_path = out / "log.csv"
     new_log = not (resume and log_path.is_file())
     log_file = log_path.open("w" if new_log else "a", newline="")
@@ -313,70 +317,130 @@ def train(
     writer = csv.DictWriter(log_file, fieldnames=fieldnames, extrasaction="ignore")
     if new_log:
         writer.writeheader()
-    budget = max_minutes * 60.0
-    t_start = time.perf_counter() - state["elapsed"]
-    t_val = t_ckpt = time.perf_counter()
-    acc: dict[str, list[float]] = {"loss": [], "l1": [], "per": []}
-    logger.info("training %d parameters on %d triples", model.num_trainable(), len(imgs))
+    return log_file, writer
 
-    def save_last() -> None:
-        state["elapsed"] = time.perf_counter() - t_start
-        torch.save({"model": model.state_dict(), "opt": opt.state_dict(), "state": state},
-                   last.with_suffix(".tmp"))
+
+@dataclass
+class _Session:
+    """What a training run's validation, checkpoints and steps share."""
+
+    out: Path
+    settings: TrainSettings
+    model: FrozenMariner
+    opt: torch.optim.Optimizer
+    state: dict
+    log_file: Any
+    writer: csv.DictWriter
+    t_start: float
+    acc: dict[str, list[float]]
+
+    def save_last(self) -> None:
+        """Write ``last.pt`` (model, optimiser, state) through a temporary file."""
+        last = self.out / "last.pt"
+        self.state["elapsed"] = time.perf_counter() - self.t_start
+        torch.save({"model": self.model.state_dict(), "opt": self.opt.state_dict(),
+                    "state": self.state}, last.with_suffix(".tmp"))
         last.with_suffix(".tmp").replace(last)
 
-    def run_val() -> None:
-        res = _validate(model, v_imgs, v_scores, k, val_jobs)
+    def run_val(self, v_imgs: np.ndarray, v_scores: np.ndarray, k: int, val_jobs: list) -> None:
+        """Validate, log a row (with the mean training losses since the last one) and keep
+        ``best.pt`` when the mean offset PSNR-Y improved."""
+        from .enhancer import save_checkpoint
+
+        state, acc = self.state, self.acc
+        res = _validate(self.model, v_imgs, v_scores, k, val_jobs)
         mean = float(np.mean([res.get("coloured_offset", 0), res.get("colourless_offset", 0)]))
-        row = {"step": state["step"], "minutes": round((time.perf_counter() - t_start) / 60, 2),
+        minutes = round((time.perf_counter() - self.t_start) / 60, 2)
+        row = {"step": state["step"], "minutes": minutes,
                "samples": state["samples"], "val_mean": round(mean, 3),
                **{kk: round(v, 3) for kk, v in res.items()}}
         for kk in ("loss", "l1", "per"):
             if acc[kk]:
                 row[kk] = round(float(np.mean(acc[kk])), 5)
             acc[kk] = []
-        row["lr"] = opt.param_groups[0]["lr"]
-        writer.writerow(row)
-        log_file.flush()
+        row["lr"] = self.opt.param_groups[0]["lr"]
+        self.writer.writerow(row)
+        self.log_file.flush()
         logger.info("val %s", row)
         if mean > state["best"]:
             state["best"] = mean
-            save_checkpoint(model, out / "best.pt", fp16=True, extra={
+            save_checkpoint(self.model, self.out / "best.pt", fp16=True, extra={
                 "step": state["step"], "samples": state["samples"],
                 "minutes": row["minutes"], "val": {kk: float(v) for kk, v in res.items()},
-                "settings": asdict(settings),
+                "settings": asdict(self.settings),
             })
 
-    if state["step"] == 0:
-        run_val()
-    while time.perf_counter() - t_start < budget:
-        prog = (time.perf_counter() - t_start) / budget
-        lr = cosine_lr(prog, settings.lr, settings.lr_min)
-        for g in opt.param_groups:
-            g["lr"] = lr
+    def step(self, per, imgs: np.ndarray, scores: np.ndarray, k: int,
+             rng: np.random.Generator) -> None:
+        """One optimiser step on a random batch of crops; its losses go to ``acc``."""
+        settings, state, acc = self.settings, self.state, self.acc
         idx = rng.integers(0, len(imgs), size=settings.batch_size)
         prep, tgt = _batch_inputs(imgs, scores, k, idx, settings.crop, rng, settings.colour_aug)
-        y = model.fuse(prep)
+        y = self.model.fuse(prep)
         l1 = (y - tgt).abs().mean()
         lp = per(y, tgt) if settings.lambda_per > 0 else torch.zeros(())
         loss = l1 + settings.lambda_per * lp
-        opt.zero_grad(set_to_none=True)
+        self.opt.zero_grad(set_to_none=True)
         loss.backward()
-        opt.step()
+        self.opt.step()
         state["step"] += 1
         state["samples"] += settings.batch_size
         acc["loss"].append(float(loss.detach()))
         acc["l1"].append(float(l1.detach()))
         acc["per"].append(float(lp.detach()))
+
+
+def train(
+    out: str | Path, max_minutes: float, settings: TrainSettings, resume: bool,
+    init: str | Path | None = None,
+) -> Path:
+    """Train the fusion decoder on the cached triples; returns the path of ``best.pt``.
+
+    ``init``: start from these weights (e.g. the shipped checkpoint, whose decoder size must
+    match ``settings``) instead of a zero-initialised head; ignored when resuming ``last.pt``.
+    """
+    from .losses import PerceptualLoss
+
+    out = Path(out)
+    torch.set_num_threads(settings.threads)
+    torch.manual_seed(settings.seed)
+    meta, cfg, imgs, scores, v_imgs, v_scores = _load_triples(out, settings)
+    k = cfg.top_k
+    val_jobs = meta["val_jobs"]
+    model = _initial_model(cfg, out, init, resume)
+    params = [p for n, p in model.named_parameters() if not n.startswith("vgg.")]
+    opt = torch.optim.Adam(params, lr=settings.lr)
+    per = PerceptualLoss.pretrained(("relu1_2", "relu2_2"))
+    rng = np.random.default_rng(settings.seed)
+    state = {"step": 0, "elapsed": 0.0, "best": -1e9, "samples": 0}
+    last = out / "last.pt"
+    if resume and last.is_file():
+        state, rng = _resume(last, model, opt, settings)
+    log_file, writer = _open_log(out, resume)
+    budget = max_minutes * 60.0
+    t_start = time.perf_counter() - state["elapsed"]
+    t_val = t_ckpt = time.perf_counter()
+    acc: dict[str, list[float]] = {"loss": [], "l1": [], "per": []}
+    logger.info("training %d parameters on %d triples", model.num_trainable(), len(imgs))
+    run = _Session(out, settings, model, opt, state, log_file, writer, t_start, acc)
+
+    if state["step"] == 0:
+        run.run_val(v_imgs, v_scores, k, val_jobs)
+    while time.perf_counter() - t_start < budget:
+        prog = (time.perf_counter() - t_start) / budget
+        lr = cosine_lr(prog, settings.lr, settings.lr_min)
+        for g in opt.param_groups:
+            g["lr"] = lr
+        run.step(per, imgs, scores, k, rng)
         now = time.perf_counter()
         if now - t_val > settings.val_every_minutes * 60:
-            run_val()
+            run.run_val(v_imgs, v_scores, k, val_jobs)
             t_val = time.perf_counter()
         if now - t_ckpt > settings.ckpt_every_minutes * 60:
-            save_last()
+            run.save_last()
             t_ckpt = now
-    run_val()
-    save_last()
+    run.run_val(v_imgs, v_scores, k, val_jobs)
+    run.save_last()
     log_file.close()
     return out / "best.pt"
 
