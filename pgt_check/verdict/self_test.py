@@ -465,8 +465,10 @@ def curve_phrase(c: DetectionCurve) -> str:
     if c.judgement == "untested":
         return f"{curve_label(c)} untested"
     noise = ""
-    if c.judgement == "held" and c.upper_p is not None:
-        end = max((p for p in c.points if 1.0 <= p.k <= 1.0 + HELD_TOLERANCE + 1e-9),
+    band = (1.0 - HELD_TOLERANCE, 1.0 + HELD_TOLERANCE)
+    in_band = any(k is not None and band[0] <= k <= band[1] for k in (c.k50, c.k95))
+    if c.judgement == "held" and c.upper_p is not None and not in_band:
+        end = max((p for p in c.points if 1.0 <= p.k <= band[1] + 1e-9 and p.n > 0),
                   key=lambda p: p.k)
         noise = (f"; {end.flagged}/{end.n} flagged at {end.k:g}x is within the sampling noise "
                  f"of 95 % detection, p = {c.upper_p:.2f}")

@@ -16,7 +16,12 @@ from pgt_check.correct.calibration import (
     with_focal_scale,
     write_calibrated_rig,
 )
-from pgt_check.geometry.transforms import axis_angle_to_rotmat, invert_rigid, make_rigid, quat_to_rotmat
+from pgt_check.geometry.transforms import (
+    axis_angle_to_rotmat,
+    invert_rigid,
+    make_rigid,
+    quat_to_rotmat,
+)
 from pgt_check.io import read_trajectory
 from pgt_check.measure.record import camera_key
 from pgt_check.types import Camera, Frame, Trajectory

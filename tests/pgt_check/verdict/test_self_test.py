@@ -165,6 +165,12 @@ def test_a_95_point_above_the_band_by_sampling_noise_still_holds():
     assert noisy.k95 > 1.3 and noisy.judgement == "held"
     assert noisy.upper_p == pytest.approx(1 - 0.95 ** 16, rel=1e-6)  # P(15 or fewer of 16)
     assert "15/16 flagged at 1.3x is within the sampling noise" in curve_phrase(noisy)
+    # held by its 50 % point in the band: the phrase does not call on the noise
+    in_band = _curve("single_frame", "rotation", 1.0, 8.0, [
+        CurvePoint(k, k, 16, f, f, 0)
+        for k, f in {0.0: 0, 0.5: 0, 0.7: 2, 1.0: 10, 1.3: 15, 2.0: 16}.items()])
+    assert in_band.judgement == "held" and in_band.upper_p is not None
+    assert "sampling noise" not in curve_phrase(in_band)
     short = curve(13)
     assert short.judgement == "shallow" and short.upper_p < 0.05
     # one trial (the shared test) cannot tell: a miss at 1.3x leaves k_50 above the band
