@@ -13,7 +13,7 @@ from pathlib import Path
 from typing import Any
 
 from pgt_check.config import RunConfig
-from pgt_check.errors import RunInterrupted
+from pgt_check.errors import InputError, RunInterrupted
 from pgt_check.measure import FrameMeasurement, build_frame_checker
 from pgt_check.measure.steps import format_exception
 from pgt_check.progress import frame_progress
@@ -59,7 +59,13 @@ def correct_stage(
     # a significant calibration estimate written exactly, as a rig (``correct.calibration``)
     from pgt_check.correct.calibration import write_calibrated_rig
 
-    rig = write_calibrated_rig(traj, judged.shared, out)
+    try:
+        rig = write_calibrated_rig(traj, judged.shared, out)
+    except (OSError, ValueError, InputError) as err:  # the verdicts stand without it
+        if config.fail_fast:
+            raise
+        logger.error("calibrated/ could not be written (%s)", err)
+        rig = None
     if rig is not None:
         corrections["calibrated_rig"] = rig
     if config.correct.frames != "none":  # corrected poses (pgt_check.correct.frames)

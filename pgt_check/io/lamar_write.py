@@ -54,7 +54,9 @@ def write_lamar(
     for stamp, frame in zip(stamp_text, trajectory, strict=True):
         cam_id = camera_ids[frame.camera]
         device = f"rig_{cam_id}" if frame.camera in rigs else cam_id
-        images_rows.append(f"{stamp}, {cam_id}, {_image_text(frame, directory)}")
+        image = _image_text(frame, directory)
+        if image is not None:  # a pose without an image stays a frame without one
+            images_rows.append(f"{stamp}, {cam_id}, {image}")
         traj_rows.append(f"{stamp}, {device}, {_pose_text(frame.world_from_cam)}")
     out = {
         "sensors": directory / f"sensors{suffix}.txt",
@@ -107,15 +109,18 @@ def _sensors_rows(camera_ids: list[tuple[Camera, str]]) -> list[str]:
     return sensors_rows
 
 
-def _image_text(frame: Frame, directory: Path) -> str:
+def _image_text(frame: Frame, directory: Path) -> str | None:
     """A frame's image path as written in the images file: relative to ``directory`` when the
-    frame has an ``image_file``, else its ``image_path``; raises InputError if unwritable."""
+    frame has an ``image_file``, else its ``image_path`` (None when it has neither); raises
+    InputError if unwritable."""
     if frame.image_file is not None:
         image = Path(
             os.path.relpath(Path(frame.image_file).absolute(), directory.absolute())
         ).as_posix()
     else:
         image = frame.image_path
+    if image is None:
+        return None
     if "," in image or not image:
         raise InputError(
             f"frame {frame.frame_id}: image path {image!r} cannot be written to a LaMAR file"

@@ -105,3 +105,15 @@ def test_rig_from_cam_inverts_the_estimate_and_focal_scale_keeps_the_rest():
         rig_from_cam(CalibrationCheck(status="finding", reason=""))
     scaled = with_focal_scale(OTHER, 2.0)
     assert scaled.params[:2] == (500.0, 502.0) and scaled.params[2:] == OTHER.params[2:]
+
+
+def test_frames_without_an_image_keep_their_pose(tmp_path):
+    """An in-memory trajectory may hold poses without images: the rig session keeps them as
+    frames without one (``read_lamar``: image_missing), it does not fail the run."""
+    frames = [Frame(f"{i}/cam", CAM, np.eye(4), *((f"img/{i}.png", tmp_path / f"img/{i}.png")
+                                                   if i != 1 else (None, None)),
+                    timestamp=float(i)) for i in range(3)]
+    shared = SimpleNamespace(calibration={camera_key(CAM): _estimate()})
+    entry = write_calibrated_rig(Trajectory(tuple(frames)), shared, tmp_path)
+    back = read_trajectory(tmp_path / entry["trajectory_file"])
+    assert len(back) == 3 and [f.image_file is None for f in back] == [False, True, False]
