@@ -243,12 +243,12 @@ def _calibration_checks(
 ) -> tuple[dict[str, CalibrationCheck], dict[str, CameraCalibration], dict[str, CalibrationCheck]]:
     """Per camera: the calibration entry, the calibration to remove (this run's estimate, or the
     trusted run's with ``calibration_from``) and, with ``calibration_from``, the change entry."""
-    from pgt_check.geometry.shared_errors import estimate_calibration
+    from pgt_check.geometry.shared_errors import CalibrationSettings, estimate_calibration
 
     v = config.verdict
-    trans = v.calibration_translation
+    settings = CalibrationSettings(calibration_translation=v.calibration_translation)
     calib, cals = {}, {}
-    for cam_id, est in estimate_calibration(ev, calibration_translation=trans).items():
+    for cam_id, est in estimate_calibration(ev, settings).items():
         calib[cam_id] = calibration_entry(est, thr, frame_thr)
         cal = CameraCalibration.from_estimate(est)
         if cal is not None:
@@ -269,9 +269,7 @@ def _calibration_checks(
         # calibration only: the change is what the trusted calibration leaves unexplained (a
         # joint fit would trade part of it against a world correction, and re-split the same
         # run's calibration differently)
-        for cam_id, est in estimate_calibration(
-            rest, registration="none", calibration_translation=trans
-        ).items():
+        for cam_id, est in estimate_calibration(rest, settings, registration="none").items():
             if cam_id:
                 change[cam_id] = calibration_change_entry(est, thr)
     return calib, cals, change
@@ -279,7 +277,7 @@ def _calibration_checks(
 
 def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfig) -> SharedChecks:
     """All run-level checks on the measurements (in trajectory order)."""
-    from pgt_check.geometry.shared_errors import estimate_drift, estimate_registration
+    from pgt_check.geometry import shared_errors as se
 
     thr = shared_threshold(measurements, config)
     frame_thr = (
@@ -290,8 +288,9 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
     ev = frame_evidence(measurements)
     # frames with an error of their own are left out of the pooled fits
     all_ev = ev
+    no_boot = se.FitSettings(n_bootstrap=0)
     ev, left_out = consistent_frames(
-        ev, lambda fr: estimate_registration(fr, n_bootstrap=0), 0.5 * frame_thr, 0.5 * frame_thr
+        ev, lambda fr: se.estimate_registration(fr, no_boot), 0.5 * frame_thr, 0.5 * frame_thr
     )
     if left_out:
         logger.info(
@@ -312,10 +311,12 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
         # corrected by it, and registration / drift are judged on what remains
         ev, all_ev = [_without(cals, e) for e in ev], [_without(cals, e) for e in all_ev]
         mode = "none"
-    kw = {"calibration": mode, "calibration_translation": trans}
+    fit = se.FitSettings(calibration_translation=trans)
     reg, sim = (
         shared_or_not(
-            registration_entry(est := estimate_registration(ev, similarity=s, **kw), thr, kind),
+            registration_entry(
+                est := se.estimate_registration(ev, fit, similarity=s, calibration=mode), thr, kind
+            ),
             frame_residuals(ev, est),
             0.5 * frame_thr,
         )
@@ -325,9 +326,9 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
     # frames without evidence of their own are covered by the segment they lie in
     ids = [m.frame_id for m in measurements]
     drift_thr = DRIFT_THRESHOLD_FACTOR * thr
-    drift, drift_px, flagged = drift_entry(
-        estimate_drift(all_ev, threshold_px=drift_thr, **kw), ids, drift_thr
-    )
+    drift_set = se.DriftSettings(calibration_translation=trans)
+    drift_est = se.estimate_drift(all_ev, drift_set, threshold_px=drift_thr, calibration=mode)
+    drift, drift_px, flagged = drift_entry(drift_est, ids, drift_thr)
     reg, sim = (replace(e, frames_left_out=tuple(left_out)) for e in (reg, sim))
     return SharedChecks(
         thr, reg, sim, drift, calib, drift_px, flagged, homs, frozenset(left_out), frame_homs,

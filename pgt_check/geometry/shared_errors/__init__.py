@@ -32,8 +32,9 @@ still caught) and the calibration estimate the calibration-only fit, both flagge
 Drift (``drift``): windows grown to enough inliers, compared with the reference by paired
 bootstrap, flagged on the lower bound, short runs rejected.
 
-Modules: ``evidence`` (FrameEvidence + JSON), ``results`` (result types), ``model``,
-``solver``, ``selection``, ``effects``, ``registration``, ``calibration``, ``drift``.
+Modules: ``evidence`` (FrameEvidence + JSON), ``results`` (result types), ``settings`` (the
+estimators' settings dataclasses), ``model``, ``solver``, ``selection``, ``effects``,
+``registration``, ``calibration``, ``drift``.
 """
 
 from __future__ import annotations
@@ -48,12 +49,20 @@ from pgt_check.geometry.shared_errors.results import (
     DriftWindow,
     RegistrationEstimate,
 )
+from pgt_check.geometry.shared_errors.settings import (
+    CalibrationSettings,
+    DriftSettings,
+    FitSettings,
+)
 
 __all__ = [
     "REASONS",
     "CalibrationEstimate",
+    "CalibrationSettings",
     "DriftEstimate",
+    "DriftSettings",
     "DriftWindow",
+    "FitSettings",
     "FrameEvidence",
     "RegistrationEstimate",
     "estimate_calibration",

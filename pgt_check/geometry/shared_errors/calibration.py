@@ -22,6 +22,7 @@ from pgt_check.geometry.shared_errors.model import (
 )
 from pgt_check.geometry.shared_errors.results import _NAN_CI, CalibrationEstimate
 from pgt_check.geometry.shared_errors.selection import _select, _Selection, _use_joint
+from pgt_check.geometry.shared_errors.settings import CalibrationSettings
 from pgt_check.geometry.shared_errors.solver import (
     _bootstrap_deltas,
     _ci,
@@ -127,22 +128,14 @@ def _choose_calibration_fit(
 
 def estimate_calibration(
     evidence: Sequence[FrameEvidence],
+    settings: CalibrationSettings | None = None,
     *,
     registration: str = "auto",
-    n_bootstrap: int = 100,
-    seed: int = 0,
-    loss_scale_px: float = 2.0,
-    max_error_px: float = 6.0,
-    min_frames: int = 3,
-    min_points_per_frame: int = 6,
-    min_inliers: int = 30,
-    max_correlation: float = 0.985,
-    model_penalty: float = 2.0,
-    ambiguity_margin: float = 0.1,
-    calibration_translation: bool = False,
 ) -> dict[str, CalibrationEstimate]:
     """Per camera_id: shared camera-frame rotation (principal-point shift + roll) and zoom.
 
+    settings: the robust-fit settings (``CalibrationSettings``; None: the defaults; with
+    ``calibration_translation`` a camera-frame translation per camera is fitted too).
     registration: "auto" fits a rigid world correction jointly when it lowers the robust cost
     significantly (BIC-like, ``model_penalty``) and the attribution is not ambiguous; "joint"
     always; "none" never. ``separable`` is False (with the reason in ``ambiguity``) when a
@@ -150,25 +143,23 @@ def estimate_calibration(
     ``estimate_registration``); the estimate is then the calibration-only fit. Returns one
     estimate per camera id present in the evidence (a single "" entry with the reason when
     there is no evidence at all).
-    calibration_translation: also fit a camera-frame translation per camera (a camera mounted
-    beside the sensor whose poses are given, e.g. RGB beside depth), where the points' depths
-    differ enough; off by default: for cameras circling the scene it mimics a world rotation.
     """
     if registration not in ("auto", "joint", "none"):
         raise ValueError(f"registration must be auto, joint or none, not {registration!r}")
-    p = _prepare(evidence, min_points_per_frame, min_frames, calibration_translation)
+    s = settings if settings is not None else CalibrationSettings()
+    p = _prepare(evidence, s.min_points_per_frame, s.min_frames, s.calibration_translation)
     if isinstance(p, str):
         ids = sorted({ev.camera_id for ev in evidence}) or [""]
         return {cid: CalibrationEstimate(False, p, cid) for cid in ids}
     sel = _select(
-        p, similarity=False, loss_scale_px=loss_scale_px, max_correlation=max_correlation,
-        model_penalty=model_penalty, ambiguity_margin=ambiguity_margin,
+        p, similarity=False, loss_scale_px=s.loss_scale_px, max_correlation=s.max_correlation,
+        model_penalty=s.model_penalty, ambiguity_margin=s.ambiguity_margin,
     )  # fmt: skip
-    fit, world = _choose_calibration_fit(p, registration, loss_scale_px, model_penalty, sel)
-    inl = np.linalg.norm(fit.residuals, axis=1) < max_error_px
+    fit, world = _choose_calibration_fit(p, registration, s.loss_scale_px, s.model_penalty, sel)
+    inl = np.linalg.norm(fit.residuals, axis=1) < s.max_error_px
     deltas = None
-    if n_bootstrap > 0 and fit.ok:
-        deltas = _bootstrap_deltas(p, fit, n_bootstrap, seed)[1]
+    if s.n_bootstrap > 0 and fit.ok:
+        deltas = _bootstrap_deltas(p, fit, s.n_bootstrap, s.seed)[1]
     _, off, _ = _layout(p, world, False, True)
     sel_pts = _effect_points(p, inl)
     out: dict[str, CalibrationEstimate] = {}
@@ -176,7 +167,7 @@ def estimate_calibration(
         base = _camera_fields(p, g, inl, sel, world)
         if not fit.ok:
             out[cid] = CalibrationEstimate(False, "ill_conditioned", cid, **base)
-        elif base["n_inliers"] < min_inliers or base["n_frames"] < min_frames:
+        elif base["n_inliers"] < s.min_inliers or base["n_frames"] < s.min_frames:
             out[cid] = CalibrationEstimate(False, "too_few_inliers", cid, **base)
         else:
             out[cid] = _camera_estimate(p, fit, g, cid, deltas, off, sel_pts, base)

@@ -27,6 +27,7 @@ from pgt_check.geometry.shared_errors.registration import (
 )
 from pgt_check.geometry.shared_errors.results import DriftEstimate, DriftWindow
 from pgt_check.geometry.shared_errors.selection import _Selection
+from pgt_check.geometry.shared_errors.settings import DriftSettings
 from pgt_check.geometry.shared_errors.solver import _bootstrap_deltas, _Fit, _fit_at, _solve
 
 
@@ -42,6 +43,7 @@ class _DriftOptions:
     min_window_inliers: int
     min_segment_windows: int
     min_segment_frames: int
+    min_inliers: int  # of the reference estimate
 
 
 def _window_bounds(
@@ -189,6 +191,7 @@ def _reference_estimate(p: _Problem, st: _State, calib: bool, sel, opt: _DriftOp
     return _registration_from_fit(
         p, fit, similarity=opt.similarity, calib=calib, n_bootstrap=0, seed=opt.seed,
         max_error_px=opt.max_error_px, scene_depth=None, selection=sel,
+        min_inliers=opt.min_inliers,
     )  # fmt: skip
 
 
@@ -199,56 +202,41 @@ def _inliers_per_frame(p: _Problem, fit: _Fit, max_error_px: float) -> np.ndarra
 
 def estimate_drift(
     evidence: Sequence[FrameEvidence],
+    settings: DriftSettings | None = None,
     *,
-    window: float = 0.2,
-    step: float = 0.5,
     threshold_px: float = 2.0,
     similarity: bool = False,
     calibration: str = "auto",
-    n_bootstrap: int = 100,
-    seed: int = 0,
-    loss_scale_px: float = 2.0,
-    max_error_px: float = 6.0,
-    min_frames: int = 5,
-    min_window_inliers: int = 150,
-    min_points: int = 60,
-    min_points_per_frame: int = 6,
-    min_segment_windows: int = 2,
-    min_segment_frames: int = 3,
-    max_correlation: float = 0.985,
-    model_penalty: float = 2.0,
-    ambiguity_margin: float = 0.1,
-    calibration_translation: bool = False,
 ) -> DriftEstimate:
     """Windowed world corrections along ``index`` relative to the reference registration.
 
-    window / step: nominal window length (fraction of the index span) and step (fraction of the
-    window); windows grow about their centre to ``min_frames`` frames, ``min_window_inliers``
-    inliers and ``min_points`` points. The reference is the global fit (calibration as in
-    ``estimate_registration``), refitted once on the unflagged frames when frames are flagged.
-    A window is flagged when the lower 95 % bound of its effect relative to the reference
-    exceeds threshold_px; a frame when it lies in a flagged window, its interpolated lower bound
-    exceeds threshold_px, and its run of such frames spans ``min_segment_windows`` flagged
-    windows or ``min_segment_frames`` frames (shorter runs: ``rejected_segments``).
-    calibration_translation: also fit a camera-frame translation per camera (a camera mounted
-    beside the sensor whose poses are given, e.g. RGB beside depth), where the points' depths
-    differ enough; off by default: for cameras circling the scene it mimics a world rotation.
+    settings: ``DriftSettings`` (None: the defaults). window / step: nominal window length
+    (fraction of the index span) and step (fraction of the window); windows grow about their
+    centre to ``min_frames`` frames, ``min_window_inliers`` inliers and ``min_points`` points.
+    The reference is the global fit (calibration as in ``estimate_registration``), refitted
+    once on the unflagged frames when frames are flagged. A window is flagged when the lower
+    95 % bound of its effect relative to the reference exceeds threshold_px; a frame when it
+    lies in a flagged window, its interpolated lower bound exceeds threshold_px, and its run of
+    such frames spans ``min_segment_windows`` flagged windows or ``min_segment_frames`` frames
+    (shorter runs: ``rejected_segments``).
     """
+    s = settings if settings is not None else DriftSettings()
     opt = _DriftOptions(
-        threshold_px, similarity, n_bootstrap, seed, loss_scale_px, max_error_px, min_frames,
-        min_window_inliers, min_segment_windows, min_segment_frames,
+        threshold_px, similarity, s.n_bootstrap, s.seed, s.loss_scale_px, s.max_error_px,
+        s.min_frames, s.min_window_inliers, s.min_segment_windows, s.min_segment_frames,
+        s.min_inliers,
     )  # fmt: skip
-    p = _prepare(evidence, min_points_per_frame, 2 * min_frames, calibration_translation)
+    p = _prepare(evidence, s.min_points_per_frame, 2 * s.min_frames, s.calibration_translation)
     if isinstance(p, str):
         return DriftEstimate(False, p, threshold_px=threshold_px)
     fit, calib, sel = _choose_world_fit(
-        p, similarity=similarity, calibration=calibration, loss_scale_px=loss_scale_px,
-        max_correlation=max_correlation, model_penalty=model_penalty,
-        ambiguity_margin=ambiguity_margin,
+        p, similarity=similarity, calibration=calibration, loss_scale_px=s.loss_scale_px,
+        max_correlation=s.max_correlation, model_penalty=s.model_penalty,
+        ambiguity_margin=s.ambiguity_margin,
     )  # fmt: skip
     if not fit.ok:
         return DriftEstimate(False, "ill_conditioned", threshold_px=threshold_px)
-    compared = _compare_windows(p, fit, calib, window, step, min_points, opt)
+    compared = _compare_windows(p, fit, calib, s.window, s.step, s.min_points, opt)
     if compared is None:
         return DriftEstimate(False, "too_few_inliers", threshold_px=threshold_px)
     return _drift_estimate(p, *compared, calib, sel, opt)

@@ -18,6 +18,7 @@ from pgt_check.geometry.shared_errors.evidence import FrameEvidence
 from pgt_check.geometry.shared_errors.model import _prepare, _Problem, _residuals, _State
 from pgt_check.geometry.shared_errors.results import _CI, _NAN_CI, RegistrationEstimate
 from pgt_check.geometry.shared_errors.selection import _select, _Selection, _use_joint
+from pgt_check.geometry.shared_errors.settings import FitSettings
 from pgt_check.geometry.shared_errors.solver import (
     _bootstrap_deltas,
     _ci,
@@ -215,53 +216,38 @@ def _choose_world_fit(
 
 def estimate_registration(
     evidence: Sequence[FrameEvidence],
+    settings: FitSettings | None = None,
     *,
     similarity: bool = False,
     calibration: str = "auto",
-    n_bootstrap: int = 100,
-    seed: int = 0,
-    loss_scale_px: float = 2.0,
-    max_error_px: float = 6.0,
     scene_depth: float | None = None,
-    min_frames: int = 5,
-    min_points_per_frame: int = 6,
-    min_inliers: int = 30,
-    max_correlation: float = 0.985,
-    model_penalty: float = 2.0,
-    ambiguity_margin: float = 0.1,
-    calibration_translation: bool = False,
 ) -> RegistrationEstimate:
     """One world correction (rigid, or similarity) for the whole trajectory.
 
+    settings: the robust-fit settings (``FitSettings``; None: the defaults).
     calibration: "auto" (default) fits a per-camera camera-frame rotation + zoom jointly when it
     lowers the robust cost significantly (BIC-like test scaled by ``model_penalty``) and the
     attribution is not ambiguous; "joint" always jointly; "none" never (no ambiguity check).
     ``ambiguous_with_calibration`` (with the reason in ``ambiguity``) is set when a significant
     shared error could as well be a calibration error: the blocks are not separable (largest
-    canonical correlation >= max_correlation; a full synthetic loop gives 0.980, 7-Scenes
-    0.988-0.990) or world-only and calibration-only fits explain it about equally well (costs
-    within ``ambiguity_margin`` of the larger cost drop); the estimate is then the world-only
-    fit, so a misregistered trajectory is still caught. loss_scale_px: Cauchy scale;
-    max_error_px: inlier threshold; scene_depth: the depth used for ``translation_frac``
-    (default: median depth of the inliers).
-    calibration_translation: also fit a camera-frame translation per camera (a camera mounted
-    beside the sensor whose poses are given, e.g. RGB beside depth), where the points' depths
-    differ enough; off by default: for cameras circling the scene it mimics a world rotation.
-    min_frames: frames with evidence needed (default 5): the interval resamples frames, and
-    fewer give too few distinct resamples (3 frames with errors of their own fit a shared
-    similarity closely).
+    canonical correlation >= ``max_correlation``) or world-only and calibration-only fits
+    explain it about equally well (costs within ``ambiguity_margin`` of the larger cost drop);
+    the estimate is then the world-only fit, so a misregistered trajectory is still caught.
+    scene_depth: the depth used for ``translation_frac`` (default: median depth of the inliers).
     """
-    p = _prepare(evidence, min_points_per_frame, min_frames, calibration_translation)
+    s = settings if settings is not None else FitSettings()
+    p = _prepare(evidence, s.min_points_per_frame, s.min_frames, s.calibration_translation)
     if isinstance(p, str):
         return RegistrationEstimate(False, p, n_frames=len(evidence), similarity=similarity)
     fit, calib, sel = _choose_world_fit(
-        p, similarity=similarity, calibration=calibration, loss_scale_px=loss_scale_px,
-        max_correlation=max_correlation, model_penalty=model_penalty,
-        ambiguity_margin=ambiguity_margin,
+        p, similarity=similarity, calibration=calibration, loss_scale_px=s.loss_scale_px,
+        max_correlation=s.max_correlation, model_penalty=s.model_penalty,
+        ambiguity_margin=s.ambiguity_margin,
     )  # fmt: skip
     if sel is not None and sel.ambiguous:
         logger.info("registration: %s; world-only fit reported", sel.ambiguity)
     return _registration_from_fit(
-        p, fit, similarity=similarity, calib=calib, n_bootstrap=n_bootstrap, seed=seed,
-        max_error_px=max_error_px, scene_depth=scene_depth, selection=sel, min_inliers=min_inliers,
+        p, fit, similarity=similarity, calib=calib, n_bootstrap=s.n_bootstrap, seed=s.seed,
+        max_error_px=s.max_error_px, scene_depth=scene_depth, selection=sel,
+        min_inliers=s.min_inliers,
     )  # fmt: skip

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from pgt_check.geometry.shared_errors import (
+    CalibrationSettings,
     estimate_calibration,
     estimate_registration,
 )
@@ -53,7 +54,8 @@ def test_camera_to_rig_translation_is_estimated_and_removed():
 
     t = np.array([0.05, 0.0, 0.0])
     ev = make_evidence(4, noise_px=0.5, outliers=0.1, cam_translation=t)
-    (cal,) = estimate_calibration(ev, registration="none", calibration_translation=True).values()
+    with_translation = CalibrationSettings(calibration_translation=True)
+    (cal,) = estimate_calibration(ev, with_translation, registration="none").values()
     assert cal.success and cal.translation_fitted
     np.testing.assert_allclose(cal.translation, t, atol=0.3 * 0.05)
     assert np.all(cal.translation_ci[:, 0] - 1e-3 <= t) and np.all(

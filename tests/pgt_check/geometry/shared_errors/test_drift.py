@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from pgt_check.geometry.shared_errors import (
+    DriftSettings,
     estimate_drift,
 )
 from pgt_eval import roc_auc
@@ -83,8 +84,7 @@ def test_drift_flags_only_on_the_lower_bound_and_long_enough_segments():
     )
     assert sum(x.flagged for x in strict.windows) < sum(x.flagged for x in d.windows)
     # the segment rule is configurable: demanding more than the run has rejects it
-    long = estimate_drift(
-        ev, threshold_px=THRESHOLD_PX, min_segment_frames=100, min_segment_windows=100
-    )
+    demanding = DriftSettings(min_segment_frames=100, min_segment_windows=100)
+    long = estimate_drift(ev, demanding, threshold_px=THRESHOLD_PX)
     assert long.segments == () and not long.frame_flagged.any()
     assert long.rejected_segments == d.segments

@@ -7,6 +7,8 @@ import numpy as np
 import pytest
 
 from pgt_check.geometry.shared_errors import (
+    CalibrationSettings,
+    FitSettings,
     estimate_calibration,
     estimate_registration,
 )
@@ -36,14 +38,14 @@ def test_equally_explained_error_is_ambiguous_even_when_separable_by_correlation
     calibration-only fit, both with the reason."""
     rc = axis_angle_to_rotmat(np.array([1.0, 1.0, 0.3]), 0.8)
     ev = make_evidence(6, layout="line", cam_rotation=rc)
-    reg = estimate_registration(ev, max_correlation=1.01)
+    reg = estimate_registration(ev, FitSettings(max_correlation=1.01))
     assert reg.success and reg.ambiguous_with_calibration and not reg.calibration_fitted
     assert "about equally well" in reg.ambiguity and "not separable" not in reg.ambiguity
     assert abs(reg.gain_world_only - reg.gain_calibration_only) < 0.1 * reg.gain_world_only
     world_only = estimate_registration(ev, calibration="none")
     assert reg.effect_px == pytest.approx(world_only.effect_px, rel=1e-9)
     assert reg.exceeds(THRESHOLD_PX)
-    (cal,) = estimate_calibration(ev, max_correlation=1.01).values()
+    (cal,) = estimate_calibration(ev, CalibrationSettings(max_correlation=1.01)).values()
     assert cal.success and not cal.separable and not cal.registration_fitted
     assert "about equally well" in cal.ambiguity
     assert _within(cal.equivalent_rotation_deg, 0.8, 0.1) and cal.exceeds(THRESHOLD_PX)
