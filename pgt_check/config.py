@@ -182,8 +182,8 @@ class EnhanceConfig:
     """
 
     mode: Literal["never", "auto", "always"] = "auto"
-    #: default "reproject": on the shared data it beats the shipped (CPU-trained) MaRINeR
-    #: weights, see reports/raw_vs_enhanced.md and reports/mariner_quality.md
+    #: default "reproject": no torch, and ahead of the shipped (CPU-trained) MaRINeR weights on
+    #: colourless meshes; MaRINeR's evidence is absolute (reports/raw_vs_enhanced.md)
     method: str = "reproject"
     weights: str | None = None
     iterations: int | None = None
