@@ -9,8 +9,9 @@ from __future__ import annotations
 import functools
 import logging
 from collections.abc import Callable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pgt_check.config import RunConfig
 from pgt_check.errors import InputError, RunInterrupted
@@ -19,61 +20,95 @@ from pgt_check.measure.steps import format_exception
 from pgt_check.progress import frame_progress
 from pgt_check.types import Frame, Trajectory
 
+if TYPE_CHECKING:
+    from pgt_check.correct.calibration import CalibratedRig
+    from pgt_check.correct.frames import CorrectionsSummary
+    from pgt_check.verdict.apply import RunJudgement
+    from pgt_check.verdict.shared import SharedChecks
+
 logger = logging.getLogger(__name__)
 
-__all__ = ["PlainMeasure", "correct_stage", "self_test_stage"]
+__all__ = ["CorrectedRun", "PlainMeasure", "correct_stage", "self_test_stage"]
+
+
+@dataclass(frozen=True)
+class CorrectedRun:
+    """What the correction stage returns: the verdict rows with the correction columns, the
+    run-level checks as reported (the registration correction refined; the verdicts keep the
+    judged ones) and what the stage wrote (``summary_extra``: their summary.json sections)."""
+
+    rows: list[dict[str, Any]]
+    shared: SharedChecks | None
+    calibrated_rig: CalibratedRig | None = None
+    corrections: CorrectionsSummary | None = None
+
+    def summary_extra(self) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        if self.calibrated_rig is not None:
+            out["calibrated_rig"] = self.calibrated_rig.to_json()
+        if self.corrections is not None:
+            out["corrections"] = self.corrections.to_json()
+        return out
 
 
 def correct_stage(
     traj: Trajectory,
     measurements: list[FrameMeasurement],
-    judged: Any,
+    judged: RunJudgement,
     config: RunConfig,
     checker_factory: Callable[[], Any],
-) -> tuple[list[dict[str, Any]], dict[str, Any], Any]:
+) -> CorrectedRun:
     """The correction stage (``pgt_check.correct``) after the verdicts: a failed registration
     check's estimate refined, a significant calibration estimate written as a rig
-    (``calibrated/``), then the corrected poses of the chosen frames; the rows (with
-    correction columns), the corrections' summary and the run-level checks as reported
-    (``judged.shared`` with the refined registration correction; the verdicts keep
-    ``judged.shared``)."""
+    (``calibrated/``), then the corrected poses of the chosen frames."""
     out = Path(config.out)
     rows = judged.rows
     shared = judged.shared
     if shared is not None:  # a failed registration check: its estimate refined
-        from pgt_check.correct.registration import refine_run
+        shared = _refined(traj, measurements, shared, config, out)
+    rig = _calibrated_rig(traj, judged.shared, config, out)
+    corrections = None
+    if config.correct.frames != "none":  # corrected poses (pgt_check.correct.frames)
+        from pgt_check.correct.frames import correct_run
 
-        measure = PlainMeasure()
-        try:
-            shared = refine_run(traj, measurements, judged.shared, config, measure, out)
-        except RunInterrupted:
+        rows, corrections = correct_run(traj, measurements, rows, config, checker_factory, out)
+    return CorrectedRun(rows, shared, rig, corrections)
+
+
+def _refined(traj: Trajectory, measurements: list[FrameMeasurement], shared: SharedChecks,
+             config: RunConfig, out: Path) -> SharedChecks:
+    """``shared`` with a failed registration check's estimate refined (``correct.registration``);
+    ``shared`` itself when the refinement fails (logged; raised with ``fail_fast``)."""
+    from pgt_check.correct.registration import refine_run
+
+    measure = PlainMeasure()
+    try:
+        return refine_run(traj, measurements, shared, config, measure, out)
+    except RunInterrupted:
+        raise
+    except Exception as err:  # the verdicts and the first estimate stand without it
+        if config.fail_fast:
             raise
-        except Exception as err:  # the verdicts and the first estimate stand without it
-            if config.fail_fast:
-                raise
-            logger.error("the registration refinement failed (%s); the first estimate is "
-                         "reported", format_exception(err))
-        finally:
-            measure.close()
-    corrections: dict[str, Any] = {}
-    # a significant calibration estimate written exactly, as a rig (``correct.calibration``)
+        logger.error("the registration refinement failed (%s); the first estimate is "
+                     "reported", format_exception(err))
+        return shared
+    finally:
+        measure.close()
+
+
+def _calibrated_rig(traj: Trajectory, shared: SharedChecks | None, config: RunConfig,
+                    out: Path) -> CalibratedRig | None:
+    """A significant calibration estimate written exactly, as a rig (``correct.calibration``);
+    None when there is none or it cannot be written (logged; raised with ``fail_fast``)."""
     from pgt_check.correct.calibration import write_calibrated_rig
 
     try:
-        rig = write_calibrated_rig(traj, judged.shared, out)
+        return write_calibrated_rig(traj, shared, out)
     except (OSError, ValueError, InputError) as err:  # the verdicts stand without it
         if config.fail_fast:
             raise
         logger.error("calibrated/ could not be written (%s)", err)
-        rig = None
-    if rig is not None:
-        corrections["calibrated_rig"] = rig
-    if config.correct.frames != "none":  # corrected poses (pgt_check.correct.frames)
-        from pgt_check.correct.frames import correct_run
-
-        rows, part = correct_run(traj, measurements, rows, config, checker_factory, out)
-        corrections.update(part)
-    return rows, corrections, shared
+        return None
 
 
 def self_test_stage(traj: Trajectory, rows: list[dict[str, Any]], judged: Any,

@@ -211,10 +211,10 @@ def _check_frames_locked(
     )
     judged = judge_run(measurements, config)
     traj = trajectory if trajectory is not None else Trajectory(tuple(frames))
-    rows, corrections, shared = correct_stage(traj, measurements, judged, config,
-                                              checker_factory)
+    corrected = correct_stage(traj, measurements, judged, config, checker_factory)
+    rows = corrected.rows
     # summary.json's run-level section: the checks with the refined registration correction
-    shared_extra = replace(judged, shared=shared).summary_extra()
+    shared_extra = replace(judged, shared=corrected.shared).summary_extra()
     if config.self_test > 0:  # the stated detection limits tested (``verdict.self_test``)
         shared_extra["self_test"] = self_test_stage(traj, rows, judged, shared_extra, config)
     assets = write_report_assets(
@@ -232,7 +232,7 @@ def _check_frames_locked(
         },
         **(extra or {}),
         **shared_extra,
-        **corrections,
+        **corrected.summary_extra(),
         "wall_time_s": time.perf_counter() - t0,
     }
     return write_outputs(out, rows, config, extra=summary_extra, assets=assets)

@@ -22,6 +22,7 @@ significant.
 from __future__ import annotations
 
 import logging
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -76,8 +77,8 @@ def significant_calibrations(shared: SharedChecks | None) -> dict[str, Calibrati
 
 def write_calibrated_rig(
     trajectory: Trajectory, shared: SharedChecks | None, out: str | Path
-) -> dict[str, Any] | None:
-    """Write ``out/calibrated/`` (module docstring) and return its summary entry; None (and an
+) -> CalibratedRig | None:
+    """Write ``out/calibrated/`` (module docstring) and return what it holds; None (and an
     earlier run's files removed) when no camera's calibration is significant."""
     from pgt_check.io.lamar_write import write_lamar
 
@@ -99,19 +100,43 @@ def write_calibrated_rig(
     (folder / "rigs.txt").unlink(missing_ok=True)
     files = write_lamar(trajectory, folder, rigs=rigs)
     logger.info("wrote %s (the calibration estimate as a rig, %d camera(s))", folder, len(rigs))
-    return {
-        "folder": CALIBRATED_DIR,
-        "trajectory_file": f"{CALIBRATED_DIR}/{files['trajectories'].name}",
-        "cameras": {camera_key(c): _camera_entry(e, r) for c, (e, r) in rigs.items()},
-    }
+    return CalibratedRig(
+        trajectory_file=f"{CALIBRATED_DIR}/{files['trajectories'].name}",
+        cameras={camera_key(c): RigCamera.of(e, r) for c, (e, r) in rigs.items()},
+    )
 
 
-def _camera_entry(camera: Camera, rig: np.ndarray) -> dict[str, Any]:
-    from pgt_check.geometry.transforms import rotation_angle_deg
+@dataclass(frozen=True)
+class RigCamera:
+    """One camera of the rig session: the camera written (focal lengths scaled) and where it
+    sits in the posed sensor (``rig_from_cam``, its rotation and translation sizes)."""
 
-    return {
-        "camera_written": camera_key(camera),
-        "rig_from_cam": np.asarray(rig).tolist(),
-        "rotation_deg": rotation_angle_deg(rig[:3, :3]),
-        "translation": float(np.linalg.norm(rig[:3, 3])),
-    }
+    camera_written: str  # ``camera_key`` of the camera written
+    rig_from_cam: np.ndarray  # (4, 4)
+    rotation_deg: float
+    translation: float
+
+    @classmethod
+    def of(cls, camera: Camera, rig: np.ndarray) -> RigCamera:
+        from pgt_check.geometry.transforms import rotation_angle_deg
+
+        rig = np.asarray(rig, np.float64)
+        return cls(camera_key(camera), rig, rotation_angle_deg(rig[:3, :3]),
+                   float(np.linalg.norm(rig[:3, 3])))
+
+    def to_json(self) -> dict[str, Any]:
+        return {"camera_written": self.camera_written, "rig_from_cam": self.rig_from_cam.tolist(),
+                "rotation_deg": self.rotation_deg, "translation": self.translation}
+
+
+@dataclass(frozen=True)
+class CalibratedRig:
+    """What ``write_calibrated_rig`` wrote: summary.json -> ``calibrated_rig``."""
+
+    trajectory_file: str  # relative to the output folder
+    cameras: dict[str, RigCamera]  # by the calibration check's camera key
+    folder: str = CALIBRATED_DIR
+
+    def to_json(self) -> dict[str, Any]:
+        return {"folder": self.folder, "trajectory_file": self.trajectory_file,
+                "cameras": {k: c.to_json() for k, c in self.cameras.items()}}

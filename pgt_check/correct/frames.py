@@ -24,6 +24,7 @@ from __future__ import annotations
 import logging
 import time
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -136,8 +137,8 @@ def correct_run(
     checker_factory: Callable[[], Any],
     out: str | Path,
     clock: Callable[[], float] = time.perf_counter,
-) -> tuple[list[dict[str, Any]], dict[str, Any]]:
-    """Run the correction step; returns (rows with the correction columns, summary part)."""
+) -> tuple[list[dict[str, Any]], CorrectionsSummary]:
+    """Run the correction step; returns (rows with the correction columns, its summary)."""
     from pgt_check.correct.registration import main_pass_seconds
     from pgt_check.files import atomic_write_text
     from pgt_check.io.writers import write_trajectory_file
@@ -155,7 +156,7 @@ def correct_run(
     fmt = write_trajectory_file(corrected_trajectory(trajectory, corrections),
                                 out / CORRECTED_NAME)
     atomic_write_text(out / BAD_FRAMES_NAME, bad_frames_text(rows, corrections))
-    summary = {"corrections": _corrections_summary(corrections, config, stopped, fmt)}
+    summary = _corrections_summary(corrections, config, stopped, fmt)
     return add_correction_columns(rows, corrections), summary
 
 
@@ -213,19 +214,40 @@ def _correct_one(checker: Any, fid: str, frame: Frame, m: FrameMeasurement | Non
         return Correction(fid, False, "internal_error")
 
 
+@dataclass(frozen=True)
+class CorrectionsSummary:
+    """summary.json -> ``corrections``: how many frames the correction step tried, corrected
+    and applied, why it stopped early (None when it did not), and the files it wrote."""
+
+    mode: str
+    attempted: int
+    succeeded: int
+    not_attempted: int
+    stopped: str | None
+    applied: int
+    format: str  # of the corrected trajectory
+    file: str = CORRECTED_NAME
+    bad_frames_file: str = BAD_FRAMES_NAME
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "mode": self.mode, "attempted": self.attempted, "succeeded": self.succeeded,
+            "not_attempted": self.not_attempted, "stopped": self.stopped,
+            "applied": self.applied, "file": self.file, "format": self.format,
+            "bad_frames_file": self.bad_frames_file,
+        }  # fmt: skip
+
+
 def _corrections_summary(
     corrections: Mapping[str, Correction], config: RunConfig, stopped: str, fmt: str
-) -> dict[str, Any]:
+) -> CorrectionsSummary:
     """The summary's ``corrections`` entry (``fmt``: the corrected trajectory's format)."""
-    applied = [c for c in corrections.values() if c.applied]
-    return {
-        "mode": config.correct.frames,
-        "attempted": sum(c.reason != "time_limit" for c in corrections.values()),
-        "succeeded": sum(c.success for c in corrections.values()),
-        "not_attempted": sum(c.reason == "time_limit" for c in corrections.values()),
-        "stopped": stopped or None,
-        "applied": len(applied),
-        "file": CORRECTED_NAME,
-        "format": fmt,
-        "bad_frames_file": BAD_FRAMES_NAME,
-    }
+    return CorrectionsSummary(
+        mode=config.correct.frames,
+        attempted=sum(c.reason != "time_limit" for c in corrections.values()),
+        succeeded=sum(c.success for c in corrections.values()),
+        not_attempted=sum(c.reason == "time_limit" for c in corrections.values()),
+        stopped=stopped or None,
+        applied=sum(c.applied for c in corrections.values()),
+        format=fmt,
+    )

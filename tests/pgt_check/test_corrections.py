@@ -165,7 +165,7 @@ def test_corrections_stop_at_their_time_budget(tmp_path, monkeypatch):
                                   "correct": {"budget": 2.0}})  # 20 s
     rows, summary = frames_mod.correct_run(traj, ms, rows, config, Checker, tmp_path,
                                            clock=lambda: now[0])
-    c = summary["corrections"]
+    c = summary.to_json()  # summary.json -> corrections
     # 5 frames (20 s) fit; a sixth (24 s) would exceed the budget
     assert c["attempted"] == 5 and c["not_attempted"] == 5
     assert c["stopped"].startswith("time limit: 5 frame(s) took 20.0 s of the 20.0 s budget")
@@ -175,4 +175,4 @@ def test_corrections_stop_at_their_time_budget(tmp_path, monkeypatch):
                                   "correct": {"budget": 0}})
     _, summary = frames_mod.correct_run(traj, ms, rows, config, Checker, tmp_path,
                                         clock=lambda: now[0])
-    assert summary["corrections"]["attempted"] == 10 and summary["corrections"]["stopped"] is None
+    assert summary.attempted == 10 and summary.stopped is None

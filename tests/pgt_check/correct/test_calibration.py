@@ -63,8 +63,9 @@ def test_the_rig_session_reads_back_as_the_calibrated_cameras(tmp_path, random_r
     shared = SimpleNamespace(calibration={camera_key(CAM): est,
                                           camera_key(OTHER): _estimate("passed")})
     entry = write_calibrated_rig(traj, shared, tmp_path / "out")
-    assert entry is not None and list(entry["cameras"]) == [camera_key(CAM)]
-    back = read_trajectory(tmp_path / "out" / entry["trajectory_file"])
+    assert entry is not None and list(entry.cameras) == [camera_key(CAM)]
+    assert entry.to_json()["trajectory_file"] == "calibrated/trajectories.txt"
+    back = read_trajectory(tmp_path / "out" / entry.trajectory_file)
     assert [f.frame_id.split("/")[0] for f in back] == [f.frame_id.split("/")[0] for f in traj]
     true_from_checked = np.eye(4)
     true_from_checked[:3, :3] = np.asarray(est.rotation)
@@ -81,7 +82,7 @@ def test_the_rig_session_reads_back_as_the_calibrated_cameras(tmp_path, random_r
                         true_from_checked, atol=1e-9)
         assert read.camera.focal == pytest.approx((525.0 * 0.9989, 525.0 * 0.9989))
         assert read.camera.principal_point == pytest.approx(CAM.principal_point)
-    assert entry["cameras"][camera_key(CAM)]["translation"] == pytest.approx(
+    assert entry.to_json()["cameras"][camera_key(CAM)]["translation"] == pytest.approx(
         np.linalg.norm(est.translation))
 
 
@@ -115,5 +116,5 @@ def test_frames_without_an_image_keep_their_pose(tmp_path):
                     timestamp=float(i)) for i in range(3)]
     shared = SimpleNamespace(calibration={camera_key(CAM): _estimate()})
     entry = write_calibrated_rig(Trajectory(tuple(frames)), shared, tmp_path)
-    back = read_trajectory(tmp_path / entry["trajectory_file"])
+    back = read_trajectory(tmp_path / entry.trajectory_file)
     assert len(back) == 3 and [f.image_file is None for f in back] == [False, True, False]
