@@ -27,6 +27,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from .checkpoint import CHECKPOINT_KEYS, read_checkpoint  # noqa: F401  (re-exported)
 from .config import MarinerConfig
 from .frozen import ARCHITECTURE as FROZEN_ARCHITECTURE
 from .frozen import FrozenMariner, FrozenMarinerConfig
@@ -45,7 +46,6 @@ __all__ = [
 ]
 
 DEFAULT_CHECKPOINT = Path(__file__).resolve().parent / "weights" / "mariner.pt"
-CHECKPOINT_KEYS = frozenset({"config", "state_dict", "meta"})
 FORMAT_VERSION = 1
 
 
@@ -86,16 +86,7 @@ def load_checkpoint(
     path: str | Path, map_location: str | torch.device = "cpu"
 ) -> Mariner | FrozenMariner:
     """Load a checkpoint strictly (``weights_only=True``, ``strict=True``) into a fresh model."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"MaRINeR checkpoint not found: {path}")
-    ckpt = torch.load(path, map_location=map_location, weights_only=True)
-    if not isinstance(ckpt, dict) or set(ckpt) != CHECKPOINT_KEYS:
-        keys = sorted(ckpt) if isinstance(ckpt, dict) else type(ckpt).__name__
-        raise ValueError(
-            f"{path} is not a MaRINeR checkpoint: expected keys "
-            f"{sorted(CHECKPOINT_KEYS)}, got {keys}"
-        )
+    ckpt = read_checkpoint(path, map_location)
     model = build_model(dict(ckpt["config"]))
     model.load_state_dict(ckpt["state_dict"], strict=True)  # fp16 storage: copied to float32
     logger.info("loaded MaRINeR checkpoint %s (meta %s)", path, ckpt["meta"])

@@ -232,11 +232,14 @@ class FrozenMariner(nn.Module):
     @classmethod
     def from_pretrained(cls, path: str) -> FrozenMariner:
         """Load a checkpoint strictly (``weights_only=True``); it must be a frozen-matcher one."""
-        from .enhancer import load_checkpoint
+        from .checkpoint import read_checkpoint
 
-        model = load_checkpoint(path)
-        if not isinstance(model, cls):
-            raise ValueError(f"{path} holds a {type(model).__name__}, not a FrozenMariner")
+        ckpt = read_checkpoint(path)
+        config = dict(ckpt["config"])
+        if config.get("architecture") != ARCHITECTURE:
+            raise ValueError(f"{path} holds a Mariner (the spec network), not a FrozenMariner")
+        model = cls(FrozenMarinerConfig.from_dict(config))
+        model.load_state_dict(ckpt["state_dict"], strict=True)  # fp16 storage: cast to float32
         return model
 
     # -- frozen part -------------------------------------------------------------------------
