@@ -17,6 +17,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import time
 from pathlib import Path
 
@@ -168,8 +169,9 @@ def _write_report(results: list[dict], t_start: float) -> None:
     text = "\n".join([
         "# Error against run time",
         "",
-        f"Machine: {machine()}; torch threads = 2; the cores were shared with other jobs "
-        f"(a training run) while this ran. Command: `{command_line()}`. "
+        f"Machine: {machine()}; torch threads = 2; load average at the end "
+        f"{' / '.join(f'{x:.1f}' for x in os.getloadavg())} (1 / 5 / 15 min: other jobs on "
+        f"the cores make the times pessimistic). Command: `{command_line()}`. "
         f"Total {time.perf_counter() - t_start:.0f} s.",
         "",
         "Grid points are `matcher / enhancement / longest side used for matching`. Each frame is "
