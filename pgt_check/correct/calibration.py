@@ -97,7 +97,6 @@ def write_calibrated_rig(
         if folder.is_dir() and not any(folder.iterdir()):
             folder.rmdir()
         return None
-    (folder / "rigs.txt").unlink(missing_ok=True)
     files = write_lamar(trajectory, folder, rigs=rigs)
     logger.info("wrote %s (the calibration estimate as a rig, %d camera(s))", folder, len(rigs))
     return CalibratedRig(

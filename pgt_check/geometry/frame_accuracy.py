@@ -297,8 +297,8 @@ def _replicates(
 ) -> tuple[np.ndarray, np.ndarray]:
     """(reps (B, 3), devs (B, 3)): each replicate's sizes (``_sizes``) and its distance to the
     estimate (r, t) in the same three measures; ``pts`` (N, 3) inlier points, ``ref`` (N, 2)
-    their unmoved projections. All replicates at once (the per-replicate loop cost ~35 ms a
-    frame: reports/pipeline_timing.md)."""
+    their unmoved projections. All replicates at once: a loop over them was a visible part of
+    every frame's cost (reports/pipeline_timing.md)."""
     steps = np.asarray(steps, np.float64).reshape(-1, 6)
     dr = _exp_batch(steps[:, :3])  # (B, 3, 3)
     rb = dr @ r
