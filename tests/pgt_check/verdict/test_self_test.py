@@ -120,6 +120,9 @@ def test_boxes_self_test_end_to_end(boxes_self_test, capsys):
                 assert len(p["missed"]) == p["n"] - p["flagged"]
                 assert all(x.split(" (")[0] in st["frame_ids"] and " px / " in x
                            for x in p["missed"])
+        if c["test"] == "shared":  # the given poses once, then both directions per size
+            assert [p["n"] for p in c["points"]] == [1, *[2] * len(MULTIPLES)]
+            assert all(len(p["status"].split(" / ")) == p["n"] for p in c["points"])
         # monotone-ish: no share falls by more than one trial in six below an earlier one
         assert all(b >= a - 1 / 6 - 1e-9 for i, a in enumerate(shares) for b in shares[i:])
         assert c["stated"] == pytest.approx(
@@ -191,3 +194,13 @@ def test_a_limit_not_stated_is_untested_not_understated():
     stated = _curve("shared", "translation", 0.02, 2.7,
                     [CurvePoint(0.0, 0.0, 1, 0, 0, 0), CurvePoint(2.0, 0.04, 1, 0, 0, 0)])
     assert stated.judgement == "understated"
+
+
+def test_a_shared_point_counts_both_directions():
+    from pgt_check.verdict.self_test import _shared_point
+
+    p = _shared_point(1.3, 0.5, [("failed", "failed"), ("passed", "inconclusive")])
+    assert (p.n, p.flagged, p.failed, p.unverifiable) == (2, 1, 1, 0)
+    assert p.share == 0.5 and p.status == "failed / passed (rigid inconclusive)"
+    q = _shared_point(0.0, 0.0, [("not_checked", "not_checked")])
+    assert (q.n, q.flagged, q.unverifiable) == (1, 0, 1)
