@@ -58,6 +58,9 @@ class Enhancer(Protocol):
 
     name: str
     evidence: Evidence
+    #: the enhanced image carries detail only up to this short side (px; None: the render's
+    #: own): the enhanced path matches it at that size (``measure.steps.match_path``)
+    detail_short_side: int | None
 
     def enhance(
         self, view: View, reference: ReferenceView, renderer: Renderer

@@ -87,6 +87,7 @@ class ReprojectEnhancer:
 
     name = "reproject"
     evidence = Evidence.RELATIVE
+    detail_short_side = None  # the reference photo's own detail, at the render's size
 
     @classmethod
     def from_config(cls, config: Any) -> ReprojectEnhancer:

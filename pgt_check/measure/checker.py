@@ -20,9 +20,8 @@ import numpy as np
 from pgt_check.config import RunConfig
 from pgt_check.enhance.base import Evidence, ReferenceView, View
 from pgt_check.errors import InputError, ReferenceUnreadableError
-from pgt_check.measure.edge_path import EdgePath, edge_evidence, measure_edges
+from pgt_check.measure.edge_path import EdgePath, edge_extra, measure_edges
 from pgt_check.measure.paths import (
-    MAX_EVIDENCE_POINTS,
     FrameImages,
     PathImages,
     PathResult,
@@ -223,7 +222,7 @@ class FrameChecker:
         absolute = [(raw, "raw")]
         if enh is not None and self.enhancer.evidence is Evidence.ABSOLUTE:
             absolute.append((enh, method))
-        extra = [] if edges is None else _edge_extra(edges)
+        extra = [] if edges is None else edge_extra(edges)
         return replace_measurement(
             m,
             evidence=absolute_evidence(absolute, w.render.depth, w.cam_w, w.scale, extra=extra),
@@ -295,7 +294,7 @@ class FrameChecker:
         return replace_measurement(
             m,
             evidence=absolute_evidence(
-                [], w.render.depth, w.cam_w, w.scale, extra=_edge_extra(edges)
+                [], w.render.depth, w.cam_w, w.scale, extra=edge_extra(edges)
             ),
             edges=edges.measurement,
             enhance_why=EnhanceWhy.EDGES_DECISIVE,
@@ -406,7 +405,7 @@ class FrameChecker:
             res = match_path(
                 self.matcher, self.config.homography, out.image, photo_w,
                 view.render.coverage, size, scale, camera, clock,
-                getattr(self.enhancer, "detail_short_side", None),
+                self.enhancer.detail_short_side,
             )
             tried.append((ref.frame_id, res))
             if best is None or res.n_inliers > best.n_inliers:
@@ -430,11 +429,6 @@ def _chosen_path(raw: PathResult, enh: PathResult | None, edges: EdgePath | None
             if res is not None:
                 keep.paths[name] = res.images(scale)
     return chosen, path_name
-
-
-def _edge_extra(edges: EdgePath) -> list[tuple[np.ndarray, np.ndarray, str]]:
-    """The edge path's matched points as the ``extra`` evidence source of ``absolute_evidence``."""
-    return [(*edge_evidence(edges, MAX_EVIDENCE_POINTS), "edges")]
 
 
 def build_frame_checker(

@@ -15,6 +15,7 @@ import numpy as np
 
 from pgt_check.config import EdgeConfig
 from pgt_check.enhance.base import Evidence
+from pgt_check.measure.paths import MAX_EVIDENCE_POINTS
 from pgt_check.measure.record import PathMeasurement
 from pgt_check.render.base import Render
 from pgt_check.types import Camera
@@ -137,6 +138,12 @@ def _edge_path(m: PathMeasurement, points_from: Any, cam_w: Camera, scale: tuple
         empty = np.zeros((0, 2))
         return EdgePath(m, empty, empty, np.zeros(0), cam_w, scale)
     return EdgePath(m, mt.render_points, mt.photo_points, mt.depth, cam_w, scale)
+
+
+def edge_extra(path: EdgePath) -> list[tuple[np.ndarray, np.ndarray, str]]:
+    """The matched edge points as the ``extra`` evidence source of
+    ``measure.paths.absolute_evidence`` (at most ``MAX_EVIDENCE_POINTS``)."""
+    return [(*edge_evidence(path, MAX_EVIDENCE_POINTS), "edges")]
 
 
 def edge_evidence(path: EdgePath, max_points: int) -> tuple[np.ndarray, np.ndarray]:
