@@ -2,8 +2,9 @@
 
 Two steps, both resumable, both reading a frame cache (``mariner_core.data``):
 
-1. ``cache``: for every training frame and render variant, ``pairs`` references drawn 10-60
-   frames away; the frozen matching (``FrozenMariner.prepare``) of each triple is stored once
+1. ``cache`` (``mariner_core.frozen_cache``): for every training frame and render variant,
+   ``pairs`` references drawn 10-60 frames away; the frozen matching
+   (``FrozenMariner.prepare``) of each triple is stored once
    (uint8 images, float16 similarity maps at 1/4 resolution) in ``OUT/triples.npy`` +
    ``OUT/scores.npy``. Validation triples (the pool's last 15 %, reference ``val_offset`` frames
    away, coloured and colourless, and the same frames with Ref = target) go to ``OUT/val_*.npy``.
@@ -29,32 +30,15 @@ from typing import Any
 
 import numpy as np
 import torch
-import torch.nn.functional as F
 
-from .data import (
-    RENDER_VARIANTS,
-    FrameCache,
-    load_frame_cache,
-    reference_candidates,
-    split_frames,
-    to_tensor,
-)
 from .frozen import FrozenMariner, FrozenMarinerConfig
+from .frozen_cache import build_triples, layout
 from .metrics import psnr_y
 from .train_config import cosine_lr
 
 logger = logging.getLogger(__name__)
 
 __all__ = ["TrainSettings", "build_triples", "train"]
-
-#: channel layout of one cached triple (uint8): render 3, warped 3k, colour 3, target 3
-def _layout(k: int) -> dict[str, slice]:
-    return {
-        "render": slice(0, 3),
-        "warped": slice(3, 3 + 3 * k),
-        "colour": slice(3 + 3 * k, 6 + 3 * k),
-        "target": slice(6 + 3 * k, 9 + 3 * k),
-    }
 
 
 @dataclass(frozen=True)
@@ -72,104 +56,6 @@ class TrainSettings:
     colour_aug: float = 0.0
     channels: int = 24
     blocks: tuple[int, int, int] = (1, 2, 3)
-
-
-def _u8(x: torch.Tensor) -> np.ndarray:
-    return (x.clamp(0, 1) * 255.0).round().to(torch.uint8).numpy()
-
-
-def _prepare_one(
-    model: FrozenMariner, render: np.ndarray, ref: np.ndarray, target: np.ndarray,
-    ref_features: torch.Tensor | None = None,
-):
-    prep = model.prepare(to_tensor(render)[None], to_tensor(ref)[None], low_res_scores=True,
-                         reference_features=ref_features)
-    x = prep["render"]
-    tgt = F.pad(to_tensor(target)[None], (0, x.shape[-1] - target.shape[1],
-                                            0, x.shape[-2] - target.shape[0]), mode="replicate")
-    img = torch.cat([prep["render"], prep["warped"], prep["colour"], tgt], 1)[0]
-    return _u8(img), prep["score"][0].half().numpy()
-
-
-def build_triples(
-    data: str | Path, out: str | Path, pairs: int = 2, val_offset: float = 20.0,
-    val_every: int = 4, seed: int = 0, weights: str | Path | None = None,
-) -> None:
-    """Write the cached matching of training and validation triples (see module docstring)."""
-    from .pretrained import backbone_state_dict
-
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    cache = load_frame_cache(data)
-    train_pos, val_pos = split_frames(cache.t)
-    cfg = FrozenMarinerConfig()
-    model = FrozenMariner(cfg).eval()
-    model.load_vgg(backbone_state_dict("vgg16"))
-    rng = np.random.default_rng(seed)
-    variants = [v for v in RENDER_VARIANTS if v in cache.images]
-    jobs: list[tuple[int, int, str]] = []
-    for i in train_pos:
-        cand = reference_candidates(cache.t, int(i), train_pos, 10.0, 60.0)
-        if not len(cand):
-            continue
-        for v in variants:
-            for j in rng.choice(cand, size=min(pairs, len(cand)), replace=False):
-                jobs.append((int(i), int(j), v))
-    jobs = [jobs[n] for n in rng.permutation(len(jobs))]  # any prefix is a random subset
-    val_jobs: list[tuple[int, int, str, str]] = []
-    for i in val_pos[::val_every]:
-        d = np.abs(cache.t[val_pos] - (cache.t[i] + val_offset))
-        d_b = np.abs(cache.t[val_pos] - (cache.t[i] - val_offset))
-        j = val_pos[np.argmin(d)] if d.min() <= d_b.min() else val_pos[np.argmin(d_b)]
-        for v in ("render", "render_colourless"):
-            if v in cache.images:
-                val_jobs.append((int(i), int(j), v, "offset"))
-        if "render_colourless" in cache.images:
-            val_jobs.append((int(i), int(i), "render_colourless", "ref_target"))
-        val_jobs.append((int(i), int(i), "render", "ref_target"))
-    meta = {
-        "data": str(data), "pairs": pairs, "val_offset": val_offset, "seed": seed,
-        "config": cfg.to_dict(), "train_jobs": jobs,
-        "val_jobs": [list(j) for j in val_jobs],
-    }
-    (out / "triples.json").write_text(json.dumps(meta))
-    _write_set(model, cache, [(i, j, v) for i, j, v, _ in val_jobs], out / "val", "val")
-    _write_set(model, cache, jobs, out / "train", "train")
-
-
-def _write_set(model: FrozenMariner, cache: FrameCache, jobs: list, stem: Path, name: str) -> None:
-    img_path = stem.with_name(stem.name + "_images.npy")
-    sc_path = stem.with_name(stem.name + "_scores.npy")
-    done_path = stem.with_name(stem.name + "_done.json")
-    done = json.loads(done_path.read_text())["n"] if done_path.is_file() else 0
-    photo_features: dict[int, torch.Tensor] = {}  # each photo's relu3_3 once (~2 MB each)
-
-    def prepared(n: int) -> tuple[np.ndarray, np.ndarray]:
-        i, j, v = jobs[n]
-        if j not in photo_features:
-            photo_features[j] = model.features(to_tensor(cache.images["photo"][j])[None])
-        return _prepare_one(model, cache.images[v][i], cache.images["photo"][j],
-                            cache.images["photo"][i], photo_features[j])
-
-    first = prepared(done if done < len(jobs) else 0)  # the array shapes
-    mode = "r+" if img_path.is_file() and done > 0 else "w+"
-    imgs = np.lib.format.open_memmap(img_path, mode=mode, dtype=np.uint8,
-                                     shape=(len(jobs), *first[0].shape))
-    scs = np.lib.format.open_memmap(sc_path, mode=mode, dtype=np.float16,
-                                    shape=(len(jobs), *first[1].shape))
-    t0 = time.perf_counter()
-    for n in range(done, len(jobs)):
-        imgs[n], scs[n] = first if n == done else prepared(n)
-        if (n + 1) % 100 == 0 or n + 1 == len(jobs):
-            imgs.flush()
-            scs.flush()
-            done_path.write_text(json.dumps({"n": n + 1}))
-            el = time.perf_counter() - t0
-            logger.info("%s: %d/%d triples (%.0f s, %.2f s each)", name, n + 1, len(jobs), el,
-                        el / (n + 1 - done))
-    imgs.flush()
-    scs.flush()
-    done_path.write_text(json.dumps({"n": len(jobs)}))
 
 
 def _recolour(
@@ -208,7 +94,7 @@ def _batch_inputs(
     imgs: np.ndarray, scores: np.ndarray, k: int, idx: np.ndarray, crop: int | None,
     rng: np.random.Generator | None, colour_aug: float = 0.0,
 ) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
-    lay = _layout(k)
+    lay = layout(k)
     x = torch.from_numpy(np.ascontiguousarray(imgs[idx])).float().div_(255.0)
     sc = torch.from_numpy(np.ascontiguousarray(scores[idx])).float()
     h, w = x.shape[-2:]
