@@ -42,13 +42,18 @@ CALIBRATED_DIR = "calibrated"
 CALIBRATED_FILES = ("sensors.txt", "images.txt", "trajectories.txt", "rigs.txt")
 
 
-def with_focal_scale(camera: Camera, scale: float) -> Camera:
-    """``camera`` with its focal length(s) multiplied by ``scale`` (nothing else changed)."""
+def with_focal_scale(
+    camera: Camera, scale: float, principal_point: tuple[float, float] | None = None
+) -> Camera:
+    """``camera`` with its focal length(s) multiplied by ``scale`` and, if given, its principal
+    point replaced (OpenCV pixels); distortion and size unchanged."""
     names = CAMERA_MODELS[camera.model]
     params = dict(zip(names, camera.params, strict=True))
     for key in ("f", "fx", "fy"):
         if key in params:
             params[key] *= scale
+    if principal_point is not None:
+        params["cx"], params["cy"] = principal_point
     return Camera(camera.model, camera.width, camera.height, tuple(params[n] for n in names))
 
 

@@ -29,8 +29,9 @@ from typing import Any
 import numpy as np
 
 from pgt_check._checks import check_shape
+from pgt_check.correct.calibration import with_focal_scale
 from pgt_check.files import atomic_write_text
-from pgt_check.types import CAMERA_MODELS, Camera, opencv_to_colmap_params
+from pgt_check.types import Camera, opencv_to_colmap_params
 
 logger = logging.getLogger(__name__)
 
@@ -98,16 +99,9 @@ def calibrated_camera(
     truth = _project(ks, x @ r.T + t)
     residual = float(np.mean(np.linalg.norm(_project(k2, x) - truth, axis=1)))
     effect = float(np.mean(np.linalg.norm(_project(k, x) - truth, axis=1)))
-    names = CAMERA_MODELS[camera.model]
-    new = dict(zip(names, camera.params, strict=True))
-    if "f" in new:
-        new["f"] *= focal_scale
-    else:
-        new["fx"], new["fy"] = new["fx"] * focal_scale, new["fy"] * focal_scale
-    new["cx"], new["cy"] = cx2, cy2
     roll = math.degrees(math.atan2(r[1, 0] - r[0, 1], r[0, 0] + r[1, 1]))
     return CalibratedCamera(
-        Camera(camera.model, camera.width, camera.height, tuple(new[n] for n in names)),
+        with_focal_scale(camera, focal_scale, (float(cx2), float(cy2))),
         roll, (float(t[0]), float(t[1]), float(t[2])), residual, effect,
     )  # fmt: skip
 
