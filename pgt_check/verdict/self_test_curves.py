@@ -150,16 +150,25 @@ def detection_point(ks: Sequence[float], shares: Sequence[float | None], q: floa
     return None
 
 
+def _band_end(points: Sequence[CurvePoint]) -> CurvePoint | None:
+    """The point with trials at the largest measured k in [1, 1.3] (the band's upper end)."""
+    end = [p for p in points if 1.0 <= p.k <= 1.0 + HELD_TOLERANCE + 1e-9 and p.n > 0]
+    return max(end, key=lambda q: q.k) if end else None
+
+
+def _in_band(k50: float | None, k95: float | None) -> bool:
+    """``k_50`` or ``k_95`` within ``HELD_TOLERANCE`` of 1."""
+    lo, hi = 1.0 - HELD_TOLERANCE, 1.0 + HELD_TOLERANCE
+    return any(k is not None and lo <= k <= hi for k in (k50, k95))
+
+
 def upper_end_p(points: Sequence[CurvePoint]) -> float | None:
-    """P(this few flagged or fewer | 95 % detection) at the largest measured k in [1, 1.3]
-    (exact binomial, one-sided); None when no point with trials lies there."""
+    """P(this few flagged or fewer | 95 % detection) at the band's upper end (``_band_end``;
+    exact binomial, one-sided); None when no point with trials lies there."""
     from scipy.stats import binom
 
-    band = [p for p in points if 1.0 <= p.k <= 1.0 + HELD_TOLERANCE + 1e-9 and p.n > 0]
-    if not band:
-        return None
-    p = max(band, key=lambda q: q.k)
-    return float(binom.cdf(p.flagged, p.n, 0.95))
+    p = _band_end(points)
+    return None if p is None else float(binom.cdf(p.flagged, p.n, 0.95))
 
 
 def judge_curve(k50: float | None, k95: float | None, baseline: float | None,
@@ -169,7 +178,7 @@ def judge_curve(k50: float | None, k95: float | None, baseline: float | None,
     if baseline is None or baseline >= 0.5:
         return "untested"
     lo, hi = 1.0 - HELD_TOLERANCE, 1.0 + HELD_TOLERANCE
-    if any(k is not None and lo <= k <= hi for k in (k50, k95)):
+    if _in_band(k50, k95):
         return "held"
     if (k50 is not None and k50 <= hi and (k95 is None or k95 > hi) and upper_p is not None
             and upper_p >= NOISE_ALPHA):
@@ -211,11 +220,9 @@ def curve_phrase(c: DetectionCurve) -> str:
     if c.judgement == "untested":
         return f"{curve_label(c)} untested"
     noise = ""
-    band = (1.0 - HELD_TOLERANCE, 1.0 + HELD_TOLERANCE)
-    in_band = any(k is not None and band[0] <= k <= band[1] for k in (c.k50, c.k95))
-    if c.judgement == "held" and c.upper_p is not None and not in_band:
-        end = max((p for p in c.points if 1.0 <= p.k <= band[1] + 1e-9 and p.n > 0),
-                  key=lambda p: p.k)
+    end = _band_end(c.points)
+    if c.judgement == "held" and c.upper_p is not None and end is not None \
+            and not _in_band(c.k50, c.k95):
         noise = (f"; {end.flagged}/{end.n} flagged at {end.k:g}x is within the sampling noise "
                  f"of 95 % detection, p = {c.upper_p:.2f}")
     return (f"{curve_label(c)} {c.judgement} (50 % at {_g(c.k50)}x, 95 % at {_g(c.k95)}x"
