@@ -56,38 +56,8 @@ def datasets(names: list[str], n: int) -> dict[str, tuple[Trajectory, Path, dict
             out[name] = (_subset(read_trajectory(r / "trajectories.txt"), n), r / "mesh.ply",
                          merge(fast, {"verdict": {"remove_calibration": True}}),
                          f"--preset fast --remove-calibration, {n} frames evenly spaced")
-        elif name == "7s-rig":
-            # the 7-Scenes frames with their RGB-vs-depth offset written as a rig by a first run
-            # (out/calibrated/): judged without removing a calibration, so the shared limits
-            # are stated and tested on this data too
-            # judged on the mesh's geometry (shaded renders): its colours were painted with the
-            # depth camera's poses, so texture matches show the offset the other way once the
-            # photos sit where the RGB camera is (the run's texture finding says so)
-            r = shared_data() / "7scenes_redkitchen"
-            first = _subset(read_trajectory(r / "trajectories.txt"), n)
-            shaded = merge(fast, {"render": {"shading": "shaded"}})
-            cfg = RunConfig.from_dict(merge(shaded, {
-                "input": {"trajectory": str(first.source), "mesh": str(r / "mesh.ply")},
-                "out": str(OUT / "7s-first"), "overwrite": True, "report_details": 0}))
-            run_trajectory(first, cfg)
-            rig = read_trajectory(OUT / "7s-first" / "calibrated" / "trajectories.txt")
-            out[name] = (rig, r / "mesh.ply", shaded,
-                         f"--preset fast --shading shaded, {n} frames evenly spaced, posed "
-                         "through the rig (calibrated/) a first run wrote")
-        elif name == "7s-trusted":
-            # the RGB-vs-depth offset estimated by a first run on the same frames and removed
-            # as a trusted calibration (--calibration-from): fixed, it cannot absorb a shared
-            # error of the frames under test, so the shared limits are stated
-            r = shared_data() / "7scenes_redkitchen"
-            traj = _subset(read_trajectory(r / "trajectories.txt"), n)
-            cfg = RunConfig.from_dict(merge(fast, {
-                "input": {"trajectory": str(traj.source), "mesh": str(r / "mesh.ply")},
-                "out": str(OUT / "7s-first"), "overwrite": True, "report_details": 0}))
-            run_trajectory(traj, cfg)
-            trusted = str(OUT / "7s-first" / "summary.json")
-            out[name] = (traj, r / "mesh.ply",
-                         merge(fast, {"verdict": {"calibration_from": trusted}}),
-                         f"--preset fast --calibration-from a first run on the same {n} frames")
+        elif name in ("7s-rig", "7s-trusted"):
+            out[name] = _seven_scenes_after_a_first_run(name, n, fast)
         elif name == "tsdf":
             # a scan as an RGB-D capture fuses it (pgt_eval.tsdf: rounded, shrunk silhouettes,
             # clutter in the photos that the mesh lacks), true poses: a scene no limit was
@@ -102,6 +72,39 @@ def datasets(names: list[str], n: int) -> dict[str, tuple[Trajectory, Path, dict
             out[name] = (read_trajectory(r / "trajectories.txt"), r / "mesh.ply", fast,
                          "--preset fast, all 10 frames")
     return out
+
+
+def _first_run(name: str, traj: Trajectory, mesh: Path, cfgd: dict) -> Path:
+    """Run ``traj`` once with ``cfgd`` (no self-test) into ``OUT/<name>-first`` (one folder per
+    dataset: a later dataset's first run must not replace the file an earlier one reads)."""
+    out = OUT / f"{name}-first"
+    run_trajectory(traj, RunConfig.from_dict(merge(cfgd, {
+        "input": {"trajectory": str(traj.source), "mesh": str(mesh)},
+        "out": str(out), "overwrite": True, "report_details": 0})))
+    return out
+
+
+def _seven_scenes_after_a_first_run(name: str, n: int, fast: dict) -> tuple:
+    """``7s-rig`` / ``7s-trusted``: the 7-Scenes frames after a first run on them, so that the
+    shared limits are stated (under ``--remove-calibration`` they are not).
+
+    7s-rig: judged through the rig the first run wrote (``calibrated/``), on the mesh's geometry
+    (shaded renders: its colours were painted with the depth camera's poses, so texture matches
+    show the offset the other way once the photos sit where the RGB camera is). 7s-trusted: the
+    offset the first run estimated removed as a trusted calibration (``--calibration-from``):
+    fixed, it cannot absorb a shared error of the frames under test."""
+    r = shared_data() / "7scenes_redkitchen"
+    traj = _subset(read_trajectory(r / "trajectories.txt"), n)
+    if name == "7s-rig":
+        shaded = merge(fast, {"render": {"shading": "shaded"}})
+        first = _first_run(name, traj, r / "mesh.ply", shaded)
+        return (read_trajectory(first / "calibrated" / "trajectories.txt"), r / "mesh.ply",
+                shaded, f"--preset fast --shading shaded, {n} frames evenly spaced, posed "
+                "through the rig (calibrated/) a first run wrote")
+    first = _first_run(name, traj, r / "mesh.ply", fast)
+    return (traj, r / "mesh.ply",
+            merge(fast, {"verdict": {"calibration_from": str(first / "summary.json")}}),
+            f"--preset fast --calibration-from a first run on the same {n} frames")
 
 
 def run_dataset(name: str, traj: Trajectory, mesh: Path, cfgd: dict, n: int) -> dict:
