@@ -157,9 +157,9 @@ def check(
 
 def _rows(out: Path, cfg: RunConfig) -> list[dict[str, Any]]:
     """The judged rows of a finished run directory (verdicts + correction columns)."""
-    from pgt_check.correct.pose import add_correction_columns, load_corrections
+    from pgt_check.correct.result import stored_corrections
     from pgt_check.report.stored import load_run
-    from pgt_check.verdict import apply_verdicts
+    from pgt_check.verdict import judge_run
 
     records, _ = load_run(out)
-    return add_correction_columns(apply_verdicts(records, cfg), load_corrections(out))
+    return stored_corrections(judge_run(records, cfg), out)[0].rows()

@@ -9,7 +9,7 @@ from __future__ import annotations
 import functools
 import logging
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -22,57 +22,40 @@ from pgt_check.types import Frame, Trajectory
 
 if TYPE_CHECKING:
     from pgt_check.correct.calibration import CalibratedRig
-    from pgt_check.correct.frames import CorrectionsSummary
-    from pgt_check.verdict.apply import RunJudgement
+    from pgt_check.correct.result import CorrectedRun
+    from pgt_check.verdict.result import RunResult
     from pgt_check.verdict.shared import SharedChecks
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["CorrectedRun", "PlainMeasure", "correct_stage", "self_test_stage"]
-
-
-@dataclass(frozen=True)
-class CorrectedRun:
-    """What the correction stage returns: the verdict rows with the correction columns, the
-    run-level checks as reported (the registration correction refined; the verdicts keep the
-    judged ones) and what the stage wrote (``summary_extra``: their summary.json sections)."""
-
-    rows: list[dict[str, Any]]
-    shared: SharedChecks | None
-    calibrated_rig: CalibratedRig | None = None
-    corrections: CorrectionsSummary | None = None
-
-    def summary_extra(self) -> dict[str, Any]:
-        out: dict[str, Any] = {}
-        if self.calibrated_rig is not None:
-            out["calibrated_rig"] = self.calibrated_rig.to_json()
-        if self.corrections is not None:
-            out["corrections"] = self.corrections.to_json()
-        return out
+__all__ = ["PlainMeasure", "correct_stage", "self_test_stage"]
 
 
 def correct_stage(
     traj: Trajectory,
     measurements: list[FrameMeasurement],
-    judged: RunJudgement,
+    judged: RunResult,
     config: RunConfig,
     checker_factory: Callable[[], Any],
 ) -> CorrectedRun:
-    """The correction stage (``pgt_check.correct``) after the verdicts: a failed registration
-    check's estimate refined, a significant calibration estimate written as a rig
+    """The correction stage (``pgt_check.correct``) on the verdict stage's result: a failed
+    registration check's estimate refined, a significant calibration estimate written as a rig
     (``calibrated/``), then the corrected poses of the chosen frames."""
+    from pgt_check.correct.result import CorrectedRun
+
     out = Path(config.out)
-    rows = judged.rows
     shared = judged.shared
     if shared is not None:  # a failed registration check: its estimate refined
         shared = _refined(traj, measurements, shared, config, out)
     rig = _calibrated_rig(traj, judged.shared, config, out)
-    corrections = None
+    corrections, summary = {}, None
     if config.correct.frames != "none":  # corrected poses (pgt_check.correct.frames)
         from pgt_check.correct.frames import correct_run
 
-        rows, corrections = correct_run(traj, measurements, rows, config, checker_factory, out)
-    return CorrectedRun(rows, shared, rig, corrections)
+        corrections, summary = correct_run(traj, measurements, judged, config,
+                                           checker_factory, out)
+    return CorrectedRun.of(judged, reported_shared=shared, calibrated_rig=rig,
+                           corrections=corrections, corrections_summary=summary)
 
 
 def _refined(traj: Trajectory, measurements: list[FrameMeasurement], shared: SharedChecks,
@@ -111,25 +94,21 @@ def _calibrated_rig(traj: Trajectory, shared: SharedChecks | None, config: RunCo
         return None
 
 
-def self_test_stage(traj: Trajectory, rows: list[dict[str, Any]], judged: Any,
-               shared_extra: dict[str, Any], config: RunConfig) -> dict[str, Any]:
-    """summary.json ``self_test``: ``config.self_test`` frames measured again at poses moved
-    around this run's stated detection limits (``pgt_check.verdict.self_test``)."""
+def self_test_stage(traj: Trajectory, result: CorrectedRun, config: RunConfig) -> CorrectedRun:
+    """``result`` with its ``self_test``: ``config.self_test`` frames measured again at poses
+    moved around this run's stated detection limits (``pgt_check.verdict.self_test``)."""
     from pgt_check.verdict.accuracy import run_accuracy
-    from pgt_check.verdict.decide import resolve_threshold_px
     from pgt_check.verdict.self_test import run_self_test
 
-    w, h = (int(rows[0]["width"]), int(rows[0]["height"])) if rows else (0, 0)
-    acc = run_accuracy(rows, shared_extra.get("shared_errors"), config.verdict,
-                       resolve_threshold_px(config.verdict, w, h))
+    threshold = result.frames[0].threshold_px if result.frames else 0.0
+    acc = run_accuracy(result.rows(), result.shared_as_reported, config.verdict, threshold)
     measure = PlainMeasure("pgt-check self-test")
     try:
-        st = run_self_test(traj.frames, rows, judged.shared, acc.limits, config, measure,
-                           config.self_test)
+        st = run_self_test(traj.frames, result, acc.limits, config, measure, config.self_test)
     finally:
         measure.close()
     logger.info("%s", st.sentence)
-    return st.to_json()
+    return replace(result, self_test=st)
 
 
 class PlainMeasure:

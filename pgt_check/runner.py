@@ -15,7 +15,6 @@ import functools
 import logging
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -41,7 +40,7 @@ from pgt_check.progress import frame_progress, log_progress
 from pgt_check.remeasure import PlainMeasure, correct_stage, self_test_stage
 from pgt_check.store import mesh_content_hash
 from pgt_check.types import Frame, Trajectory
-from pgt_check.verdict import judge_run
+from pgt_check.verdict import RunResult, judge_run
 
 logger = logging.getLogger(__name__)
 
@@ -98,18 +97,15 @@ def run_trajectory(
         factory = _ReuseFirst(checker, factory)
     else:
         checker.close()
-    extra: dict[str, Any] = {"trajectory_format": traj.format or "in-memory"}
     outside = images_outside_dataset(config, frames) if config.input.trajectory else []
     if outside:
-        extra["images_outside_dataset"] = {"count": len(outside), "examples": outside[:5]}
-        extra["warnings"] = [
-            f"{len(outside)} image paths point outside the dataset folder (e.g. "
-            f"{outside[0]!r}): they were read and their thumbnails may appear in this report"
-        ]
-        logger.warning("%s", extra["warnings"][0])
+        logger.warning("%d image paths point outside the dataset folder (e.g. %r): they were "
+                       "read and their thumbnails may appear in this report", len(outside),
+                       outside[0])
     try:
-        return check_frames(frames, config, factory, extra=extra, t0=t0, input_keys=keys,
-                            inputs=inputs, trajectory=traj)
+        return check_frames(frames, config, factory, t0=t0, input_keys=keys, inputs=inputs,
+                            trajectory=traj, trajectory_format=traj.format or "in-memory",
+                            outside_dataset=tuple(outside))
     finally:
         if isinstance(factory, _ReuseFirst):
             factory.close_unused()
@@ -164,15 +160,18 @@ def check_frames(
     *,
     input_keys: dict[str, str],
     inputs: dict[str, str],
-    extra: dict[str, Any] | None = None,
     t0: float | None = None,
     trajectory: Trajectory | None = None,
+    trajectory_format: str = "in-memory",
+    outside_dataset: tuple[str, ...] = (),
 ) -> dict[str, Any]:
     """Measure ``frames`` (skipping those already in the store), then write the outputs.
 
     ``input_keys`` (frame id -> ``frame_input_keys``): a stored record counts as done only if
     it carries the same key; ``inputs`` (run-wide content hashes, ``{"mesh": ...}``) enter the
     fingerprint. Both are required: a stored measurement is reused only on matching content.
+    ``trajectory_format`` and ``outside_dataset`` (image paths outside the dataset folder) are
+    reported in summary.json.
 
     Measurements stream from the executor into ``out/records.jsonl`` as frames finish; the
     outputs are built from the store in ``frames`` order, so a resumed run writes the same
@@ -182,8 +181,9 @@ def check_frames(
     """
     with _open_store(config, [f.frame_id for f in frames], inputs) as store:
         return _check_frames_locked(
-            store, frames, config, checker_factory, extra=extra, t0=t0, input_keys=input_keys,
-            inputs=inputs, trajectory=trajectory,
+            store, frames, config, checker_factory, t0=t0, input_keys=input_keys,
+            inputs=inputs, trajectory=trajectory, trajectory_format=trajectory_format,
+            outside_dataset=outside_dataset,
         )
 
 
@@ -193,15 +193,16 @@ def _check_frames_locked(
     config: RunConfig,
     checker_factory: Callable[[], Any],
     *,
-    extra: dict[str, Any] | None,
     t0: float | None,
     input_keys: dict[str, str],
     inputs: dict[str, str],
     trajectory: Trajectory | None,
+    trajectory_format: str,
+    outside_dataset: tuple[str, ...],
 ) -> dict[str, Any]:
     """``check_frames`` with the store open (and locked) by the caller."""
     from pgt_check.executor import ExecutorStats
-    from pgt_check.report.outputs import write_outputs
+    from pgt_check.report.outputs import ExecutorSummary, RunFacts, write_run
 
     t0 = time.perf_counter() if t0 is None else t0
     out = Path(config.out)
@@ -211,31 +212,22 @@ def _check_frames_locked(
     )
     judged = judge_run(measurements, config)
     traj = trajectory if trajectory is not None else Trajectory(tuple(frames))
-    corrected = correct_stage(traj, measurements, judged, config, checker_factory)
-    rows = corrected.rows
-    # summary.json's run-level section: the checks with the refined registration correction
-    shared_extra = replace(judged, shared=corrected.shared).summary_extra()
+    result = correct_stage(traj, measurements, judged, config, checker_factory)
     if config.self_test > 0:  # the stated detection limits tested (``verdict.self_test``)
-        shared_extra["self_test"] = self_test_stage(traj, rows, judged, shared_extra, config)
+        result = self_test_stage(traj, result, config)
     assets = write_report_assets(
-        frames, rows, config, checker_factory, measurement_fingerprint(config, inputs)
+        frames, result, config, checker_factory, measurement_fingerprint(config, inputs)
     )
     shadings = sorted({str(m.shading) for m in measurements if m.shading})
-    summary_extra = {
-        "shading": shadings[0] if len(shadings) == 1 else (shadings or None),
-        "executor": {
-            "kind": config.executor,
-            "workers": stats.workers,
-            "frames_measured": stats.yielded,
-            "frames_reused": n_reused,
-            "worker_crashes": stats.worker_crashes,
-        },
-        **(extra or {}),
-        **shared_extra,
-        **corrected.summary_extra(),
-        "wall_time_s": time.perf_counter() - t0,
-    }
-    return write_outputs(out, rows, config, extra=summary_extra, assets=assets)
+    facts = RunFacts(
+        trajectory_format=trajectory_format,
+        shading=shadings[0] if len(shadings) == 1 else (shadings or None),
+        executor=ExecutorSummary(config.executor, stats.workers, stats.yielded, n_reused,
+                                 stats.worker_crashes),
+        outside_dataset=outside_dataset,
+        wall_time_s=time.perf_counter() - t0,
+    )
+    return write_run(out, result, config, facts, assets=assets)
 
 
 def _open_store(config: RunConfig, ids: list[str], inputs: dict[str, str]) -> Any:
@@ -312,48 +304,45 @@ def _done_ids(store: Any, ids: Sequence[str], input_keys: dict[str, str]) -> set
 
 def write_report_assets(
     frames: Sequence[Frame],
-    rows: list[dict[str, Any]],
+    result: RunResult,
     config: RunConfig,
     checker_factory: Callable[[], Any],
     fingerprint: str | None = None,
 ) -> dict[str, dict[str, str]] | None:
-    """Panels for the report's detail frames: those written during the main pass
-    (``report.assets.PanelWriter``) are reused; only the selected frames still without panels
-    are measured again here (in this process, keeping their images). Panels of frames that
-    were not selected are deleted."""
-    from pgt_check.report.assets import (
-        main_pass_assets,
-        prune_panels,
-        select_detail_frames,
-        write_frame_assets,
-    )
+    """Panels for the report's detail frames (``report.assets.report_panels``); the selected
+    frames without panels from the main pass are measured again here (in this process,
+    keeping their images)."""
+    from pgt_check.report.assets import report_panels
 
     if config.report_details <= 0:
         return None
-    out = Path(config.out)
-    chosen = select_detail_frames(rows, max_details=config.report_details)
-    fingerprint = fingerprint or measurement_fingerprint(config)
-    assets = main_pass_assets(out, chosen, fingerprint)
-    missing = [fid for fid in chosen if fid not in assets]
-    by_id = {f.frame_id: f for f in frames}
-    missing = [fid for fid in missing if fid in by_id]
-    logger.info("report: %d detail frames, %d with panels from the main pass, %d measured again",
-                len(chosen), len(assets), len(missing))
-    if missing:
-        row_by_id = {r["frame_id"]: r for r in rows}
-        checker = checker_factory()
-        if getattr(checker, "panel_sink", None) is not None:
-            checker.panel_sink = None  # panels are written below, for these frames only
-        try:
-            for fid in missing:
-                images = FrameImages()
-                checker.measure(by_id[fid], keep=images)
-                if images.photo is None:
-                    continue
-                assets[fid] = write_frame_assets(out, row_by_id[fid], images)
-        finally:
-            checker.close()
-    removed = prune_panels(out, chosen)
-    if removed:
-        logger.debug("removed %d panel files of frames not shown", removed)
-    return {fid: assets[fid] for fid in chosen if fid in assets}
+    again = _PanelImages(checker_factory, {f.frame_id: f for f in frames})
+    try:
+        return report_panels(config.out, result, config.report_details,
+                             fingerprint or measurement_fingerprint(config), again)
+    finally:
+        again.close()
+
+
+class _PanelImages:
+    """``frame_id -> FrameImages`` of a frame measured again (None for an unknown frame or
+    one without a photo); the checker is built on the first call."""
+
+    def __init__(self, checker_factory: Callable[[], Any], by_id: dict[str, Frame]) -> None:
+        self._factory, self._by_id, self._checker = checker_factory, by_id, None
+
+    def __call__(self, frame_id: str) -> FrameImages | None:
+        if frame_id not in self._by_id:
+            return None
+        if self._checker is None:
+            self._checker = self._factory()
+            if getattr(self._checker, "panel_sink", None) is not None:
+                self._checker.panel_sink = None  # panels are written for these frames only
+        images = FrameImages()
+        self._checker.measure(self._by_id[frame_id], keep=images)
+        return None if images.photo is None else images
+
+    def close(self) -> None:
+        if self._checker is not None:
+            self._checker.close()
+            self._checker = None

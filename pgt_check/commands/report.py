@@ -10,39 +10,14 @@ from __future__ import annotations
 import argparse
 import sys
 from collections.abc import Sequence
-from dataclasses import replace
 from pathlib import Path
-from typing import Any
 
 from pgt_check._cli import OneLineErrorParser, install_sigterm_handler, parse_args
 from pgt_check.config import RunConfig, merge
-from pgt_check.correct.pose import add_correction_columns, load_corrections
 from pgt_check.errors import InputError
 from pgt_check.files import MAX_SMALL_JSON_BYTES, load_json_limited, safe_text
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.report.stored import load_run
-
-
-def _shared_extra(judged: Any, out: Path) -> dict[str, Any]:
-    """The run-level section, with the run's registration refinement where it started from
-    this judgement's estimate (other verdict settings may change the estimate: then the
-    refinement is stale and left out, with a note)."""
-    from pgt_check.correct.registration import (
-        REFINED_FILE,
-        apply_refinement,
-        load_refinement,
-        needs_refinement,
-    )
-
-    shared = judged.shared
-    if shared is None:
-        return judged.summary_extra()
-    refined = load_refinement(out, shared)
-    if refined is None and needs_refinement(shared) and (out / REFINED_FILE).is_file():
-        print(f"pgt-check report: note: {REFINED_FILE} was measured for another registration "
-              "estimate (other verdict settings); the estimate shown is not refined",
-              file=sys.stderr)
-    return replace(judged, shared=apply_refinement(shared, refined)).summary_extra()
 
 
 def _warn_stale_auto_decisions(records: list[FrameMeasurement], config: RunConfig) -> None:
@@ -152,7 +127,9 @@ def main(argv: Sequence[str]) -> int:
 
 
 def _report(args: argparse.Namespace) -> int:
-    from pgt_check.report.outputs import outputs_complete, write_outputs
+    from pgt_check.correct.registration import REFINED_FILE
+    from pgt_check.correct.result import stored_corrections
+    from pgt_check.report.outputs import RunFacts, outputs_complete, write_run
     from pgt_check.verdict import judge_run
 
     try:
@@ -184,8 +161,12 @@ def _report(args: argparse.Namespace) -> int:
                 f"{out}: the stored records cannot be judged, one is malformed "
                 f"({type(err).__name__}: {err}); measure again with --overwrite"
             ) from err
-        rows = add_correction_columns(judged.rows, load_corrections(out))
-        summary = write_outputs(out, rows, config, {**extra, **_shared_extra(judged, out)})
+        result, stale = stored_corrections(judged, out)
+        if stale:
+            print(f"pgt-check report: note: {REFINED_FILE} was measured for another "
+                  "registration estimate (other verdict settings); the estimate shown is not "
+                  "refined", file=sys.stderr)
+        summary = write_run(out, result, config, RunFacts(carried=extra))
     except (InputError, OSError) as err:
         print(f"pgt-check report: error: {safe_text(err)}", file=sys.stderr)
         return 2

@@ -31,14 +31,10 @@ from typing import Any
 import numpy as np
 
 from pgt_check.config import RunConfig
-from pgt_check.correct.pose import (
-    Correction,
-    add_correction_columns,
-    refine_pose,
-    save_corrections,
-)
+from pgt_check.correct.pose import Correction, refine_pose, save_corrections
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.types import Frame, Trajectory
+from pgt_check.verdict.result import FrameResult, RunResult
 
 logger = logging.getLogger(__name__)
 
@@ -46,7 +42,7 @@ CORRECTED_NAME = "corrected_trajectory.txt"
 BAD_FRAMES_NAME = "bad_frames.txt"
 
 
-def chosen_frames(rows: Sequence[dict[str, Any]], mode: str) -> list[str]:
+def chosen_frames(frames: Sequence[FrameResult], mode: str) -> list[str]:
     """Frame ids to correct: FAIL verdicts ("fail"), every frame ("all") or none.
 
     With "fail", frames that FAIL only because a run-level check failed (reason
@@ -56,11 +52,10 @@ def chosen_frames(rows: Sequence[dict[str, Any]], mode: str) -> list[str]:
     if mode == "none":
         return []
     if mode == "all":
-        return [str(r["frame_id"]) for r in rows]
+        return [f.frame_id for f in frames]
     return [
-        str(r["frame_id"]) for r in rows
-        if r.get("verdict") == "FAIL"
-        and not str(r.get("reason") or "").startswith(("registration:", "drift:"))
+        f.frame_id for f in frames
+        if f.verdict == "FAIL" and not f.reason.startswith(("registration:", "drift:"))
     ]
 
 
@@ -116,8 +111,8 @@ def corrected_trajectory(trajectory: Trajectory, corrections: dict[str, Correcti
                       dict(trajectory.metadata))
 
 
-def bad_frames_text(rows: Sequence[dict[str, Any]], corrections: dict[str, Correction]) -> str:
-    bad = [str(r["frame_id"]) for r in rows if r.get("verdict") == "FAIL"]
+def bad_frames_text(frames: Sequence[FrameResult], corrections: Mapping[str, Correction]) -> str:
+    bad = [f.frame_id for f in frames if f.verdict == "FAIL"]
     fixed = [f for f in bad if f in corrections and corrections[f].applied]
     lines = [
         "# pgt-check: frames whose pose FAILs the check, one id per line",
@@ -132,22 +127,23 @@ def bad_frames_text(rows: Sequence[dict[str, Any]], corrections: dict[str, Corre
 def correct_run(
     trajectory: Trajectory,
     measurements: Sequence[FrameMeasurement],
-    rows: list[dict[str, Any]],
+    result: RunResult,
     config: RunConfig,
     checker_factory: Callable[[], Any],
     out: str | Path,
     clock: Callable[[], float] = time.perf_counter,
-) -> tuple[list[dict[str, Any]], CorrectionsSummary]:
-    """Run the correction step; returns (rows with the correction columns, its summary)."""
+) -> tuple[dict[str, Correction], CorrectionsSummary]:
+    """Run the correction step on the verdict stage's ``result``; returns (frame id -> its
+    correction, the step's summary)."""
     from pgt_check.correct.registration import main_pass_seconds
     from pgt_check.files import atomic_write_text
     from pgt_check.io.writers import write_trajectory_file
 
     out = Path(out)
-    ids = chosen_frames(rows, config.correct.frames)
+    ids = chosen_frames(result.frames, config.correct.frames)
     by_id = trajectory.by_id()
     m_by_id = {m.frame_id: m for m in measurements}
-    thr = {str(r["frame_id"]): r.get("threshold_px") for r in rows}
+    thr = {f.frame_id: f.threshold_px for f in result.frames}
     budget = config.correct.budget * main_pass_seconds(measurements)
     corrections, stopped = _correct_frames(
         ids, by_id, m_by_id, thr, config, checker_factory, budget, clock
@@ -155,9 +151,8 @@ def correct_run(
     save_corrections(out, corrections.values(), config.measurement_fingerprint())
     fmt = write_trajectory_file(corrected_trajectory(trajectory, corrections),
                                 out / CORRECTED_NAME)
-    atomic_write_text(out / BAD_FRAMES_NAME, bad_frames_text(rows, corrections))
-    summary = _corrections_summary(corrections, config, stopped, fmt)
-    return add_correction_columns(rows, corrections), summary
+    atomic_write_text(out / BAD_FRAMES_NAME, bad_frames_text(result.frames, corrections))
+    return corrections, _corrections_summary(corrections, config, stopped, fmt)
 
 
 def _correct_frames(

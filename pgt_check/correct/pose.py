@@ -17,7 +17,7 @@ from __future__ import annotations
 import json
 import logging
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -115,18 +115,6 @@ def _clean(v: Any) -> Any:
     if isinstance(v, (list, tuple)):
         return [_clean(x) for x in v]
     return v
-
-
-def add_correction_columns(
-    rows: Sequence[dict[str, Any]], corrections: Mapping[str, Correction]
-) -> list[dict[str, Any]]:
-    """Rows (from ``apply_verdicts``) with the ``CORRECTION_COLUMNS`` of their frame's
-    correction; rows of frames without one get no such keys (empty cells in frames.csv)."""
-    out = []
-    for r in rows:
-        c = corrections.get(str(r.get("frame_id")))
-        out.append({**r, **c.row()} if c is not None else dict(r))
-    return out
 
 
 def save_corrections(

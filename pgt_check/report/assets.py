@@ -19,7 +19,7 @@ import heapq
 import json
 import logging
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
@@ -29,6 +29,7 @@ if TYPE_CHECKING:
     from pgt_check.config import VerdictConfig
     from pgt_check.measure.paths import FrameImages
     from pgt_check.measure.record import FrameMeasurement
+    from pgt_check.verdict.result import RunResult
 
 from pgt_check.report.drawing import (  # re-exported: callers and tests import them here
     ARROW_GRID,
@@ -328,3 +329,35 @@ def existing_assets(
     if missing and warn:
         logger.warning("%d report assets are missing or unsafe and are not shown", missing)
     return out
+
+
+def report_panels(
+    out_dir: str | Path,
+    result: RunResult,
+    max_details: int,
+    fingerprint: str,
+    frame_images: Callable[[str], FrameImages | None],
+) -> dict[str, dict[str, str]]:
+    """Panels of the report's detail frames of ``result`` (``select_detail_frames``): those
+    written during the main pass (``PanelWriter``) are reused; ``frame_images(frame_id)``
+    measures a selected frame still without panels again and returns its images (None: none
+    to show). Panels of frames that were not selected are deleted."""
+    out = Path(out_dir)
+    rows = result.rows()
+    chosen = select_detail_frames(rows, max_details=max_details)
+    assets = main_pass_assets(out, chosen, fingerprint)
+    missing = [fid for fid in chosen if fid not in assets]
+    row_by_id = {r["frame_id"]: r for r in rows}
+    n_again = 0
+    for fid in missing:
+        images = frame_images(fid)
+        if images is None:
+            continue
+        n_again += 1
+        assets[fid] = write_frame_assets(out, row_by_id[fid], images)
+    logger.info("report: %d detail frames, %d with panels from the main pass, %d measured again",
+                len(chosen), len(chosen) - len(missing), n_again)
+    removed = prune_panels(out, chosen)
+    if removed:
+        logger.debug("removed %d panel files of frames not shown", removed)
+    return {fid: assets[fid] for fid in chosen if fid in assets}

@@ -11,6 +11,7 @@ import math
 import platform
 import statistics
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
 from typing import Any
@@ -21,8 +22,8 @@ from pgt_check.correct.pose import CORRECTION_COLUMNS
 from pgt_check.files import safe_text
 from pgt_check.measure.columns import MEASUREMENT_COLUMNS, TIMING_COLUMNS
 from pgt_check.report.files import atomic_write_text
-from pgt_check.verdict.apply import VERDICT_COLUMNS
 from pgt_check.verdict.frame_bounds import ACCURACY_COLUMNS
+from pgt_check.verdict.result import VERDICT_COLUMNS, RunResult
 
 logger = logging.getLogger(__name__)
 
@@ -256,3 +257,69 @@ def write_outputs(
     write_completion_marker(out)  # last: the set is complete
     logger.info("wrote %s", out)
     return summary
+
+
+@dataclass(frozen=True)
+class ExecutorSummary:
+    """summary.json -> ``executor``: how the frames were measured."""
+
+    kind: str
+    workers: int
+    frames_measured: int
+    frames_reused: int
+    worker_crashes: int
+
+    def to_json(self) -> dict[str, Any]:
+        return {"kind": self.kind, "workers": self.workers,
+                "frames_measured": self.frames_measured, "frames_reused": self.frames_reused,
+                "worker_crashes": self.worker_crashes}
+
+
+@dataclass(frozen=True)
+class RunFacts:
+    """What summary.json says about the run beside its results: the trajectory's format, the
+    mesh shading used, the executor, image paths outside the dataset folder (a warning), the
+    wall time; ``carried``: sections of an earlier summary.json kept as written (``pgt-check
+    report`` re-judges stored measurements and keeps how they were measured)."""
+
+    trajectory_format: str | None = None
+    shading: str | list[str] | None = None
+    executor: ExecutorSummary | None = None
+    outside_dataset: Sequence[str] = ()
+    wall_time_s: float | None = None
+    carried: Mapping[str, Any] = field(default_factory=dict)
+
+    def sections(self) -> dict[str, Any]:
+        out: dict[str, Any] = dict(self.carried)
+        if self.shading is not None or self.executor is not None:
+            out["shading"] = self.shading
+        if self.executor is not None:
+            out["executor"] = self.executor.to_json()
+        if self.trajectory_format is not None:
+            out["trajectory_format"] = self.trajectory_format
+        if self.outside_dataset:
+            n, first = len(self.outside_dataset), self.outside_dataset[0]
+            out["images_outside_dataset"] = {"count": n,
+                                             "examples": list(self.outside_dataset[:5])}
+            out["warnings"] = [
+                f"{n} image paths point outside the dataset folder (e.g. {first!r}): they "
+                "were read and their thumbnails may appear in this report"
+            ]
+        return out
+
+
+def write_run(
+    out: Path,
+    result: RunResult,
+    config: RunConfig,
+    facts: RunFacts,
+    *,
+    assets: dict[str, dict[str, str]] | None = None,
+) -> dict[str, Any]:
+    """``write_outputs`` for a run's typed result (``verdict.RunResult``, or the correction
+    stage's ``correct.result.CorrectedRun``): its rows and its summary sections, after
+    ``facts``; return the summary."""
+    extra = {**facts.sections(), **result.summary_extra()}
+    if facts.wall_time_s is not None:
+        extra["wall_time_s"] = facts.wall_time_s
+    return write_outputs(out, result.rows(), config, extra=extra, assets=assets)

@@ -25,6 +25,7 @@ import numpy as np
 
 from pgt_check.config import VerdictConfig
 from pgt_check.verdict.accuracy_text import _fmt, _need, accuracy_sentences  # re-exported
+from pgt_check.verdict.shared import SharedChecks
 
 logger = logging.getLogger(__name__)
 
@@ -303,11 +304,14 @@ def detection_limits(
 
 def run_accuracy(
     rows: Sequence[Mapping[str, Any]],
-    shared: Mapping[str, Any] | None,
+    shared: SharedChecks | Mapping[str, Any] | None,
     config: VerdictConfig,
     threshold_px: float,
 ) -> RunAccuracy:
-    """The run's accuracy statement from judged rows (with ``ACCURACY_COLUMNS``)."""
+    """The run's accuracy statement from judged rows (with ``ACCURACY_COLUMNS``) and the
+    run-level checks (``SharedChecks`` or their summary.json section)."""
+    if isinstance(shared, SharedChecks):
+        shared = shared.summary()
     bounded = [
         r for r in rows
         if _num(r.get("acc_rot_bound_deg")) is not None and _num(r.get("acc_t_bound")) is not None

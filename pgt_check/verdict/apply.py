@@ -1,9 +1,10 @@
-"""Stage 2 over a run: run-level checks, then verdicts for stored measurements as flat rows."""
+"""Stage 2 over a run: run-level checks, then each stored measurement's verdict, as a typed
+``RunResult`` (``verdict.result``)."""
 
 from __future__ import annotations
 
 from collections.abc import Iterable
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import Any
 
 from pgt_check.config import RunConfig
@@ -19,40 +20,17 @@ from pgt_check.verdict.decide import (
 )
 from pgt_check.verdict.frame_bounds import (
     calibrations_to_remove,
-    frame_accuracy_columns,
+    frame_bounds,
     world_sensitivity,
 )
 from pgt_check.verdict.off_mesh import off_mesh_frames
-from pgt_check.verdict.shared import SharedChecks, run_shared_checks
+from pgt_check.verdict.result import FrameResult, RunResult
+from pgt_check.verdict.shared import run_shared_checks
 from pgt_check.verdict.shared_results import Sensitivity
 from pgt_check.verdict.status import NOT_CHECKED
 
-#: the verdict columns every row gets beside the measurement columns, with their meaning
-VERDICT_COLUMNS: dict[str, str] = {
-    "verdict": "PASS / FAIL / UNVERIFIABLE",
-    "reason": "why (FAIL, UNVERIFIABLE)",
-    "threshold_px": "PASS threshold on the corner error, photo px",
-    "evidence": "what the verdict rests on: absolute, relative+registration, relative, none",
-    "raw_verdict": "what the raw render alone says",
-    "enhanced_verdict": "what the enhanced render alone says ('' if it did not run)",
-    "disagree": "raw and enhanced paths give PASS and FAIL",
-    "drift_px": "run-level drift score of this frame, px (see summary shared_errors.drift)",
-    "decided_by": "the path the verdict rests on: raw, enhanced, edges ('' when none)",
-}
 
-
-@dataclass(frozen=True)
-class RunJudgement:
-    """Rows (measurement columns + ``VERDICT_COLUMNS``) and the run-level checks."""
-
-    rows: list[dict[str, Any]]
-    shared: SharedChecks | None
-
-    def summary_extra(self) -> dict[str, Any]:
-        return {} if self.shared is None else {"shared_errors": self.shared.summary()}
-
-
-def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> RunJudgement:
+def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> RunResult:
     """Run-level checks on all measurements (trajectory order), then each frame's judgement;
     a frame below ``min_coverage`` whose neighbours see the mesh well FAILs ``off_mesh``
     (``pgt_check.verdict.off_mesh``).
@@ -84,32 +62,20 @@ def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> Ru
     cals = calibrations_to_remove(
         v, None if shared is None else shared.summary(), [m.camera_id for m in ms]
     )
-    accuracy = frame_accuracy_columns(ms, cals)
-    rows = []
+    bounds = frame_bounds(ms, cals)
+    frames = []
     for m, j in zip(ms, judged, strict=True):
         m2 = vouched_reference(m, j, first, v)
         if m2 is not None:
             m, j = m2, judge(m2, v, shared, own, path_outcomes(m2, v, shared))
-        row = m.row()
-        row.update(
-            verdict=j.verdict.value,
-            reason=j.reason,
-            threshold_px=v.threshold_for(m.width, m.height),
-            evidence=j.evidence,
-            raw_verdict=j.raw_verdict,
-            enhanced_verdict=j.enhanced_verdict,
-            disagree=j.disagree,
-            drift_px=None if shared is None else shared.drift_px.get(m.frame_id),
-            decided_by=j.decided_by,
-        )
-        row.update(accuracy[m.frame_id])
-        row["camera_id"] = m.camera_id  # not a frames.csv column (calibrated_sensors.txt)
-        rows.append(row)
-    return RunJudgement(rows, shared)
+        drift = None if shared is None else shared.drift_px.get(m.frame_id)
+        frames.append(FrameResult(m, j, v.threshold_for(m.width, m.height), drift,
+                                  bounds[m.frame_id]))
+    return RunResult(tuple(frames), shared)
 
 
 def apply_verdicts(
     measurements: Iterable[FrameMeasurement], config: RunConfig
 ) -> list[dict[str, Any]]:
-    """The rows of ``judge_run``."""
-    return judge_run(measurements, config).rows
+    """The frames.csv rows of ``judge_run`` (for the pandas API and the comparison)."""
+    return judge_run(measurements, config).rows()

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -82,18 +83,40 @@ def bound_points(
     return p2, pc, tuple(evidence.sources)
 
 
-def frame_accuracy_columns(
+@dataclass(frozen=True)
+class FrameBound:
+    """One frame's pose accuracy from its absolute evidence: the fit (None when the frame has
+    no absolute evidence), the sources it rests on (``acc_evidence``) and, without a bound,
+    why (``acc_reason``)."""
+
+    accuracy: FrameAccuracy | None = None
+    evidence: str = ""
+    reason: str = "no_absolute_evidence"
+
+    @property
+    def bounded(self) -> bool:
+        """Whether the frame has a rotation bound (``acc_rot_bound_deg``)."""
+        return self.accuracy is not None and self.accuracy.success
+
+    def columns(self) -> dict[str, Any]:
+        """The frame's ``ACCURACY_COLUMNS`` (frames.csv)."""
+        row: dict[str, Any] = dict.fromkeys(ACCURACY_COLUMNS)
+        row.update(acc_evidence=self.evidence, acc_reason=self.reason)
+        if self.accuracy is not None:
+            row.update(_columns(self.accuracy))
+        return row
+
+
+def frame_bounds(
     measurements: Sequence[FrameMeasurement],
     calibrations: Mapping[str, CameraCalibration] | None = None,
-) -> dict[str, dict[str, Any]]:
-    """frame id -> the ``ACCURACY_COLUMNS`` of every measurement. ``calibrations``: camera id ->
-    a calibration error to take out of the evidence first (``--remove-calibration``,
+) -> dict[str, FrameBound]:
+    """frame id -> the ``FrameBound`` of every measurement. ``calibrations``: camera id -> a
+    calibration error to take out of the evidence first (``--remove-calibration``,
     ``--calibration-from``)."""
-    out: dict[str, dict[str, Any]] = {}
+    out: dict[str, FrameBound] = {}
     for i, m in enumerate(measurements):
-        row: dict[str, Any] = dict.fromkeys(ACCURACY_COLUMNS)
-        row.update(acc_evidence="", acc_reason="no_absolute_evidence")
-        out[m.frame_id] = row
+        out[m.frame_id] = FrameBound()
         if m.evidence is None or not len(m.evidence) or m.world_from_cam is None or not m.intrinsics:
             continue
         k = camera_matrix(m.intrinsics)
@@ -102,12 +125,18 @@ def frame_accuracy_columns(
         if not fa.success and sources != tuple(m.evidence.sources):
             # the feature points alone give no bound: every point (edges included)
             fa, sources = _fit(m, i, k, cal, features_only=False)
-        row.update(_columns(fa))
-        if fa.success:
-            row["acc_evidence"] = "+".join(sources) + (
-                "+calibration removed" if cal is not None else ""
-            )
+        evidence = "+".join(sources) + ("+calibration removed" if cal is not None else "")
+        out[m.frame_id] = FrameBound(fa, evidence if fa.success else "", fa.reason if not
+                                     fa.success else "")
     return out
+
+
+def frame_accuracy_columns(
+    measurements: Sequence[FrameMeasurement],
+    calibrations: Mapping[str, CameraCalibration] | None = None,
+) -> dict[str, dict[str, Any]]:
+    """frame id -> the ``ACCURACY_COLUMNS`` of every measurement (``frame_bounds`` as columns)."""
+    return {fid: b.columns() for fid, b in frame_bounds(measurements, calibrations).items()}
 
 
 def _fit(

@@ -50,6 +50,7 @@ from pgt_check.measure.record import FrameMeasurement
 from pgt_check.types import Frame
 from pgt_check.verdict.accuracy import DetectionLimits
 from pgt_check.verdict.decide import Verdict, judge
+from pgt_check.verdict.result import FrameResult, RunResult
 from pgt_check.verdict.self_test_curves import (  # noqa: F401  (re-exported)
     HELD_TOLERANCE,
     MULTIPLES,
@@ -133,14 +134,13 @@ def weakest_world_axes(ms: Sequence[FrameMeasurement],
     return out
 
 
-def choose_frames(rows: Sequence[Mapping[str, Any]], frames: Sequence[Frame],
+def choose_frames(results: Sequence[FrameResult], frames: Sequence[Frame],
                   n: int) -> list[Frame]:
     """Up to ``n`` frames, evenly spaced, of those that PASS with a per-frame accuracy bound
     (absolute evidence): an injected error is then the only reason to flag them."""
     by_id = {f.frame_id: f for f in frames}
-    ok = [r["frame_id"] for r in rows
-          if r.get("verdict") == Verdict.PASS.value and r.get("acc_rot_bound_deg") is not None
-          and r["frame_id"] in by_id]
+    ok = [r.frame_id for r in results
+          if r.verdict == Verdict.PASS.value and r.bound.bounded and r.frame_id in by_id]
     if len(ok) > n:
         ok = [ok[i] for i in np.linspace(0, len(ok) - 1, n).round().astype(int)]
     return [by_id[fid] for fid in ok]
@@ -244,20 +244,20 @@ def _moved_measured(chosen: Sequence[Frame], kind: str, size: float, direction: 
 
 def run_self_test(
     frames: Sequence[Frame],
-    rows: Sequence[Mapping[str, Any]],
-    shared: Any,
+    result: RunResult,
     limits: DetectionLimits,
     config: RunConfig,
     measure: MeasureFn,
     n: int,
 ) -> SelfTest:
     """The self-test of this run's stated ``limits`` on up to ``n`` of its ``frames`` (module
-    docstring). ``rows``: the run's judged rows; ``shared``: its ``SharedChecks`` (the context
-    each moved frame is judged in; None without run-level checks)."""
+    docstring). ``result``: the run's verdicts; its ``shared`` checks are the context each moved
+    frame is judged in (None without run-level checks)."""
     from pgt_check.verdict.shared import run_shared_checks
 
     t0 = time.perf_counter()
-    chosen = choose_frames(rows, frames, n)
+    chosen = choose_frames(result.frames, frames, n)
+    shared = result.shared
     ecfg = evidence_config(config)
     rng = np.random.default_rng(SEED)
     single = {ROTATION: (limits.frame_deg, limits.frame_px),

@@ -142,14 +142,17 @@ def test_corrections_stop_at_their_time_budget(tmp_path, monkeypatch):
     from pgt_check.measure import MeasureReason, failed_measurement
     from pgt_check.measure.record import Timings
     from pgt_check.types import Camera, Frame, Trajectory
+    from pgt_check.verdict.decide import Judgement, Verdict
+    from pgt_check.verdict.result import FrameResult, RunResult
 
     cam = Camera.pinhole(64, 48, 50.0, 50.0, 31.5, 23.5)
     traj = Trajectory(tuple(Frame(f"f{i}", cam, np.eye(4), timestamp=float(i))
                             for i in range(10)), "synthetic", "lamar")
     ms = [failed_measurement(f, MeasureReason.NONE).with_timings(Timings(total=1.0))
           for f in traj.frames]  # main pass: 10 s
-    rows = [{"frame_id": f.frame_id, "verdict": "FAIL", "reason": "corner_error"}
-            for f in traj.frames]
+    result = RunResult(tuple(
+        FrameResult(m, Judgement(Verdict.FAIL, "corner_error", "absolute", "FAIL", ""), 4.0)
+        for m in ms), None)
     now = [0.0]
 
     def fake_correct(checker, frame, m, config, threshold_px=None):
@@ -163,16 +166,16 @@ def test_corrections_stop_at_their_time_budget(tmp_path, monkeypatch):
     monkeypatch.setattr(frames_mod, "correct_frame", fake_correct)
     config = RunConfig.from_dict({"input": {"trajectory": "t", "mesh": "m"},
                                   "correct": {"budget": 2.0}})  # 20 s
-    rows, summary = frames_mod.correct_run(traj, ms, rows, config, Checker, tmp_path,
-                                           clock=lambda: now[0])
+    corrections, summary = frames_mod.correct_run(traj, ms, result, config, Checker, tmp_path,
+                                                  clock=lambda: now[0])
     c = summary.to_json()  # summary.json -> corrections
     # 5 frames (20 s) fit; a sixth (24 s) would exceed the budget
     assert c["attempted"] == 5 and c["not_attempted"] == 5
     assert c["stopped"].startswith("time limit: 5 frame(s) took 20.0 s of the 20.0 s budget")
-    assert [r["corr_reason"] for r in rows].count("time_limit") == 5
+    assert [c.reason for c in corrections.values()].count("time_limit") == 5
     # 0: no bound
     config = RunConfig.from_dict({"input": {"trajectory": "t", "mesh": "m"},
                                   "correct": {"budget": 0}})
-    _, summary = frames_mod.correct_run(traj, ms, rows, config, Checker, tmp_path,
+    _, summary = frames_mod.correct_run(traj, ms, result, config, Checker, tmp_path,
                                         clock=lambda: now[0])
     assert summary.attempted == 10 and summary.stopped is None

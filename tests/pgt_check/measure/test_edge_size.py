@@ -117,7 +117,7 @@ def test_edges_lead_on_a_colourless_mesh_and_leave_out_the_raw_path(shared_data)
         assert m.enhance_why is EnhanceWhy.EDGES_DECISIVE and m.verdict_path == "edges"
         assert m.evidence is not None and m.evidence.sources == ("edges",)
     cfg = RunConfig.from_dict({"input": {"mesh": str(root / "mesh.ply")}})
-    assert [r["verdict"] for r in judge_run(led, cfg).rows] == ["PASS", "PASS"]
+    assert [r["verdict"] for r in judge_run(led, cfg).rows()] == ["PASS", "PASS"]
     plain = _measure(traj, root / "mesh.ply", {"lead_on_shaded": False})
     assert all(m.raw is not None and m.raw.photo_from_render is None for m in plain)
     assert [m.edges.corner_error_px for m in plain] == pytest.approx(

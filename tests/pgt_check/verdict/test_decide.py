@@ -233,7 +233,7 @@ def test_a_reference_the_run_does_not_pass_gives_way_to_one_it_does(alt_inliers,
         ),
     )
     rows = {r["frame_id"]: r for r in judge_run([p, b, g], RunConfig.from_dict(
-        {"verdict": {"shared_checks": False}})).rows}
+        {"verdict": {"shared_checks": False}})).rows()}
     assert rows["p"]["verdict"] == "PASS"
     assert rows["b"]["verdict"] == "FAIL"
     assert (rows["g"]["verdict"], rows["g"]["reference_id"]) == (verdict, reference)

@@ -78,14 +78,25 @@ def test_moves_have_the_injected_size():
 
 
 def test_choose_frames_takes_pass_frames_with_a_bound_evenly():
+    from pgt_check.geometry.frame_accuracy import FrameAccuracy
+    from pgt_check.measure import MeasureReason, failed_measurement
+    from pgt_check.verdict.decide import Judgement, Verdict
+    from pgt_check.verdict.frame_bounds import FrameBound
+    from pgt_check.verdict.result import FrameResult
+
     frames = [_frame(i) for i in range(10)]
-    rows = [{"frame_id": f.frame_id, "verdict": "PASS", "acc_rot_bound_deg": 0.1}
-            for f in frames]
-    rows[1]["verdict"] = "FAIL"
-    rows[2]["acc_rot_bound_deg"] = None  # no absolute evidence
-    got = [f.frame_id for f in choose_frames(rows, frames, 3)]
+    bound = FrameBound(FrameAccuracy(True, "", rotation_bound_deg=0.1), "raw", "")
+
+    def result(f, verdict=Verdict.PASS, b=bound):
+        return FrameResult(failed_measurement(f, MeasureReason.NONE),
+                           Judgement(verdict, "", "absolute", "PASS", ""), 4.0, None, b)
+
+    results = [result(f) for f in frames]
+    results[1] = result(frames[1], Verdict.FAIL)
+    results[2] = result(frames[2], b=FrameBound())  # no absolute evidence
+    got = [f.frame_id for f in choose_frames(results, frames, 3)]
     assert got == ["0", "6", "9"]  # of 0, 3-9: first, middle, last
-    assert len(choose_frames(rows, frames, 50)) == 8
+    assert len(choose_frames(results, frames, 50)) == 8
 
 
 @pytest.fixture(scope="module")

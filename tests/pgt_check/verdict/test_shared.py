@@ -97,7 +97,7 @@ def test_correct_trajectory_passes_every_check(truth):
     se = j.shared.summary()
     assert se["registration"]["status"] == "passed", se["registration"]["message"]
     assert se["drift"]["status"] == "passed"
-    assert all(r["verdict"] == "PASS" and r["evidence"] == "absolute" for r in j.rows)
+    assert all(r["verdict"] == "PASS" and r["evidence"] == "absolute" for r in j.rows())
 
 
 @pytest.mark.parametrize("relative", [False, True])
@@ -109,18 +109,18 @@ def test_misregistered_trajectory_fails_every_frame(truth, relative):
     reg = j.shared.summary()["registration"]
     assert reg["status"] == "failed"
     assert reg["angle_deg"] == pytest.approx(2.0, rel=0.3)
-    assert all(r["verdict"] == "FAIL" for r in j.rows)
+    assert all(r["verdict"] == "FAIL" for r in j.rows())
     # frames whose own error is below the per-frame threshold fail by the run-level check
-    assert any(r["reason"].startswith("registration") for r in j.rows)
+    assert any(r["reason"].startswith("registration") for r in j.rows())
 
 
 def test_relative_pass_needs_a_passed_registration_check(truth):
     ms = measurements(truth, truth, relative=True)
     j = judge_run(ms, RunConfig())
-    assert all(r["verdict"] == "PASS" and r["evidence"] == "relative+registration" for r in j.rows)
+    assert all(r["verdict"] == "PASS" and r["evidence"] == "relative+registration" for r in j.rows())
     j = judge_run(ms, RunConfig.from_dict({"verdict": {"shared_checks": False}}))
-    assert all(r["verdict"] == "UNVERIFIABLE" for r in j.rows)
-    assert all(r["reason"].startswith("relative_evidence_only") for r in j.rows)
+    assert all(r["verdict"] == "UNVERIFIABLE" for r in j.rows())
+    assert all(r["reason"].startswith("relative_evidence_only") for r in j.rows())
 
 
 def test_relative_frames_without_absolute_evidence_are_not_verified(truth):
@@ -128,7 +128,7 @@ def test_relative_frames_without_absolute_evidence_are_not_verified(truth):
           for m in measurements(truth, truth, relative=True)]
     j = judge_run(ms, RunConfig())
     assert j.shared.summary()["registration"]["status"] == "not_checked"
-    assert {r["verdict"] for r in j.rows} == {"UNVERIFIABLE"}
+    assert {r["verdict"] for r in j.rows()} == {"UNVERIFIABLE"}
 
 
 def test_similarity_is_estimated(truth):
@@ -145,10 +145,10 @@ def test_drifting_segment_is_separated(truth):
 
     drifted, ids = drift_trajectory(truth, 0.6, 2.0, 0.12, seed=5)
     j = judge_run(measurements(truth, drifted), RunConfig())
-    labels = np.array([r["frame_id"] in set(ids) for r in j.rows])
-    score = np.array([r["drift_px"] or 0.0 for r in j.rows])
+    labels = np.array([r["frame_id"] in set(ids) for r in j.rows()])
+    score = np.array([r["drift_px"] or 0.0 for r in j.rows()])
     assert roc_auc(score, labels) >= 0.95
-    assert not any(r["verdict"] != "PASS" for r, lab in zip(j.rows, labels, strict=True)
+    assert not any(r["verdict"] != "PASS" for r, lab in zip(j.rows(), labels, strict=True)
                    if not lab and r["frame_id"] < "f010")
 
 
@@ -168,7 +168,7 @@ def test_drift_covers_frames_without_evidence_of_their_own(truth):
         for a, r in zip(absolute, relative, strict=True)
     ]
     j = judge_run(ms, RunConfig())
-    rows = {r["frame_id"]: r for r in j.rows}
+    rows = {r["frame_id"]: r for r in j.rows()}
     drift = j.shared.summary()["drift"]
     assert drift["status"] == "failed"
     for fid in blind:
@@ -176,7 +176,7 @@ def test_drift_covers_frames_without_evidence_of_their_own(truth):
         assert rows[fid]["drift_px"] > j.shared.threshold_px
     # inside the segment (or next to it, its interpolated bound above the threshold): FAIL
     first, last = drift["segments"][0]
-    inside = {r["frame_id"] for r in j.rows if first <= r["frame_id"] <= last}
+    inside = {r["frame_id"] for r in j.rows() if first <= r["frame_id"] <= last}
     assert blind & inside
     for fid in blind & inside:
         assert rows[fid]["verdict"] == "FAIL" and rows[fid]["reason"].startswith("drift")
@@ -274,7 +274,7 @@ def test_calibration_from_a_trusted_run_keeps_misregistration_visible(truth, tmp
     # the given trajectory with the trusted calibration passes
     ok = judge_run(with_pp_shift(measurements(truth, truth)), cfg)
     assert ok.shared.summary()["registration"]["status"] == "passed"
-    assert all(r["verdict"] == "PASS" for r in ok.rows)
+    assert all(r["verdict"] == "PASS" for r in ok.rows())
 
 
 def test_calibration_from_a_trusted_run_sees_the_camera_change(truth, tmp_path):
@@ -295,17 +295,17 @@ def test_calibration_from_a_trusted_run_sees_the_camera_change(truth, tmp_path):
     same = judge_run(with_pp_shift(measurements(truth, truth, seed=1), 5.0), cfg)
     change = next(iter(same.shared.summary()["calibration_change"].values()))
     assert change["status"] == "passed", change["message"]
-    assert all(r["verdict"] == "PASS" for r in same.rows)
+    assert all(r["verdict"] == "PASS" for r in same.rows())
     changed = judge_run(with_pp_shift(measurements(truth, truth, seed=1), 11.0), cfg)
     change = next(iter(changed.shared.summary()["calibration_change"].values()))
     assert change["status"] == "failed", change["message"]
     assert change["principal_point_shift_px"][0] == pytest.approx(6.0, rel=0.3)
     assert "CHANGED since the trusted run" in change["message"]
-    assert all(r["verdict"] == "FAIL" for r in changed.rows)
+    assert all(r["verdict"] == "FAIL" for r in changed.rows())
     # these views also see the shift left as drift or misregistration: those checks come
     # first; the camera change fails the frames where they pass (below)
     assert all(r["reason"].startswith(("calibration: this camera changed", "registration:",
-                                       "drift:")) for r in changed.rows)
+                                       "drift:")) for r in changed.rows())
 
 
 def test_a_changed_camera_fails_frames_the_other_checks_pass():
@@ -371,10 +371,10 @@ def test_each_frame_weighs_the_same_in_the_pooled_fits(truth):
     se = j.shared.summary()
     assert se["registration"]["status"] == "passed", se["registration"]["message"]
     assert se["drift"]["status"] == "failed"
-    assert all(r["verdict"] == "PASS" for r in j.rows[:18])
+    assert all(r["verdict"] == "PASS" for r in j.rows()[:18])
     # the windows find the segment from its third frame on (3 deg about the trajectory
     # centroid moves these images by only ~4 px per frame)
-    assert sum(r["verdict"] == "FAIL" for r in j.rows[18:]) >= 9
+    assert sum(r["verdict"] == "FAIL" for r in j.rows()[18:]) >= 9
 
 
 def test_long_runs_pool_a_bounded_number_of_points(truth, monkeypatch):
