@@ -68,7 +68,7 @@ def datasets(names: list[str], n: int) -> dict[str, tuple[Trajectory, Path, dict
         elif name == "7s":
             r = shared_data() / "7scenes_redkitchen"
             out[name] = (_subset(read_trajectory(r / "trajectories.txt"), n), r / "mesh.ply",
-                         merge(fast, {"verdict": {"remove_calibration": True}}), {})
+                         merge(fast, {"run_checks": {"remove_calibration": True}}), {})
         elif name == "castle":
             r = shared_data() / "sceaux_castle"
             out[name] = (read_trajectory(r / "trajectories.txt"), r / "mesh.ply", fast, {})
@@ -96,7 +96,8 @@ def judge(ms: list, cfg: RunConfig):
     w, h = ms[0].width, ms[0].height
     thr = resolve_threshold_px(cfg.verdict, w, h)
     shared = None if j.shared is None else json_safe(j.shared.summary())
-    return j.rows, shared, run_accuracy(j.rows, shared, cfg.verdict, thr)
+    rows = j.rows()
+    return rows, shared, run_accuracy(rows, shared, cfg, thr)
 
 
 def per_frame_copy(traj: Trajectory, deg: float, units: float, skip: set[str], seed: int):
@@ -154,8 +155,8 @@ def _judged_config(name: str, cfgd: dict, shared) -> dict:
         # judge the copies against the given run's calibration (a trusted run)
         path = CACHE / f"{name}-given-summary.json"
         path.write_text(json.dumps({"shared_errors": shared}))
-        judged_cfg = merge(cfgd, {"verdict": {"remove_calibration": False,
-                                              "calibration_from": str(path)}})
+        judged_cfg = merge(cfgd, {"run_checks": {"remove_calibration": False,
+                                                 "calibration_from": str(path)}})
     return judged_cfg
 
 

@@ -207,7 +207,7 @@ def outputs_curve(args) -> dict:
         judged = judge_run(ms, config)
         t_judge = time.perf_counter() - t
         t = time.perf_counter()
-        write_outputs(out, judged.rows, config, extra=judged.summary_extra())
+        write_outputs(out, judged.rows(), config, extra=judged.summary_extra())
         t_out = time.perf_counter() - t
         rows.append({"frames": k, "judge_s": t_judge, "outputs_s": t_out})
         print(f"K={k}: judge_run {t_judge:.2f} s, write_outputs {t_out:.2f} s", flush=True)

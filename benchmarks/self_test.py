@@ -54,7 +54,7 @@ def datasets(names: list[str], n: int) -> dict[str, tuple[Trajectory, Path, dict
         elif name == "7s":
             r = shared_data() / "7scenes_redkitchen"
             out[name] = (_subset(read_trajectory(r / "trajectories.txt"), n), r / "mesh.ply",
-                         merge(fast, {"verdict": {"remove_calibration": True}}),
+                         merge(fast, {"run_checks": {"remove_calibration": True}}),
                          f"--preset fast --remove-calibration, {n} frames evenly spaced")
         elif name in ("7s-rig", "7s-trusted"):
             out[name] = _seven_scenes_after_a_first_run(name, n, fast)
@@ -103,7 +103,7 @@ def _seven_scenes_after_a_first_run(name: str, n: int, fast: dict) -> tuple:
                 "through the rig (calibrated/) a first run wrote")
     first = _first_run(name, traj, r / "mesh.ply", fast)
     return (traj, r / "mesh.ply",
-            merge(fast, {"verdict": {"calibration_from": str(first / "summary.json")}}),
+            merge(fast, {"run_checks": {"calibration_from": str(first / "summary.json")}}),
             f"--preset fast --calibration-from a first run on the same {n} frames")
 
 

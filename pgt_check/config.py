@@ -18,7 +18,10 @@ from pathlib import Path
 from typing import Any, Literal
 
 from pgt_check.config_judge import (  # re-exported
+    MOVED_KEYS,
     CorrectConfig,
+    GateConfig,
+    RunChecksConfig,
     VerdictConfig,
 )
 from pgt_check.config_load import check_name as _check_name
@@ -36,9 +39,9 @@ MAX_ITERATIONS = 10_000_000
 
 __all__ = [
     "ACTION_KEYS", "MEASUREMENT_SECTIONS", "PRESETS", "CorrectConfig", "EdgeConfig",
-    "EnhanceConfig", "HomographyConfig", "InputConfig", "MatchConfig", "PoseConfig",
-    "ReferenceConfig", "RenderConfig", "RunConfig", "VerdictConfig", "from_dict",
-    "load_config_file", "merge",
+    "EnhanceConfig", "GateConfig", "HomographyConfig", "InputConfig", "MatchConfig",
+    "PoseConfig", "ReferenceConfig", "RenderConfig", "RunChecksConfig", "RunConfig",
+    "VerdictConfig", "from_dict", "load_config_file", "merge", "moved_to_sections",
 ]
 
 logger = logging.getLogger(__name__)
@@ -52,8 +55,9 @@ def load_config_file(path: str | Path) -> dict[str, Any]:
     """A JSON or TOML config file as settings (``config_load.load_config_file``), without the
     one-shot actions of ``ACTION_KEYS``: replaying a run's config.json must neither discard
     its stored records (``overwrite``) nor fail as replay-and-resume (``resume``). An action
-    set in the file is ignored with a WARNING naming the option to pass instead."""
-    data = _read_config_file(path)
+    set in the file is ignored with a WARNING naming the option to pass instead. Settings of
+    the older layout are moved to their sections (``moved_to_sections``)."""
+    data = moved_to_sections(_read_config_file(path))
     for key in ACTION_KEYS:
         if key in data and data.pop(key) is not False:
             logger.warning("%s: %r is a one-shot action, not a setting: ignored (pass --%s "
@@ -305,6 +309,8 @@ class RunConfig:
     edges: EdgeConfig = field(default_factory=EdgeConfig)
     pose: PoseConfig = field(default_factory=PoseConfig)
     verdict: VerdictConfig = field(default_factory=VerdictConfig)
+    gate: GateConfig = field(default_factory=GateConfig)
+    run_checks: RunChecksConfig = field(default_factory=RunChecksConfig)
     correct: CorrectConfig = field(default_factory=CorrectConfig)
     #: frames that get image panels in the report (all FAIL/UNVERIFIABLE first, then the worst)
     report_details: int = 40
@@ -340,7 +346,9 @@ class RunConfig:
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> RunConfig:
-        return from_dict(cls, data)
+        """Strict: unknown keys and mistyped values raise ConfigError. Settings of the older
+        layout (``MOVED_KEYS``: config.json of older runs) are read at their new place."""
+        return from_dict(cls, moved_to_sections(data))
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -373,6 +381,29 @@ class RunConfig:
         return hashlib.sha256(blob).hexdigest()[:16]
 
 
+def moved_to_sections(data: dict[str, Any]) -> dict[str, Any]:
+    """``data`` with settings of the older layout (``MOVED_KEYS``) moved to their sections
+    (logged); a setting given at both places is a ConfigError."""
+    if not isinstance(data, dict):
+        return data
+    out = {k: dict(v) if isinstance(v, dict) else v for k, v in data.items()}
+    for (old_sec, old_key), (new_sec, new_key) in MOVED_KEYS.items():
+        sec = out.get(old_sec)
+        if not isinstance(sec, dict) or old_key not in sec:
+            continue
+        target = out.setdefault(new_sec, {})
+        if not isinstance(target, dict):
+            continue  # from_dict names the mistyped section
+        if new_key in target:
+            raise ConfigError(f"{old_sec}.{old_key} and {new_sec}.{new_key} are the same "
+                              f"setting (older and current layout): give it once, as "
+                              f"{new_sec}.{new_key}")
+        target[new_key] = sec.pop(old_key)
+        logger.info("config: %s.%s is read as %s.%s (older layout)", old_sec, old_key,
+                    new_sec, new_key)
+    return out
+
+
 #: Named presets (merged under the CLI options and any --config file). The points were chosen
 #: from the error-vs-runtime Pareto front in reports/error_vs_runtime.md.
 PRESETS: dict[str, dict[str, Any]] = {
@@ -389,7 +420,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         # a failing run pays only for what it reports: the registration refinement is left to
         # an explicit --registration-rounds N (the first estimate is reported; with --resume
         # a rerun measures only the rounds); reports/pipeline_timing.md
-        "correct": {"registration_rounds": 0},
+        "run_checks": {"refine_rounds": 0},
     },
     "balanced": {
         "match": {"method": "sift", "resize_max": 320},

@@ -1,6 +1,8 @@
-"""The judging sections of the run config: the per-frame verdict and the gate (``verdict``) and
-the corrections after the verdicts (``correct``). Re-exported by ``pgt_check.config``, where
-``RunConfig`` composes them with the measurement sections.
+"""The judging sections of the run config, grouped as a user thinks of them: the per-frame
+verdict (``verdict``), the gate (``gate``), the run-level checks with their refinement
+(``run_checks``) and the pose corrections (``correct``); ``MOVED_KEYS`` maps the older layout.
+Re-exported by ``pgt_check.config``, where ``RunConfig`` composes them with the measurement
+sections.
 """
 
 from __future__ import annotations
@@ -11,7 +13,8 @@ from typing import Literal
 
 from pgt_check.config_load import check_range as _check_range
 
-__all__ = ["MAX_UNVERIFIABLE_DEFAULT", "CorrectConfig", "VerdictConfig"]
+__all__ = ["MAX_UNVERIFIABLE_DEFAULT", "MOVED_KEYS", "CorrectConfig", "GateConfig", "RunChecksConfig",
+           "VerdictConfig"]
 
 
 #: default gate limit on the UNVERIFIABLE share: wide of what the shared real datasets give
@@ -22,6 +25,8 @@ MAX_UNVERIFIABLE_DEFAULT = 0.5
 
 @dataclass(frozen=True)
 class VerdictConfig:
+    """The per-frame verdict (``pgt_check.verdict.decide``): thresholds and evidence minimums."""
+
     #: PASS threshold on the corner error in original photo pixels; None = rel_diag * diagonal
     threshold_px: float | None = None
     threshold_rel_diag: float = 0.02
@@ -31,6 +36,31 @@ class VerdictConfig:
     min_coverage: float = 0.05
     min_inliers: int = 15
     min_inlier_ratio: float = 0.0
+    #: a FAIL of any path with at least this many homography inliers is a FAIL, whichever path
+    #: has more inliers (a confident FAIL is never overruled)
+    confident_inliers: int = 40
+
+    def __post_init__(self) -> None:
+        _check_range("verdict.threshold_px", self.threshold_px, 0, lo_open=True)
+        _check_range("verdict.threshold_rel_diag", self.threshold_rel_diag, 0, lo_open=True)
+        _check_range("verdict.min_coverage", self.min_coverage, 0, 1)
+        _check_range("verdict.min_inliers", self.min_inliers, 0)
+        _check_range("verdict.min_inlier_ratio", self.min_inlier_ratio, 0, 1)
+        _check_range("verdict.confident_inliers", self.confident_inliers, 0)
+
+    def threshold_for(self, width: int, height: int) -> float:
+        """The PASS threshold in original photo pixels for an image of this size."""
+        if self.threshold_px is not None:
+            return float(self.threshold_px)
+        return float(self.threshold_rel_diag * math.hypot(width, height))
+
+
+@dataclass(frozen=True)
+class GateConfig:
+    """The run's gate (exit code, JUnit): the shares of FAIL / UNVERIFIABLE frames it allows,
+    internal errors, and optionally a required pose accuracy (``verdict.run_stats.gate``,
+    ``verdict.accuracy``)."""
+
     #: the gate passes while FAIL frames / all frames <= this
     max_fail_fraction: float = 0.0
     #: and while UNVERIFIABLE frames / all frames <= this (1.0 = never gate on them). The
@@ -38,16 +68,35 @@ class VerdictConfig:
     max_unverifiable_fraction: float = MAX_UNVERIFIABLE_DEFAULT
     #: and while frames with internal_error / worker_crashed <= this (a crash is never "fine")
     max_internal_errors: int = 0
+    #: ``--require-accuracy DEG,UNITS``: the gate also fails when more than
+    #: ``max_fail_fraction`` of the frames, or a shared error, are not verified to within this
+    #: rotation (deg) / camera-centre distance (scene units) at 95 % (``verdict.accuracy``);
+    #: None = not required
+    require_accuracy_deg: float | None = None
+    require_accuracy_units: float | None = None
 
-    #: a FAIL of any path with at least this many homography inliers is a FAIL, whichever path
-    #: has more inliers (a confident FAIL is never overruled)
-    confident_inliers: int = 40
-    #: run-level checks of shared errors (registration, drift, calibration); see README
-    shared_checks: bool = True
-    #: threshold of the shared checks in photo px; None = shared_threshold_rel x the per-frame
-    #: threshold (pooled evidence is precise, and an error all frames share matters more)
-    shared_threshold_px: float | None = None
-    shared_threshold_rel: float = 0.15
+    def __post_init__(self) -> None:
+        _check_range("gate.max_fail_fraction", self.max_fail_fraction, 0, 1)
+        _check_range("gate.max_unverifiable_fraction", self.max_unverifiable_fraction, 0, 1)
+        _check_range("gate.max_internal_errors", self.max_internal_errors, 0)
+        _check_range("gate.require_accuracy_deg", self.require_accuracy_deg, 0, 180,
+                     lo_open=True)
+        _check_range("gate.require_accuracy_units", self.require_accuracy_units, 0,
+                     lo_open=True)
+
+
+@dataclass(frozen=True)
+class RunChecksConfig:
+    """The run-level checks of errors many frames share (registration, drift, calibration;
+    ``pgt_check.verdict.shared``) and the refinement of a failed registration estimate
+    (``pgt_check.correct.registration``); docs/run-level-checks.md."""
+
+    #: run the checks (off: relative evidence alone leaves frames UNVERIFIABLE)
+    enabled: bool = True
+    #: their threshold in photo px; None = threshold_rel x the per-frame threshold (pooled
+    #: evidence is precise, and an error all frames share matters more)
+    threshold_px: float | None = None
+    threshold_rel: float = 0.15
     #: judge frames after removing the estimated per-camera calibration error (absolute paths)
     remove_calibration: bool = False
     #: the calibration error also has a camera-frame translation (the photos come from a
@@ -59,35 +108,25 @@ class VerdictConfig:
     #: one estimated on this run (which views that cannot separate calibration from
     #: registration would let absorb a misregistration)
     calibration_from: str | None = None
-    #: ``--require-accuracy DEG,UNITS``: the gate also fails when more than
-    #: ``max_fail_fraction`` of the frames, or a shared error, are not verified to within this
-    #: rotation (deg) / camera-centre distance (scene units) at 95 % (``verdict.accuracy``);
-    #: None = not required
-    require_accuracy_deg: float | None = None
-    require_accuracy_units: float | None = None
+    #: when the registration check fails: at most this many rounds of measuring frames again
+    #: at the poses the estimate corrects and fitting what is left, stopping once what is left
+    #: is below the shared threshold twice (0 = off): the first estimate's rotation /
+    #: translation split is far off where the misregistration zooms the images
+    #: (reports/shared_errors.md); bounded in time by ``correct.budget``
+    refine_rounds: int = 8
+    #: frames measured per round (evenly spaced; the pooled fit needs a few dozen)
+    refine_frames: int = 30
 
     def __post_init__(self) -> None:
-        _check_range("verdict.require_accuracy_deg", self.require_accuracy_deg, 0, 180,
-                     lo_open=True)
-        _check_range("verdict.require_accuracy_units", self.require_accuracy_units, 0,
-                     lo_open=True)
-        _check_range("verdict.threshold_px", self.threshold_px, 0, lo_open=True)
-        _check_range("verdict.threshold_rel_diag", self.threshold_rel_diag, 0, lo_open=True)
-        _check_range("verdict.min_coverage", self.min_coverage, 0, 1)
-        _check_range("verdict.min_inliers", self.min_inliers, 0)
-        _check_range("verdict.min_inlier_ratio", self.min_inlier_ratio, 0, 1)
-        _check_range("verdict.max_fail_fraction", self.max_fail_fraction, 0, 1)
-        _check_range("verdict.max_unverifiable_fraction", self.max_unverifiable_fraction, 0, 1)
-        _check_range("verdict.max_internal_errors", self.max_internal_errors, 0)
-        _check_range("verdict.confident_inliers", self.confident_inliers, 0)
-        _check_range("verdict.shared_threshold_px", self.shared_threshold_px, 0, lo_open=True)
-        _check_range("verdict.shared_threshold_rel", self.shared_threshold_rel, 0, lo_open=True)
+        _check_range("run_checks.threshold_px", self.threshold_px, 0, lo_open=True)
+        _check_range("run_checks.threshold_rel", self.threshold_rel, 0, lo_open=True)
+        _check_range("run_checks.refine_rounds", self.refine_rounds, 0, 1000)
+        _check_range("run_checks.refine_frames", self.refine_frames, 3, 100_000)
 
-    def threshold_for(self, width: int, height: int) -> float:
-        """The PASS threshold in original photo pixels for an image of this size."""
-        if self.threshold_px is not None:
-            return float(self.threshold_px)
-        return float(self.threshold_rel_diag * math.hypot(width, height))
+    @property
+    def removes_calibration(self) -> bool:
+        """Whether the verdicts take a calibration error out (this run's or a trusted one)."""
+        return bool(self.remove_calibration or self.calibration_from)
 
 
 @dataclass(frozen=True)
@@ -100,24 +139,34 @@ class CorrectConfig:
     rounds: int = 3
     #: PnP bootstrap resamples for the uncertainty (0 = the last update only)
     bootstrap: int = 12
-    #: when the registration check fails: at most this many rounds of measuring frames again
-    #: at the poses the estimate corrects and fitting what is left, stopping once what is left
-    #: is below the shared threshold twice (``pgt_check.correct.registration``; 0 = off): the
-    #: first estimate's rotation / translation split is far off where the misregistration zooms
-    #: the images (reports/shared_errors.md)
-    registration_rounds: int = 8
-    #: frames measured per round (evenly spaced; the pooled fit needs a few dozen)
-    registration_frames: int = 30
-    #: the registration rounds together, and the per-frame corrections together, may each
-    #: take at most this multiple of the main pass's measuring time (the frames' summed
-    #: ``timings.total``): a round / frame is not started when those so far plus one more
-    #: (as long as the mean so far) would exceed it; the first always runs (0 = no bound).
-    #: The rounds also stop when what is left grows (the estimate oscillates)
+    #: the registration refinement's rounds together (``run_checks.refine_rounds``), and the
+    #: per-frame corrections together, may each take at most this multiple of the main pass's
+    #: measuring time (the frames' summed ``timings.total``): a round / frame is not started
+    #: when those so far plus one more (as long as the mean so far) would exceed it; the first
+    #: always runs (0 = no bound). The rounds also stop when what is left grows (the estimate
+    #: oscillates)
     budget: float = 2.0
 
     def __post_init__(self) -> None:
         _check_range("correct.rounds", self.rounds, 1, 1000)
         _check_range("correct.bootstrap", self.bootstrap, 0, 10_000)
-        _check_range("correct.registration_rounds", self.registration_rounds, 0, 1000)
-        _check_range("correct.registration_frames", self.registration_frames, 3, 100_000)
         _check_range("correct.budget", self.budget, 0, 1e6)
+
+
+#: settings of the layout before the gate and the run-level checks had sections of their own
+#: (config.json of older runs, older config files): old (section, key) -> new (section, key)
+MOVED_KEYS: dict[tuple[str, str], tuple[str, str]] = {
+    ("verdict", "max_fail_fraction"): ("gate", "max_fail_fraction"),
+    ("verdict", "max_unverifiable_fraction"): ("gate", "max_unverifiable_fraction"),
+    ("verdict", "max_internal_errors"): ("gate", "max_internal_errors"),
+    ("verdict", "require_accuracy_deg"): ("gate", "require_accuracy_deg"),
+    ("verdict", "require_accuracy_units"): ("gate", "require_accuracy_units"),
+    ("verdict", "shared_checks"): ("run_checks", "enabled"),
+    ("verdict", "shared_threshold_px"): ("run_checks", "threshold_px"),
+    ("verdict", "shared_threshold_rel"): ("run_checks", "threshold_rel"),
+    ("verdict", "remove_calibration"): ("run_checks", "remove_calibration"),
+    ("verdict", "calibration_translation"): ("run_checks", "calibration_translation"),
+    ("verdict", "calibration_from"): ("run_checks", "calibration_from"),
+    ("correct", "registration_rounds"): ("run_checks", "refine_rounds"),
+    ("correct", "registration_frames"): ("run_checks", "refine_frames"),
+}

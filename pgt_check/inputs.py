@@ -76,12 +76,12 @@ def check_side_inputs(config: RunConfig, frames: Sequence[Frame]) -> None:
     inp = config.input
     named = [("trajectory", inp.trajectory), ("mesh", inp.mesh), ("images", inp.images),
              ("sensors file", inp.sensors), ("dataparser transforms", inp.dataparser_transforms),
-             ("--calibration-from summary", config.verdict.calibration_from)]
+             ("--calibration-from summary", config.run_checks.calibration_from)]
     named += [("image", f.image_file) for f in frames]
     check_inputs_not_outputs(named, run_output_paths(config.out), "--out")
-    if config.verdict.calibration_from:
+    if config.run_checks.calibration_from:
         trusted_calibration(
-            config.verdict.calibration_from, sorted({camera_key(f.camera) for f in frames})
+            config.run_checks.calibration_from, sorted({camera_key(f.camera) for f in frames})
         )
     check_mesh_memory(config, frames)
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import os
 import sys
 from pathlib import Path
@@ -21,6 +22,12 @@ sys.path.insert(0, str(ROOT))  # the checkout's pgt_check, installed or not
 #: fingerprint (it keys the record store by settings and input paths: another checkout differs)
 VOLATILE_KEYS = {"timing", "versions", "version", "elapsed_s", "out", "wall_s", "wall_time_s",
                  "time_s", "layout", "fingerprint"}
+
+
+#: floats of summary.json equal to this relative tolerance count as equal: the edge path's
+#: least-squares refinement varies in the last digits between identical runs under CPU load
+#: (thread scheduling of the reductions); frames.csv (6 significant digits) is compared exactly
+REL_TOL = 1e-9
 
 
 def _cases() -> dict[str, list[str]]:
@@ -49,6 +56,10 @@ def _timing_columns(header: list[str]) -> set[str]:
 
 
 def _strip(value, path=""):
+    if path == ".settings" and isinstance(value, dict):
+        from pgt_check.config import moved_to_sections
+
+        value = moved_to_sections(value)  # an older layout's settings, at their new place
     if isinstance(value, dict):
         return {k: _strip(v, f"{path}.{k}") for k, v in value.items() if k not in VOLATILE_KEYS}
     if isinstance(value, list):
@@ -69,6 +80,8 @@ def _diff_json(a, b, path="") -> list[str]:
         return out
     if isinstance(a, list) and isinstance(b, list) and len(a) == len(b):
         return [d for i, (x, y) in enumerate(zip(a, b, strict=True)) for d in _diff_json(x, y, f"{path}[{i}]")]
+    if isinstance(a, float) and isinstance(b, float) and math.isclose(a, b, rel_tol=REL_TOL):
+        return []
     return [] if a == b else [f"{path}: {a!r} -> {b!r}"]
 
 

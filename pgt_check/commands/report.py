@@ -52,19 +52,37 @@ def _old_summary(path: Path) -> dict:
     return old if isinstance(old, dict) else {}
 
 
-def _verdict_fields() -> list[tuple[str, type]]:
-    """(name, type) of every ``VerdictConfig`` field (the settings a re-judge may change)."""
+#: the config sections a re-judge may change (the measurements stay): section -> the flag
+#: names of fields whose own name would be ambiguous, and the fields left out (they measure)
+_REJUDGE_SECTIONS: dict[str, tuple[dict[str, str], tuple[str, ...]]] = {
+    "verdict": ({}, ()),
+    "gate": ({}, ()),
+    "run_checks": ({"enabled": "shared_checks", "threshold_px": "shared_threshold_px",
+                    "threshold_rel": "shared_threshold_rel"},
+                   ("refine_rounds", "refine_frames")),
+}
+
+
+def _verdict_fields() -> list[tuple[str, str, str, type, object]]:
+    """(section, field, flag name, type, default) of every setting a re-judge may change."""
     import dataclasses
     import typing
 
-    from pgt_check.config import VerdictConfig
+    from pgt_check.config import RunConfig
 
-    hints = typing.get_type_hints(VerdictConfig)
+    cfg = RunConfig()
     out = []
-    for f in dataclasses.fields(VerdictConfig):
-        tp = hints[f.name]
-        args = [a for a in typing.get_args(tp) if a is not type(None)] or [tp]
-        out.append((f.name, args[0] if args[0] in (int, float, str, bool) else str))
+    for section, (names, skip) in _REJUDGE_SECTIONS.items():
+        cls = type(getattr(cfg, section))
+        hints = typing.get_type_hints(cls)
+        for f in dataclasses.fields(cls):
+            if f.name in skip:
+                continue
+            tp = hints[f.name]
+            args = [a for a in typing.get_args(tp) if a is not type(None)] or [tp]
+            tp = args[0] if args[0] in (int, float, str, bool) else str
+            out.append((section, f.name, names.get(f.name, f.name), tp,
+                        getattr(getattr(cfg, section), f.name)))
     return out
 
 
@@ -80,22 +98,29 @@ def _bool_arg(text: str) -> bool:
 
 
 def add_verdict_flags(p: argparse.ArgumentParser) -> None:
-    """One ``--name`` flag per ``VerdictConfig`` field (derived, so new fields come along)."""
-    from pgt_check.config import VerdictConfig
-
-    g = p.add_argument_group("verdict settings (re-judge without re-measuring)")
-    for name, tp in _verdict_fields():
-        default = getattr(VerdictConfig(), name)
-        flag = "--" + name.replace("_", "-")
+    """One ``--name`` flag per field of the ``verdict``, ``gate`` and ``run_checks`` sections
+    (derived, so new fields come along)."""
+    g = p.add_argument_group("verdict, gate and run-level check settings (re-judge without "
+                             "re-measuring)")
+    for section, name, flag_name, tp, default in _verdict_fields():
+        flag, dest = "--" + flag_name.replace("_", "-"), f"{section}__{name}"
         if tp is bool:
-            g.add_argument(flag, default=None, type=_bool_arg, metavar="{true,false}",
+            g.add_argument(flag, dest=dest, default=None, type=_bool_arg,
+                           metavar="{true,false}",
                            help=f"(default {default}; also yes/no, on/off, 1/0)")
         else:
-            g.add_argument(flag, type=tp, default=None, help=f"(default {default})")
+            g.add_argument(flag, dest=dest, type=tp, default=None, metavar=flag_name.upper(),
+                           help=f"(default {default})")
 
 
-def verdict_overrides(args: argparse.Namespace) -> dict:
-    return {n: getattr(args, n) for n, _ in _verdict_fields() if getattr(args, n) is not None}
+def verdict_overrides(args: argparse.Namespace) -> dict[str, dict[str, object]]:
+    """The re-judge flags given, nested by section like a config file."""
+    out: dict[str, dict[str, object]] = {}
+    for section, name, _, _, _ in _verdict_fields():
+        value = getattr(args, f"{section}__{name}")
+        if value is not None:
+            out.setdefault(section, {})[name] = value
+    return out
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -135,7 +160,7 @@ def _report(args: argparse.Namespace) -> int:
     try:
         out = Path(args.out_dir)
         records, cfg = load_run(out)
-        override: dict = {"verdict": verdict_overrides(args)}
+        override: dict = verdict_overrides(args)
         if args.absolute_paths:
             override["absolute_paths"] = True
         config = RunConfig.from_dict(merge(cfg, override))

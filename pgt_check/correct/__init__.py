@@ -2,7 +2,7 @@
 evidence says the poses should have been.
 
 * ``registration``: when the run-level registration check fails, its estimate refined by
-  measuring the frames again at the poses it corrects (``correct.registration_rounds``);
+  measuring the frames again at the poses it corrects (``run_checks.refine_rounds``);
   ``registration_refined.json``, ``registered_trajectory.txt``.
 * ``calibration``: a significant calibration estimate written exactly, as a LaMAR session
   with a rig (``calibrated/``).

@@ -1,5 +1,5 @@
 """The registration estimate refined by measuring again at the corrected poses (a correction
-step after the verdicts; ``correct.registration_rounds``).
+step after the verdicts; ``run_checks.refine_rounds``).
 
 When the run-level registration check fails, its estimate comes from evidence measured at the
 misregistered poses. Where the misregistration moves the images non-uniformly (the zoom and
@@ -15,7 +15,7 @@ Gauss-Newton iterations). The remaining motion shrinks every round, where the al
 unbiased: castle 4 % -> 27 % off after one round, 9 % after two.
 
 The rounds are bounded (issue #28: a run that fails pays only for what it reports): at most
-``correct.registration_rounds`` rounds, at most ``correct.budget`` times the main
+``run_checks.refine_rounds`` rounds, at most ``correct.budget`` times the main
 pass's measuring time, and they stop when what is left grows from one round to the next beyond
 the evidence's noise (its 95 % interval wholly above the last one; the
 estimate does not converge: the one before the update that made it grow is kept). Where the
@@ -136,7 +136,8 @@ def evidence_config(config: RunConfig) -> RunConfig:
 
 def refine_fingerprint(config: RunConfig) -> str:
     """What a stored refinement depends on: the measurement, verdict and correction settings."""
-    return config.measurement_fingerprint(verdict=config.verdict, correct=config.correct)
+    return config.measurement_fingerprint(verdict=config.verdict, run_checks=config.run_checks,
+                                        correct=config.correct)
 
 
 def _f(x: Any) -> float | None:
@@ -201,13 +202,13 @@ def refine_registration(
     ``registration_entries``); ``measure(frames, config)``: the absolute
     evidence of the frames at their (moved) poses, in any order. None when there is nothing to
     refine (``needs_refinement`` false, rounds 0, or no frame to measure). Bounded by
-    ``correct.registration_rounds``, ``correct.budget`` and the growth rule (module
+    ``run_checks.refine_rounds``, ``correct.budget`` and the growth rule (module
     docstring); ``clock`` (seconds) is replaceable for tests."""
-    c = config.correct
-    rounds = c.registration_rounds
+    c = config.run_checks
+    rounds = c.refine_rounds
     if rounds <= 0 or not needs_refinement(shared):
         return None
-    todo = refine_frames(measurements, frames, c.registration_frames)
+    todo = refine_frames(measurements, frames, c.refine_frames)
     if len(todo) < 3:
         return None
     ecfg = evidence_config(config)
@@ -215,9 +216,9 @@ def refine_registration(
     start = np.asarray(first.corrected_world_from_world, np.float64)
     centres = [np.asarray(m.world_from_cam)[:3, 3] for m in measurements if m.world_from_cam]
     origin = np.mean(centres, axis=0)
-    budget = c.budget * main_pass_seconds(measurements)
+    budget = config.correct.budget * main_pass_seconds(measurements)
     t_start = clock()
-    r = _Rounds(todo, ecfg, measure, clock, origin, budget, c.budget, t_start, first)
+    r = _Rounds(todo, ecfg, measure, clock, origin, budget, config.correct.budget, t_start, first)
     logger.info(
         "registration check failed: refining its estimate (up to %d round(s) of "
         "measuring %d frames again at the corrected poses%s)",
@@ -339,7 +340,7 @@ def refine_run(
 
     out = Path(out)
     refined = None
-    if config.correct.registration_rounds > 0 and needs_refinement(shared):
+    if config.run_checks.refine_rounds > 0 and needs_refinement(shared):
         refined = load_refinement(out, shared, refine_fingerprint(config))
         if refined is not None:
             logger.info("registration refinement reused from %s", out / REFINED_FILE)

@@ -145,9 +145,9 @@ def build_summary(
         w, h = 0, 0
     threshold = resolve_threshold_px(config.verdict, w, h)
     stats = run_statistics(records, threshold)
-    passed, why = gate(stats["counts"], config.verdict, stats["unverifiable_reasons"])
+    passed, why = gate(stats["counts"], config.gate, stats["unverifiable_reasons"])
     accuracy = run_accuracy(
-        records, (extra or {}).get("shared_errors"), config.verdict, threshold
+        records, (extra or {}).get("shared_errors"), config, threshold
     )
     if passed and accuracy.gate_passed is False:  # --require-accuracy
         passed, why = False, accuracy.gate_explanation

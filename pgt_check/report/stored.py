@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from pgt_check.config import moved_to_sections
 from pgt_check.errors import InputError
 from pgt_check.files import MAX_SMALL_JSON_BYTES, load_json_limited, regular_file_size
 from pgt_check.measure.record import FrameMeasurement, OldRecordError
@@ -54,7 +55,7 @@ def load_run(out_dir: Path) -> tuple[list[FrameMeasurement], dict]:
     if not isinstance(info, dict) or not isinstance(cfg, dict):
         raise InputError(f"{out_dir}: run.json or config.json is not a JSON object")
     try:
-        return [FrameMeasurement.from_json(latest[fid]) for fid in order], cfg
+        return [FrameMeasurement.from_json(latest[fid]) for fid in order], moved_to_sections(cfg)
     except OldRecordError as err:
         raise InputError(f"{rec_path}: {err}") from err
     except (KeyError, ValueError, TypeError, AttributeError, IndexError) as err:

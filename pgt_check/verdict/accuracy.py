@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from pgt_check.config import VerdictConfig
+from pgt_check.config import GateConfig, RunConfig
 from pgt_check.verdict.accuracy_text import _fmt, _need, accuracy_sentences  # re-exported
 from pgt_check.verdict.shared import SharedChecks
 
@@ -305,7 +305,7 @@ def detection_limits(
 def run_accuracy(
     rows: Sequence[Mapping[str, Any]],
     shared: SharedChecks | Mapping[str, Any] | None,
-    config: VerdictConfig,
+    config: RunConfig,
     threshold_px: float,
 ) -> RunAccuracy:
     """The run's accuracy statement from judged rows (with ``ACCURACY_COLUMNS``) and the
@@ -318,7 +318,7 @@ def run_accuracy(
     ]  # fmt: skip
     rot = [float(r["acc_rot_bound_deg"]) for r in bounded]
     tra = [float(r["acc_t_bound"]) for r in bounded]
-    req = config.require_accuracy_deg, config.require_accuracy_units
+    req = config.gate.require_accuracy_deg, config.gate.require_accuracy_units
     if req != (None, None):
         x, y, src = req[0], req[1], "required"
     else:
@@ -332,7 +332,7 @@ def run_accuracy(
         1 for a, b in zip(rot, tra, strict=True)
         if (x is None or a <= x) and (y is None or b <= y)
     )  # fmt: skip
-    limits = detection_limits(rows, threshold_px, shared, config.remove_calibration)
+    limits = detection_limits(rows, threshold_px, shared, config.run_checks.remove_calibration)
     sizes = shared_sizes(shared, limits.points_px_per_deg, limits.points_px_per_unit)
     acc = RunAccuracy(
         len(rows), len(bounded), x, y, src, n_within if bounded else 0,
@@ -342,13 +342,13 @@ def run_accuracy(
     )  # fmt: skip
     passed, why = (None, "")
     if req != (None, None):
-        passed, why = accuracy_gate(rows, acc, config)
+        passed, why = accuracy_gate(rows, acc, config.gate)
     acc = RunAccuracy(**{**acc.__dict__, "gate_passed": passed, "gate_explanation": why})
     return RunAccuracy(**{**acc.__dict__, "sentences": tuple(accuracy_sentences(acc))})
 
 
 def accuracy_gate(
-    rows: Sequence[Mapping[str, Any]], acc: RunAccuracy, config: VerdictConfig
+    rows: Sequence[Mapping[str, Any]], acc: RunAccuracy, config: GateConfig
 ) -> tuple[bool, str]:
     """``--require-accuracy``: fails when more than ``max_fail_fraction`` of the frames have a
     95 % bound above the required accuracy, or none at all (UNVERIFIABLE frames are left to

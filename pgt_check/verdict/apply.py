@@ -37,7 +37,7 @@ def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> Ru
 
     Measurements are not changed (records.jsonl stays as measured)."""
     ms = list(measurements)
-    shared = run_shared_checks(ms, config) if config.verdict.shared_checks and ms else None
+    shared = run_shared_checks(ms, config) if config.run_checks.enabled and ms else None
     if shared is not None and shared.registration.status != NOT_CHECKED:
         # what a world rotation / translation does to the images (the shared detection limit)
         sens = Sensitivity(*world_sensitivity(ms))
@@ -60,7 +60,7 @@ def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> Ru
     # the pose accuracy each frame's absolute evidence supports (``verdict.frame_bounds``), after
     # taking out the calibration error the verdicts take out
     cals = calibrations_to_remove(
-        v, None if shared is None else shared.summary(), [m.camera_id for m in ms]
+        config.run_checks, None if shared is None else shared.summary(), [m.camera_id for m in ms]
     )
     bounds = frame_bounds(ms, cals)
     frames = []

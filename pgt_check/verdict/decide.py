@@ -13,6 +13,7 @@ import numpy as np
 from pgt_check.config import VerdictConfig
 from pgt_check.enhance.base import Evidence
 from pgt_check.measure.record import FrameMeasurement, MeasureReason, PathMeasurement
+from pgt_check.verdict.constants import CLEAR_MARGIN
 from pgt_check.verdict.status import FAILED, NOT_CHECKED, PASSED
 
 
@@ -111,21 +112,15 @@ def _calibrated(
     m: FrameMeasurement, path: PathMeasurement | None, config: VerdictConfig, shared: Any
 ) -> Any:
     """The path's homography with the camera's estimated calibration error removed, where the
-    config asks for it (``remove_calibration`` / ``calibration_from``); else None."""
-    removing = config.remove_calibration or config.calibration_from
+    run-level checks took it out (``run_checks.remove_calibration`` / ``calibration_from``);
+    else None."""
+    removing = shared is not None and shared.removes_calibration
     if not removing or path is None or path.photo_from_render is None or shared is None:
         return None
     h_cal = shared.calibration_homography(m.frame_id, m.camera_id)
     if h_cal is None or path.evidence is not Evidence.ABSOLUTE:
         return None
     return np.linalg.solve(h_cal, np.asarray(path.photo_from_render, np.float64))
-
-
-#: the band around the threshold (fraction of it) where an absolute result is not clear, as
-#: ``enhance.auto_margin`` (default 0.5): a reference is off when its own render's error is
-#: beyond 1.5 x the threshold; a PASS of the frame's own render overrules a relative FAIL
-#: through such a reference only within 0.5 x the threshold
-CLEAR_MARGIN = 0.5
 
 
 def path_outcomes(

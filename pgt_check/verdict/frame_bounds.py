@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from pgt_check.config import VerdictConfig
+from pgt_check.config import RunChecksConfig
 from pgt_check.geometry.frame_accuracy import FrameAccuracy, frame_accuracy
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.verdict.calibration import CameraCalibration, camera_matrix
@@ -241,7 +241,7 @@ def world_axis_sensitivity(
 
 
 def calibrations_to_remove(
-    config: VerdictConfig, shared: Mapping[str, Any] | None, camera_ids: Sequence[str]
+    config: RunChecksConfig, shared: Mapping[str, Any] | None, camera_ids: Sequence[str]
 ) -> dict[str, CameraCalibration]:
     """The calibration errors the verdicts take out (the same the run-level checks used)."""
     if config.calibration_from:

@@ -25,15 +25,12 @@ import statistics
 from collections.abc import Sequence
 
 from pgt_check.measure.record import FrameMeasurement, MeasureReason
-
-#: measured frames on each side (trajectory order) whose coverage forms a frame's neighbourhood
-NEIGHBOURS_PER_SIDE = 3
-#: fewer measured neighbours than this: no comparison (the frame stays ``low_coverage``)
-MIN_NEIGHBOURS = 2
-#: off the mesh: coverage at most this fraction of the neighbours' median coverage
-OFF_MESH_RATIO = 0.25
-#: the neighbours' median coverage must be at least this many times ``min_coverage``
-MIN_NEIGHBOUR_FACTOR = 2.0
+from pgt_check.verdict.constants import (
+    MIN_NEIGHBOUR_FACTOR,
+    MIN_NEIGHBOURS,
+    NEIGHBOURS_PER_SIDE,
+    OFF_MESH_RATIO,
+)
 
 OFF_MESH = "off_mesh"
 

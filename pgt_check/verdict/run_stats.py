@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from pgt_check.config import VerdictConfig
+from pgt_check.config import GateConfig
 from pgt_check.geometry.homography import auc_at_thresholds
 from pgt_check.measure.record import MeasureReason
 from pgt_check.verdict.decide import Verdict
@@ -21,7 +21,7 @@ INTERNAL_REASONS = (MeasureReason.INTERNAL_ERROR.value, MeasureReason.WORKER_CRA
 
 def gate(
     counts: Mapping[str, int],
-    config: VerdictConfig,
+    config: GateConfig,
     reasons: Mapping[str, int] | None = None,
 ) -> tuple[bool, str]:
     """Run-level gate over verdict counts; returns (passed, explanation). Fails closed.

@@ -14,7 +14,7 @@ one small model to all of it (``pgt_check.geometry.shared_errors``). Each check 
   per-frame threshold (reported, frames still judged; ``--remove-calibration`` judges them after
   removing it).
 
-The threshold (``VerdictConfig.shared_threshold_px``; default 0.15 x the per-frame
+The threshold (``run_checks.threshold_px``; default 0.15 x the per-frame
 threshold) is lower than the per-frame one because pooled evidence is far more precise, and
 errors every frame shares matter more.
 """
@@ -35,6 +35,13 @@ from pgt_check.verdict.calibration import (
     camera_matrix,
     frame_homographies,
     trusted_calibration,
+)
+from pgt_check.verdict.constants import (  # re-exported: callers and tests use them here
+    DRIFT_THRESHOLD_FACTOR,
+    MAX_FRAME_EVIDENCE_POINTS,
+    MAX_POOLED_POINTS,
+    MIN_FRAME_EVIDENCE_POINTS,
+    OWN_ERROR_FRACTION,
 )
 from pgt_check.verdict.shared_entries import (
     calibration_change_entry,
@@ -81,6 +88,9 @@ class SharedChecks:
     #: with ``--calibration-from``, per camera id: what is left of the calibration after
     #: removing the trusted run's (``calibration_change_entry``); a FAILED camera's frames FAIL
     calibration_change: dict[str, CalibrationCheck] = field(default_factory=dict)
+    #: the verdicts take a calibration error out (``run_checks.removes_calibration``): the
+    #: absolute paths are judged on homographies with the camera's calibration removed
+    removes_calibration: bool = False
 
     def calibration_homography(self, frame_id: str, camera_id: str) -> np.ndarray | None:
         """The calibration error's photo_from_render for this frame (None if not estimated)."""
@@ -119,36 +129,15 @@ class SharedChecks:
         return e if e is not None and e.status == FAILED else None
 
 
-#: the drift check's threshold relative to the shared one. A drift window is fitted on a few
-#: frames, where view-dependent errors the model lacks show as a local correction of a few px
-#: (on 7-Scenes above the shared threshold where the camera looks at near surfaces or turns
-#: fast: reports/shared_errors.md)
-DRIFT_THRESHOLD_FACTOR = 2.0
-
-
 def shared_threshold(measurements: Sequence[FrameMeasurement], config: RunConfig) -> float:
     """The shared-error threshold in photo pixels (median over the frames' image sizes)."""
-    v = config.verdict
-    if v.shared_threshold_px is not None:
-        return float(v.shared_threshold_px)
+    rc = config.run_checks
+    if rc.threshold_px is not None:
+        return float(rc.threshold_px)
     if not measurements:
         return float("nan")
-    per_frame = [v.threshold_for(m.width, m.height) for m in measurements]
-    return float(v.shared_threshold_rel * np.median(per_frame))
-
-
-#: points per frame in the pooled run-level fits: one frame, one vote. A frame whose evidence
-#: has several sources (raw matches + edges) would otherwise weigh up to twice as much as one
-#: with edges alone (castle, `accurate` preset, drifting segment: the 4 drifting frames, with
-#: XFeat matches of their shaded renders beside their edges, made the registration fail and
-#: all 10 frames FAIL; capped, it passes and the drift is found, AUC 1.00)
-MAX_FRAME_EVIDENCE_POINTS = 200
-#: all frames' points together in the pooled fits: past MAX_POOLED_POINTS / 200 frames each frame
-#: gives fewer points (never under MIN_FRAME_EVIDENCE_POINTS), so the run-level checks of a long
-#: trajectory cost about what a 200-frame run costs, until the floor is reached (linear after
-#: it); their precision is then already far below the threshold (reports/scaling.md)
-MAX_POOLED_POINTS = 40_000
-MIN_FRAME_EVIDENCE_POINTS = 24
+    per_frame = [config.verdict.threshold_for(m.width, m.height) for m in measurements]
+    return float(rc.threshold_rel * np.median(per_frame))
 
 
 def frame_evidence(measurements: Sequence[FrameMeasurement]) -> list[Any]:
@@ -245,7 +234,7 @@ def _calibration_checks(
     trusted run's with ``calibration_from``) and, with ``calibration_from``, the change entry."""
     from pgt_check.geometry.shared_errors import CalibrationSettings, estimate_calibration
 
-    v = config.verdict
+    v = config.run_checks
     settings = CalibrationSettings(calibration_translation=v.calibration_translation)
     calib, cals = {}, {}
     for cam_id, est in estimate_calibration(ev, settings).items():
@@ -286,11 +275,12 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
         else thr
     )
     ev = frame_evidence(measurements)
+    own = OWN_ERROR_FRACTION * frame_thr  # a frame's residual above it: an error of its own
     # frames with an error of their own are left out of the pooled fits
     all_ev = ev
     no_boot = se.FitSettings(n_bootstrap=0)
     ev, left_out = consistent_frames(
-        ev, lambda fr: se.estimate_registration(fr, no_boot), 0.5 * frame_thr, 0.5 * frame_thr
+        ev, lambda fr: se.estimate_registration(fr, no_boot), own, own
     )
     if left_out:
         logger.info(
@@ -298,7 +288,7 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
             len(left_out),
             ", ".join(left_out[:5]),
         )
-    v = config.verdict
+    v = config.run_checks
     trans = v.calibration_translation
     intrinsics = {m.camera_id: m.intrinsics for m in measurements if m.intrinsics}
     calib, cals, change = _calibration_checks(ev, measurements, config, thr, frame_thr)
@@ -306,7 +296,7 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
     homs, frame_homs = frame_homographies(
         cals, all_ev, intrinsics, {m.frame_id: m.camera_id for m in measurements}
     )
-    if (v.remove_calibration or v.calibration_from) and cals:
+    if v.removes_calibration and cals:
         # the user states that the shared camera-frame error is calibration: the evidence is
         # corrected by it, and registration / drift are judged on what remains
         ev, all_ev = [_without(cals, e) for e in ev], [_without(cals, e) for e in all_ev]
@@ -318,7 +308,7 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
                 est := se.estimate_registration(ev, fit, similarity=s, calibration=mode), thr, kind
             ),
             frame_residuals(ev, est),
-            0.5 * frame_thr,
+            own,
         )
         for s, kind in ((False, "rigid"), (True, "similarity"))
     )
@@ -332,5 +322,5 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
     reg, sim = (replace(e, frames_left_out=tuple(left_out)) for e in (reg, sim))
     return SharedChecks(
         thr, reg, sim, drift, calib, drift_px, flagged, homs, frozenset(left_out), frame_homs,
-        drift_thr, texture_entry(measurements, thr), change,
+        drift_thr, texture_entry(measurements, thr), change, v.removes_calibration,
     )  # fmt: skip

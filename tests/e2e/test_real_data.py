@@ -40,7 +40,7 @@ def test_7scenes_raw_sift(shared_data, check_frames):
     # per frame; a threshold of 20 px (2.5 % of the 800 px diagonal) fits that offset.
     # per-frame raw detection only: the run-level checks would (rightly) fail every frame on
     # the poses' shared RGB-vs-depth offset (README "Registration or calibration?")
-    cfg = {"verdict": {"threshold_px": 20.0, "shared_checks": False},
+    cfg = {"verdict": {"threshold_px": 20.0}, "run_checks": {"enabled": False},
            "enhance": {"mode": "never"}}
     good = check_frames(traj, mesh, **cfg)
     verdicts = [r["verdict"] for r in good]
@@ -103,7 +103,7 @@ def test_castle_mariner_path_is_absolute_evidence(shared_data, check_frames):
     traj = read_trajectory(root / "trajectories.txt")
     mesh = root / "mesh.ply"
     cfg = {"enhance": {"mode": "always", "method": "mariner"}, "edges": {"mode": "never"},
-           "verdict": {"shared_checks": False}}
+           "run_checks": {"enabled": False}}
     centres = np.array([f.center for f in traj])
     span = float(np.linalg.norm(centres.max(0) - centres.min(0)))
     moved = move_trajectory(traj, shared_transform(traj, 2.0, 0.04 * span, seed=1))

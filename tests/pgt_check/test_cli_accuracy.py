@@ -66,7 +66,7 @@ def test_require_accuracy_flag_usage_errors(sample_scene, tmp_path, capsys):
         assert main([*base, "--require-accuracy", bad]) == 2
     assert "--require-accuracy" in capsys.readouterr().err
     cfg = tmp_path / "c.json"
-    cfg.write_text(json.dumps({"verdict": {"require_accuracy_deg": "x"}}))
+    cfg.write_text(json.dumps({"gate": {"require_accuracy_deg": "x"}}))
     assert main([*base, "--config", str(cfg)]) == 2
 
 

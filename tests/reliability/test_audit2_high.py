@@ -141,7 +141,7 @@ def test_report_boolean_flags_are_strict(cli, base_args, tmp_path, case):
     assert cli(*base_args())[0] == 0
     rc, stdout, _ = cli("report", out, "--shared-checks", "on")
     summary = json.loads((out / "summary.json").read_text())
-    assert rc == 0 and summary["settings"]["verdict"]["shared_checks"] is True
+    assert rc == 0 and summary["settings"]["run_checks"]["enabled"] is True
     assert "shared_errors" in summary  # the run-level checks ran
     for flag, word in (("--shared-checks", "ture"), ("--remove-calibration", "ture"),
                        ("--shared-checks", "2")):
@@ -152,20 +152,20 @@ def test_report_boolean_flags_are_strict(cli, base_args, tmp_path, case):
     for word, value in (("OFF", False), ("No", False), ("1", True), ("Yes", True)):
         assert cli("report", out, "--shared-checks", word)[0] == 0
         summary = json.loads((out / "summary.json").read_text())
-        assert summary["settings"]["verdict"]["shared_checks"] is value
+        assert summary["settings"]["run_checks"]["enabled"] is value
 
 
 def test_config_file_booleans_are_strict(cli, base_args, tmp_path, case):
     cfg = tmp_path / "c.json"
-    cfg.write_text(json.dumps({"verdict": {"shared_checks": "ture"}}))
+    cfg.write_text(json.dumps({"run_checks": {"enabled": "ture"}}))
     rc, _, err = cli(*base_args("--config", cfg))
     last = err.strip().splitlines()[-1]
-    case("config file verdict.shared_checks: \"ture\"", "2, names the key", f"{rc}: {last[:110]}")
-    assert rc == 2 and "shared_checks" in last and "ture" in last
-    cfg.write_text(json.dumps({"verdict": {"shared_checks": "off"}}))
+    case("config file run_checks.enabled: \"ture\"", "2, names the key", f"{rc}: {last[:110]}")
+    assert rc == 2 and "RunChecksConfig.enabled" in last and "ture" in last
+    cfg.write_text(json.dumps({"run_checks": {"enabled": "off"}}))
     assert cli(*base_args("--config", cfg))[0] == 0
     summary = json.loads((tmp_path / "out" / "summary.json").read_text())
-    assert summary["settings"]["verdict"]["shared_checks"] is False
+    assert summary["settings"]["run_checks"]["enabled"] is False
 
 
 # -- (Medium, same run code) the lock is held until the output set is complete; config replay --

@@ -44,7 +44,7 @@ def test_out_of_range_option_exits_2(option, value, cli, base_args, tmp_path, ca
 
 def test_config_file_gets_the_same_checks(tmp_path, cli, base_args, case):
     cfg = tmp_path / "c.json"
-    cfg.write_text('{"verdict": {"max_fail_fraction": NaN}}')  # Python's json reads NaN
+    cfg.write_text('{"gate": {"max_fail_fraction": NaN}}')  # Python's json reads NaN
     rc, _, err = cli(*base_args("--config", str(cfg)))
     case("config file: max_fail_fraction NaN", "2, names the key",
          f"{rc}: {err.strip().splitlines()[-1][:140]}")
@@ -84,15 +84,15 @@ def test_camera_far_larger_than_photos_is_size_mismatch(scene, cli, base_args, t
 
 
 def test_gate_function_fails_closed():
-    from pgt_check.config import VerdictConfig
+    from pgt_check.config import GateConfig
 
-    cfg = VerdictConfig()
+    cfg = GateConfig()
     assert cfg.max_unverifiable_fraction < 1.0  # a default limit exists
-    assert not gate({"PASS": 0, "FAIL": 0, "UNVERIFIABLE": 5}, VerdictConfig(
+    assert not gate({"PASS": 0, "FAIL": 0, "UNVERIFIABLE": 5}, GateConfig(
         max_unverifiable_fraction=1.0))[0]  # nothing verified: fails whatever the limit
     assert gate({"PASS": 9, "UNVERIFIABLE": 1}, cfg, {"low_coverage": 1})[0]
     ok, why = gate({"PASS": 9, "UNVERIFIABLE": 1}, cfg, {"internal_error": 1})
     assert not ok and "internal" in why
-    assert gate({"PASS": 9, "UNVERIFIABLE": 1}, VerdictConfig(max_internal_errors=1),
+    assert gate({"PASS": 9, "UNVERIFIABLE": 1}, GateConfig(max_internal_errors=1),
                 {"worker_crashed": 1})[0]
     assert not gate({"PASS": 4, "UNVERIFIABLE": 6}, cfg)[0]  # > default 0.5

@@ -152,7 +152,7 @@ def test_readers_load_or_raise_input_error(fmt, edits, tmp_path_factory):
 
 
 _CONFIG = {"limit": 3, "match": {"method": "orb", "max_keypoints": 500},
-           "verdict": {"threshold_px": 4.0, "max_fail_fraction": 0.1},
+           "verdict": {"threshold_px": 4.0}, "gate": {"max_fail_fraction": 0.1},
            "edges": {"tile_grid": 3}, "workers": 2, "executor": "serial"}
 
 

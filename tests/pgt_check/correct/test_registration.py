@@ -179,7 +179,7 @@ def test_nothing_to_refine_when_the_registration_passes():
 def test_rounds_zero_switches_it_off(moved_case, tmp_path):
     true, checked, move, config, ms, judged = moved_case
     off = RunConfig.from_dict({"input": {"trajectory": "t", "mesh": "m"},
-                               "correct": {"registration_rounds": 0}})
+                               "run_checks": {"refine_rounds": 0}})
     fake = FakeMeasure(true)
     (tmp_path / REGISTERED_NAME).write_text("stale\n")
     summary = refine_run(checked, ms, judged.shared, off, fake, tmp_path).summary()
@@ -243,14 +243,14 @@ def test_config_and_cli_reach_the_rounds():
     from pgt_check.commands.check import build_parser, load_config
     from pgt_check.errors import ConfigError
 
-    with pytest.raises(ConfigError, match="registration_rounds"):
-        RunConfig.from_dict({"correct": {"registration_rounds": -1}})
-    with pytest.raises(ConfigError, match="registration_frames"):
-        RunConfig.from_dict({"correct": {"registration_frames": 2}})
+    with pytest.raises(ConfigError, match="refine_rounds"):
+        RunConfig.from_dict({"run_checks": {"refine_rounds": -1}})
+    with pytest.raises(ConfigError, match="refine_frames"):
+        RunConfig.from_dict({"run_checks": {"refine_frames": 2}})
     args = build_parser().parse_args(["t.txt", "--mesh", "m.ply", "--registration-rounds", "0"])
-    assert load_config(args).correct.registration_rounds == 0
+    assert load_config(args).run_checks.refine_rounds == 0
     args = build_parser().parse_args(["t.txt", "--mesh", "m.ply"])
-    assert load_config(args).correct.registration_rounds == 8
+    assert load_config(args).run_checks.refine_rounds == 8
 
 
 def test_the_runners_measure_keeps_one_serial_checker_over_the_rounds(monkeypatch):
@@ -448,7 +448,7 @@ def test_the_rounds_stop_at_their_time_budget(moved_case, monkeypatch):
     free = replace(config, correct=replace(config.correct, budget=0.0))
     refined = refine_registration(checked.frames, timed, judged.shared.summary(), free,
                                   SlowMeasure(true), clock=lambda: now[0])
-    assert len(refined.rounds) == config.correct.registration_rounds
+    assert len(refined.rounds) == config.run_checks.refine_rounds
     assert refined.stopped == "round limit"
 
 

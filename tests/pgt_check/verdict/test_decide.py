@@ -3,7 +3,7 @@ import math
 import numpy as np
 import pytest
 
-from pgt_check.config import VerdictConfig
+from pgt_check.config import GateConfig, VerdictConfig
 from pgt_check.enhance.base import Evidence
 from pgt_check.measure import FrameMeasurement, MeasureReason, PathMeasurement
 from pgt_check.verdict import Verdict, decide, gate, resolve_threshold_px, systematic_offset
@@ -54,11 +54,11 @@ def test_threshold_boundary_is_inclusive():
 
 
 def test_gate():
-    cfg = VerdictConfig(max_fail_fraction=0.1)
+    cfg = GateConfig(max_fail_fraction=0.1)
     assert gate({"PASS": 9, "FAIL": 1, "UNVERIFIABLE": 0}, cfg)[0]
     assert not gate({"PASS": 8, "FAIL": 2, "UNVERIFIABLE": 0}, cfg)[0]
     assert not gate({}, cfg)[0]
-    assert not gate({"PASS": 5, "UNVERIFIABLE": 5}, VerdictConfig(max_unverifiable_fraction=0.2))[0]
+    assert not gate({"PASS": 5, "UNVERIFIABLE": 5}, GateConfig(max_unverifiable_fraction=0.2))[0]
 
 
 def test_systematic_offset_detected_for_consistent_shift():
@@ -233,7 +233,7 @@ def test_a_reference_the_run_does_not_pass_gives_way_to_one_it_does(alt_inliers,
         ),
     )
     rows = {r["frame_id"]: r for r in judge_run([p, b, g], RunConfig.from_dict(
-        {"verdict": {"shared_checks": False}})).rows()}
+        {"run_checks": {"enabled": False}})).rows()}
     assert rows["p"]["verdict"] == "PASS"
     assert rows["b"]["verdict"] == "FAIL"
     assert (rows["g"]["verdict"], rows["g"]["reference_id"]) == (verdict, reference)

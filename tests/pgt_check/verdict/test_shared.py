@@ -118,7 +118,7 @@ def test_relative_pass_needs_a_passed_registration_check(truth):
     ms = measurements(truth, truth, relative=True)
     j = judge_run(ms, RunConfig())
     assert all(r["verdict"] == "PASS" and r["evidence"] == "relative+registration" for r in j.rows())
-    j = judge_run(ms, RunConfig.from_dict({"verdict": {"shared_checks": False}}))
+    j = judge_run(ms, RunConfig.from_dict({"run_checks": {"enabled": False}}))
     assert all(r["verdict"] == "UNVERIFIABLE" for r in j.rows())
     assert all(r["reason"].startswith("relative_evidence_only") for r in j.rows())
 
@@ -221,7 +221,7 @@ def test_calibration_is_a_finding_and_can_be_removed(truth):
     cal = next(iter(j.shared.summary()["calibration"].values()))
     assert cal["status"] in ("finding", "failed")
     assert cal["principal_point_shift_px"][0] == pytest.approx(5.0, rel=0.3)
-    j2 = judge_run(ms, RunConfig.from_dict({"verdict": {"remove_calibration": True}}))
+    j2 = judge_run(ms, RunConfig.from_dict({"run_checks": {"remove_calibration": True}}))
     assert j2.shared.summary()["registration"]["status"] == "passed"
 
 
@@ -235,7 +235,7 @@ def test_calibration_translation_is_reported_and_removed(truth):
         uv = xc[:, :2] / xc[:, 2:3] * 500.0 + [319.5, 239.5]
         ms.append(m.__class__(**{**m.__dict__, "evidence": AbsoluteEvidence(
             ("raw",), tuple(map(tuple, uv)), m.evidence.pts_cam)}))
-    cfg = {"verdict": {"calibration_translation": True, "remove_calibration": True}}
+    cfg = {"run_checks": {"calibration_translation": True, "remove_calibration": True}}
     j = judge_run(ms, RunConfig.from_dict(cfg))
     cal = next(iter(j.shared.summary()["calibration"].values()))
     assert cal["translation"] is not None
@@ -267,7 +267,7 @@ def test_calibration_from_a_trusted_run_keeps_misregistration_visible(truth, tmp
     path.write_text(json.dumps({"shared_errors": trusted.shared.summary()}))
     moved = _move(truth, 2.0, 0.0)
     ms = with_pp_shift(measurements(truth, moved))
-    cfg = RunConfig.from_dict({"verdict": {"calibration_from": str(path)}})
+    cfg = RunConfig.from_dict({"run_checks": {"calibration_from": str(path)}})
     reg = judge_run(ms, cfg).shared.summary()["registration"]
     assert reg["status"] == "failed"
     assert reg["angle_deg"] == pytest.approx(2.0, rel=0.3)
@@ -291,7 +291,7 @@ def test_calibration_from_a_trusted_run_sees_the_camera_change(truth, tmp_path):
     trusted = judge_run(with_pp_shift(measurements(truth, truth), 5.0), RunConfig())
     path = tmp_path / "summary.json"
     path.write_text(json.dumps({"shared_errors": trusted.shared.summary()}))
-    cfg = RunConfig.from_dict({"verdict": {"calibration_from": str(path)}})
+    cfg = RunConfig.from_dict({"run_checks": {"calibration_from": str(path)}})
     same = judge_run(with_pp_shift(measurements(truth, truth, seed=1), 5.0), cfg)
     change = next(iter(same.shared.summary()["calibration_change"].values()))
     assert change["status"] == "passed", change["message"]
