@@ -38,7 +38,7 @@ from __future__ import annotations
 import logging
 import math
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
@@ -97,9 +97,8 @@ def _grew(
     return not (math.isfinite(lo) and math.isfinite(hi)) or lo > hi
 
 
-def needs_refinement(shared: SharedChecks | Mapping[str, Any]) -> bool:
-    """The rigid or the similarity check FAILED and the rigid fit has a correction
-    (``shared``: the run-level checks or their summary section)."""
+def needs_refinement(shared: SharedChecks) -> bool:
+    """The rigid or the similarity check FAILED and the rigid fit has a correction."""
     reg, sim = registration_entries(shared)
     return FAILED in (reg.status, sim.status) and reg.corrected_world_from_world is not None
 
@@ -191,15 +190,14 @@ class _Rounds:
 def refine_registration(
     frames: Sequence[Frame],
     measurements: Sequence[FrameMeasurement],
-    shared: SharedChecks | Mapping[str, Any],
+    shared: SharedChecks,
     config: RunConfig,
     measure: MeasureFn,
     clock: Callable[[], float] = time.perf_counter,
 ) -> RefinedRegistration | None:
     """Rounds of measure-at-the-corrected-poses -> residual fit -> compose (module docstring).
 
-    ``shared``: the main pass's run-level checks (or their summary section,
-    ``registration_entries``); ``measure(frames, config)``: the absolute
+    ``shared``: the main pass's run-level checks; ``measure(frames, config)``: the absolute
     evidence of the frames at their (moved) poses, in any order. None when there is nothing to
     refine (``needs_refinement`` false, rounds 0, or no frame to measure). Bounded by
     ``run_checks.refine_rounds``, ``correct.budget`` and the growth rule (module

@@ -12,7 +12,7 @@ import logging
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
-from typing import Any, overload
+from typing import Any
 
 import numpy as np
 
@@ -163,16 +163,9 @@ def _refinement_record(entry: RegistrationCheck, refined: RefinedRegistration) -
     }
 
 
-def registration_entries(
-    shared: SharedChecks | Mapping[str, Any],
-) -> tuple[RegistrationCheck, RegistrationCheck]:
-    """The rigid and the similarity check of ``shared``: a ``SharedChecks``, or its summary
-    section (``shared_errors``, as scripts that hold the summary pass it; read with
-    ``RegistrationCheck.from_json``, a missing entry as not checked)."""
-    if isinstance(shared, SharedChecks):
-        return shared.registration, shared.similarity
-    reg, sim = (RegistrationCheck.from_json(shared.get(k) or {}) for k in ("registration", "similarity"))
-    return reg, sim
+def registration_entries(shared: SharedChecks) -> tuple[RegistrationCheck, RegistrationCheck]:
+    """The rigid and the similarity check of the run-level checks."""
+    return shared.registration, shared.similarity
 
 
 def refined_registration(
@@ -207,35 +200,13 @@ def refined_registration(
     return replace(new, message=message)
 
 
-@overload
 def apply_refinement(shared: SharedChecks, refined: RefinedRegistration | None) -> SharedChecks:
-    ...
-
-
-@overload
-def apply_refinement(
-    shared: Mapping[str, Any], refined: RefinedRegistration | None
-) -> dict[str, Any]:
-    ...
-
-
-def apply_refinement(
-    shared: SharedChecks | Mapping[str, Any], refined: RefinedRegistration | None
-) -> SharedChecks | dict[str, Any]:
-    """The run-level checks with the refined rigid correction (``refined_registration``); a
-    summary section (``shared_errors``) gives its refined copy. The similarity entry keeps its
-    first estimate: its scale was already right (x1.03 recovered within 0.1 % on the castle
-    and the boxes) and rigid rounds cannot refine a scale."""
-    if isinstance(shared, SharedChecks):
-        if refined is None:
-            return shared
-        return replace(shared, registration=refined_registration(shared.registration, refined))
-    out = dict(shared)
-    if refined is None or not shared.get("registration"):
-        return out
-    reg, _ = registration_entries(shared)
-    out["registration"] = refined_registration(reg, refined).to_json()
-    return out
+    """The run-level checks with the refined rigid correction (``refined_registration``). The
+    similarity entry keeps its first estimate: its scale was already right
+    (reports/shared_errors.md) and rigid rounds cannot refine a scale."""
+    if refined is None:
+        return shared
+    return replace(shared, registration=refined_registration(shared.registration, refined))
 
 
 def _px(x: float | None) -> str:
@@ -249,7 +220,7 @@ def save_refinement(out_dir: str | Path, refined: RefinedRegistration) -> Path:
 
 
 def load_refinement(
-    out_dir: str | Path, shared: SharedChecks | Mapping[str, Any], fingerprint: str | None = None
+    out_dir: str | Path, shared: SharedChecks, fingerprint: str | None = None
 ) -> RefinedRegistration | None:
     """The stored refinement when it started from this run's rigid correction (and, if
     given, was measured with the same settings); else None (stale or absent)."""

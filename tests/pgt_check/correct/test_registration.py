@@ -129,7 +129,7 @@ def test_first_estimate_is_biased_and_rounds_converge(moved_case):
     # one fit on evidence that stops short: the correction is underestimated
     assert reg["angle_deg"] < 0.8 * DEG
     fake = FakeMeasure(true)
-    refined = refine_registration(checked.frames, ms, judged.shared.summary(), config, fake)
+    refined = refine_registration(checked.frames, ms, judged.shared, config, fake)
     assert refined is not None and len(refined.rounds) >= 2
     # every round measures at poses closer to the truth than the round before
     offs = [_off(call, true) for call in fake.calls]
@@ -144,7 +144,7 @@ def test_first_estimate_is_biased_and_rounds_converge(moved_case):
     assert final[0] < 0.1 * DEG and final[0] < 0.5 * first[0], (first, final)
     assert final[1] < 0.5 * first[1], (first, final)
     # the summary entry: refined split within 30 % of the injected one, first pass kept
-    new = apply_refinement(summary, refined)["registration"]
+    new = apply_refinement(judged.shared, refined).registration.to_json()
     assert new["angle_deg"] == pytest.approx(DEG, rel=0.1)
     assert new["status"] == reg["status"] and new["effect_px"] == reg["effect_px"]
     assert new["refinement"]["first_pass"]["angle_deg"] == reg["angle_deg"]
@@ -157,11 +157,11 @@ def test_first_estimate_is_biased_and_rounds_converge(moved_case):
 
 def test_the_similarity_entry_keeps_its_first_estimate(moved_case):
     true, checked, move, config, ms, judged = moved_case
-    refined = refine_registration(checked.frames, ms, judged.shared.summary(), config,
+    refined = refine_registration(checked.frames, ms, judged.shared, config,
                                   FakeMeasure(true))
     first = judged.shared.summary()["similarity"]
-    assert apply_refinement(judged.shared.summary(), refined)["similarity"] == first
     assert apply_refinement(judged.shared, refined).similarity is judged.shared.similarity
+    assert apply_refinement(judged.shared, refined).summary()["similarity"] == first
 
 
 def test_nothing_to_refine_when_the_registration_passes():
@@ -172,7 +172,7 @@ def test_nothing_to_refine_when_the_registration_passes():
     judged = judge_run(ms, config)
     assert judged.shared.summary()["registration"]["status"] == "passed"
     fake.calls.clear()
-    assert refine_registration(true.frames, ms, judged.shared.summary(), config, fake) is None
+    assert refine_registration(true.frames, ms, judged.shared, config, fake) is None
     assert fake.calls == []
 
 
@@ -212,20 +212,18 @@ def test_refine_run_writes_the_registered_trajectory_and_reuses_the_stored_resul
 
 def test_a_stored_refinement_of_another_start_or_settings_is_stale(moved_case, tmp_path):
     true, checked, move, config, ms, judged = moved_case
-    refined = refine_registration(checked.frames, ms, judged.shared.summary(), config,
+    refined = refine_registration(checked.frames, ms, judged.shared, config,
                                   FakeMeasure(true))
     save_refinement(tmp_path, refined)
-    summary = judged.shared.summary()
-    assert load_refinement(tmp_path, summary, refine_fingerprint(config)) is not None
-    assert load_refinement(tmp_path, judged.shared, refine_fingerprint(config)) is not None
-    assert load_refinement(tmp_path, summary, "other") is None
-    other = dict(summary)
-    c = np.asarray(summary["registration"]["corrected_world_from_world"])
-    other["registration"] = {**summary["registration"],
-                             "corrected_world_from_world": (c @ invert_rigid(c)).tolist()}
+    shared = judged.shared
+    assert load_refinement(tmp_path, shared, refine_fingerprint(config)) is not None
+    assert load_refinement(tmp_path, shared, "other") is None
+    c = np.asarray(shared.registration.corrected_world_from_world)
+    other = replace(shared, registration=replace(
+        shared.registration, corrected_world_from_world=(c @ invert_rigid(c)).tolist()))
     assert load_refinement(tmp_path, other) is None
     (tmp_path / "registration_refined.json").write_text("{not json")
-    assert load_refinement(tmp_path, summary) is None
+    assert load_refinement(tmp_path, shared) is None
 
 
 def test_refine_frames_spreads_the_frames_with_evidence_first(moved_case):
@@ -346,7 +344,7 @@ def test_the_rounds_stop_rules(moved_case, monkeypatch, residuals, n_rounds, sto
                 effect_px=effect, corrected_world_from_world=small.tolist() if ok else None)
 
     monkeypatch.setattr(shared_mod, "run_shared_checks", lambda m, c: Checks(*next(seq)))
-    refined = refine_registration(checked.frames, ms, judged.shared.summary(), config,
+    refined = refine_registration(checked.frames, ms, judged.shared, config,
                                   FakeMeasure(true))
     assert len(refined.rounds) == n_rounds and refined.stopped == stopped
     fitted = [r for r in refined.rounds if r.total_angle_deg is not None]
@@ -396,7 +394,7 @@ def test_an_oscillating_refinement_stops_and_says_why(moved_case, monkeypatch, t
     true, checked, move, config, ms, judged = moved_case
     _scripted(monkeypatch, residuals)
     fake = FakeMeasure(true)
-    refined = refine_registration(checked.frames, ms, judged.shared.summary(), config, fake)
+    refined = refine_registration(checked.frames, ms, judged.shared, config, fake)
     assert len(refined.rounds) == len(fake.calls) == n_rounds
     assert refined.stopped.startswith("not converging") and refined.n_kept == kept
     first = judged.shared.summary()["registration"]["effect_px"]
@@ -438,7 +436,7 @@ def test_the_rounds_stop_at_their_time_budget(moved_case, monkeypatch):
             return super().__call__(frames, config)
 
     cfg = replace(config, correct=replace(config.correct, budget=1.0))
-    refined = refine_registration(checked.frames, timed, judged.shared.summary(), cfg,
+    refined = refine_registration(checked.frames, timed, judged.shared, cfg,
                                   SlowMeasure(true), clock=lambda: now[0])
     # 24 s: rounds 1 and 2 (20 s) fit, a third (30 s) would not
     assert len(refined.rounds) == 2 and refined.stopped.startswith("time limit")
@@ -446,7 +444,7 @@ def test_the_rounds_stop_at_their_time_budget(moved_case, monkeypatch):
     # 0: no bound (the round limit ends them)
     _scripted(monkeypatch, [("failed", 5.0 - 0.1 * k) for k in range(20)])
     free = replace(config, correct=replace(config.correct, budget=0.0))
-    refined = refine_registration(checked.frames, timed, judged.shared.summary(), free,
+    refined = refine_registration(checked.frames, timed, judged.shared, free,
                                   SlowMeasure(true), clock=lambda: now[0])
     assert len(refined.rounds) == config.run_checks.refine_rounds
     assert refined.stopped == "round limit"
@@ -459,12 +457,12 @@ def test_growth_within_the_noise_does_not_stop_the_rounds(moved_case, monkeypatc
     true, checked, move, config, ms, judged = moved_case
     _scripted(monkeypatch, [("failed", 4.4, [3.5, 5.0]), ("passed", 1.33, [1.19, 2.05]),
                             ("inconclusive", 2.37, [1.89, 3.10]), ("passed", 0.3, [0.1, 0.6])])
-    refined = refine_registration(checked.frames, ms, judged.shared.summary(), config,
+    refined = refine_registration(checked.frames, ms, judged.shared, config,
                                   FakeMeasure(true))
     assert refined.stopped == "converged" and len(refined.rounds) == 4, refined.stopped
     _scripted(monkeypatch, [("failed", 4.4, [3.5, 5.0]), ("passed", 1.33, [1.19, 2.05]),
                             ("failed", 8.0, [7.1, 9.0]), ("passed", 0.3, [0.1, 0.6])])
-    refined = refine_registration(checked.frames, ms, judged.shared.summary(), config,
+    refined = refine_registration(checked.frames, ms, judged.shared, config,
                                   FakeMeasure(true))
     assert refined.stopped.startswith("not converging") and len(refined.rounds) == 3
 
