@@ -25,7 +25,7 @@ def main() -> None:
         lim = old[name]["given"]["limits"]
         judged_cfg = cfgd
         if name == "7s":
-            judged_cfg = merge(cfgd, {"verdict": {
+            judged_cfg = merge(cfgd, {"run_checks": {
                 "remove_calibration": False,
                 "calibration_from": str(A.CACHE / "7s-given-summary.json")}})
         for k in (0.5, 1.0, 1.5, 2.0):

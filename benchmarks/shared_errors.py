@@ -114,7 +114,7 @@ def refined_estimate(key: str, t: Trajectory, mesh: Path, cfg: RunConfig, ms) ->
 
         t0 = time.perf_counter()
         try:
-            refined = refine_registration(t.frames, ms, j.shared.summary(), cfg, measure_fn)
+            refined = refine_registration(t.frames, ms, j.shared, cfg, measure_fn)
         finally:
             for c in checkers:
                 c.close()
@@ -124,7 +124,7 @@ def refined_estimate(key: str, t: Trajectory, mesh: Path, cfg: RunConfig, ms) ->
                                     "s": secs}))
     if refined is None or not refined.rounds:
         return {}
-    se = apply_refinement(j.shared.summary(), refined)
+    se = apply_refinement(j.shared, refined).summary()
     reg, sim = se["registration"], se["similarity"]
     first = reg["refinement"]["first_pass"]
     return {
@@ -174,13 +174,13 @@ def run_calibration_from(name: str, traj: Trajectory, mesh: Path, cfgd: dict,
     summary.json), removed from each case (no new measurement; the cached ones are judged)."""
     import tempfile
 
-    base = {k: v for k, v in cfgd.items() if k != "verdict"}
+    base = {k: v for k, v in cfgd.items() if k != "run_checks"}
     cfg = RunConfig.from_dict({"input": {"mesh": str(mesh)}, **base})
     _, ms, _ = measure(traj, mesh, cfgd, f"{name}-given")
     trusted = Path(tempfile.mkdtemp()) / "summary.json"
     trusted.write_text(json.dumps(judge_run(ms, cfg).summary_extra(), default=str))
     given_cfg = RunConfig.from_dict(
-        {"input": {"mesh": str(mesh)}, **base, "verdict": {"calibration_from": str(trusted)}}
+        {"input": {"mesh": str(mesh)}, **base, "run_checks": {"calibration_from": str(trusted)}}
     )
     # the given poses' own correction (they are pseudo ground truth too): the evidence's
     # view of the truth of a moved case is this composed with the inverse of the move
@@ -191,7 +191,7 @@ def run_calibration_from(name: str, traj: Trajectory, mesh: Path, cfgd: dict,
         t, truth = all_cases[case]
         _, c_ms, c_tpf = measure(t, mesh, cfgd, f"{name}-{case}")
         vcfg = RunConfig.from_dict(
-            {"input": {"mesh": str(mesh)}, **base, "verdict": {"calibration_from": str(trusted)}}
+            {"input": {"mesh": str(mesh)}, **base, "run_checks": {"calibration_from": str(trusted)}}
         )
         row = evaluate(case, truth, c_ms, vcfg)
         row.update(s_per_frame=c_tpf)
@@ -213,8 +213,8 @@ def run_dataset(
     cfg, ms, tpf = measure(traj, mesh, cfgd, f"{name}-given")
     depth = scene_depth(ms)
     res = {"dataset": name, "frames": len(ms), "depth": depth, "s_per_frame": tpf, "rows": []}
-    if cfgd.get("verdict", {}).get("remove_calibration"):
-        plain = {k: v for k, v in cfgd.items() if k != "verdict"}
+    if cfgd.get("run_checks", {}).get("remove_calibration"):
+        plain = {k: v for k, v in cfgd.items() if k != "run_checks"}
         row = evaluate(
             "given (defaults, calibration kept)",
             {},
@@ -243,11 +243,11 @@ def run_dataset(
             row_off["s_per_frame"] = o_tpf
             res["rows"].append(row_off)
             print(name, json.dumps(row_off), flush=True)
-    res["independent"] = independent_check(name, traj, judge_run(ms, cfg).rows)
+    res["independent"] = independent_check(name, traj, judge_run(ms, cfg).rows())
     res["presets"] = run_presets(name, traj, mesh, cfgd, depth, presets) if presets else []
     res["calibration_from"] = (
         run_calibration_from(name, traj, mesh, cfgd, depth)
-        if cfgd.get("verdict", {}).get("remove_calibration")
+        if cfgd.get("run_checks", {}).get("remove_calibration")
         else []
     )
     return res

@@ -47,7 +47,7 @@ def _subset(traj: Trajectory, n: int) -> Trajectory:
 #: "Registration or calibration?"): their runs judge after removing the estimated calibration
 #: (``--remove-calibration``), the documented workflow for that data; the given trajectory is
 #: also judged with the defaults, to show the finding
-REMOVE_CALIBRATION = {"verdict": {"remove_calibration": True}}
+REMOVE_CALIBRATION = {"run_checks": {"remove_calibration": True}}
 
 
 def datasets(names: list[str], n: int) -> dict[str, tuple[Trajectory, Path, dict]]:
@@ -100,7 +100,7 @@ def evaluate(name: str, truth: dict, ms, cfg: RunConfig) -> dict:
     t0 = time.perf_counter()
     j = judge_run(ms, cfg)
     t_run = time.perf_counter() - t0
-    rows = j.rows
+    rows = j.rows()
     flagged = np.array([r["verdict"] != "PASS" for r in rows])
     out = {
         "case": name,
