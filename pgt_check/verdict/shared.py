@@ -50,7 +50,12 @@ from pgt_check.verdict.shared_entries import (
     registration_entry,
     shared_or_not,
 )
-from pgt_check.verdict.shared_results import CalibrationCheck, DriftCheck, RegistrationCheck
+from pgt_check.verdict.shared_results import (
+    CalibrationCheck,
+    DriftCheck,
+    RegistrationCheck,
+    TextureCheck,
+)
 from pgt_check.verdict.status import FAILED, INCONCLUSIVE, NOT_CHECKED, PASSED
 from pgt_check.verdict.texture import texture_entry
 
@@ -84,7 +89,7 @@ class SharedChecks:
     #: the drift check's threshold (``DRIFT_THRESHOLD_FACTOR`` x ``threshold_px``)
     drift_threshold_px: float = float("nan")
     #: mesh colours against mesh geometry (``texture_entry``; empty when not run)
-    texture: dict[str, Any] = field(default_factory=dict)
+    texture: TextureCheck | None = None
     #: with ``--calibration-from``, per camera id: what is left of the calibration after
     #: removing the trusted run's (``calibration_change_entry``); a FAILED camera's frames FAIL
     calibration_change: dict[str, CalibrationCheck] = field(default_factory=dict)
@@ -115,7 +120,7 @@ class SharedChecks:
             "similarity": self.similarity.to_json(),
             "drift": self.drift.to_json(),
             "calibration": {cam: e.to_json() for cam, e in self.calibration.items()},
-            **({"texture": self.texture} if self.texture else {}),
+            **({"texture": self.texture.to_json()} if self.texture is not None else {}),
             **(
                 {"calibration_change": {cam: e.to_json() for cam, e in self.calibration_change.items()}}
                 if self.calibration_change

@@ -13,7 +13,8 @@ from typing import Any
 
 from pgt_check.verdict.status import NOT_CHECKED
 
-__all__ = ["CalibrationCheck", "DriftCheck", "DriftFrame", "RegistrationCheck", "Sensitivity"]
+__all__ = ["CalibrationCheck", "DriftCheck", "DriftFrame", "RegistrationCheck", "Sensitivity",
+           "TextureCheck"]
 
 
 @dataclass(frozen=True)
@@ -204,3 +205,28 @@ class CalibrationCheck:
             "translation_ci": self.translation_ci,
             "message": self.message,
         }
+
+
+@dataclass(frozen=True)
+class TextureCheck:
+    """Mesh colours against mesh geometry (``verdict.texture.texture_entry``): status, why not
+    checked, the photos' offset of the texture matches from the geometric edges (px), its size
+    with a 95 % interval, the frames it rests on and the message. Informational."""
+
+    status: str
+    reason: str
+    n_frames: int
+    message: str
+    offset_px: tuple[float, float] | None = None
+    effect_px: float | None = None
+    effect_px_ci: tuple[float, float] | None = None
+
+    def to_json(self) -> dict[str, Any]:
+        """The summary's ``shared_errors.texture``."""
+        if self.offset_px is None:
+            return {"status": self.status, "reason": self.reason, "n_frames": self.n_frames,
+                    "message": self.message}
+        return {"status": self.status, "reason": self.reason,
+                "offset_px": list(self.offset_px), "effect_px": self.effect_px,
+                "effect_px_ci": list(self.effect_px_ci or ()), "n_frames": self.n_frames,
+                "message": self.message}

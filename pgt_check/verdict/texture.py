@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
 
 import numpy as np
 
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.verdict.calibration import camera_matrix
+from pgt_check.verdict.shared_results import TextureCheck
 from pgt_check.verdict.status import FINDING, INCONCLUSIVE, NOT_CHECKED, PASSED
 
 #: renders whose colours come from the mesh (their feature matches are texture evidence)
@@ -17,13 +17,13 @@ COLOURED_SHADINGS = ("vertex", "texture")
 GEOMETRIC_SOURCES = ("edges",)
 
 
-def texture_entry(measurements: Sequence[FrameMeasurement], threshold: float) -> dict[str, Any]:
+def texture_entry(measurements: Sequence[FrameMeasurement], threshold: float) -> TextureCheck | None:
     """Mesh colours against mesh geometry: where the raw matches of a coloured render place the
     photos against where the geometric edges do, shared by the frames. A ``finding`` (lower
     bound above ``threshold``) means the colours sit off the geometry in every photo alike:
     the mesh was likely coloured with these poses (or with a camera offset), so texture
     matches cannot show a calibration error that the geometry shows. Informational: it does
-    not change verdicts. Empty when no frame has both kinds of evidence."""
+    not change verdicts. None when no frame has both kinds of evidence."""
     from pgt_check.geometry.shared_errors.texture import FramePoints, texture_offset
 
     frames = []
@@ -43,16 +43,14 @@ def texture_entry(measurements: Sequence[FrameMeasurement], threshold: float) ->
             )
         )
     if not frames:
-        return {}
+        return None
     est = texture_offset(frames)
     if not est.success:
-        return {
-            "status": NOT_CHECKED,
-            "reason": est.reason,
-            "n_frames": est.n_frames,
-            "message": "mesh colours vs geometry not checked: too few frames with both "
-            "texture matches and geometric edges",
-        }
+        return TextureCheck(
+            NOT_CHECKED, est.reason, est.n_frames,
+            "mesh colours vs geometry not checked: too few frames with both texture matches "
+            "and geometric edges",
+        )
     lo, hi = est.effect_px_ci
     status = FINDING if lo > threshold else PASSED if hi <= threshold else INCONCLUSIVE
     dx, dy = est.offset_px
@@ -66,14 +64,9 @@ def texture_entry(measurements: Sequence[FrameMeasurement], threshold: float) ->
         if status == PASSED
         else "mesh colours vs geometry: not clear"
     )
-    return {
-        "status": status,
-        "reason": "",
-        "offset_px": [dx, dy],
-        "effect_px": est.effect_px,
-        "effect_px_ci": [lo, hi],
-        "n_frames": est.n_frames,
-        "message": f"{what}: texture matches place the photos ({dx:+.1f}, {dy:+.1f}) px from "
-        f"the geometric edges ({est.effect_px:.1f} px, 95 % {lo:.1f}-{hi:.1f}) over "
-        f"{est.n_frames} frames",
-    }
+    return TextureCheck(
+        status, "", est.n_frames,
+        f"{what}: texture matches place the photos ({dx:+.1f}, {dy:+.1f}) px from the geometric "
+        f"edges ({est.effect_px:.1f} px, 95 % {lo:.1f}-{hi:.1f}) over {est.n_frames} frames",
+        (dx, dy), est.effect_px, (lo, hi),
+    )
