@@ -14,7 +14,8 @@ from __future__ import annotations
 import functools
 import logging
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -45,7 +46,7 @@ from pgt_check.verdict import RunResult, judge_run
 logger = logging.getLogger(__name__)
 
 __all__ = [
-    "RunInterrupted", "check_frames", "content_hash", "frame_input_keys",
+    "PreparedRun", "RunInterrupted", "check_frames", "content_hash", "frame_input_keys",
     "images_outside_dataset", "load_trajectory", "log_progress", "measurement_fingerprint",
     "PlainMeasure", "panel_writer", "preflight", "run", "run_trajectory", "stored_measurements",
     "write_report_assets",
@@ -84,9 +85,14 @@ def run_trajectory(
     try:
         t_hash = time.perf_counter()
         inputs = {"mesh": mesh_content_hash(config.input.mesh, _side_files(checker))}
-        keys = frame_input_keys(frames, references)
+        prepared = PreparedRun.of(
+            frames, config, input_keys=frame_input_keys(frames, references), inputs=inputs,
+            trajectory=traj, trajectory_format=traj.format or "in-memory",
+            outside_dataset=images_outside_dataset(config, frames) if config.input.trajectory
+            else (),
+        )
         logger.info("hashed the inputs in %.2f s", time.perf_counter() - t_hash)
-        sink = panel_writer(config, measurement_fingerprint(config, inputs))
+        sink = panel_writer(config, prepared.fingerprint)
         if sink is not None:
             checker.panel_sink = sink
     except BaseException:
@@ -97,15 +103,13 @@ def run_trajectory(
         factory = _ReuseFirst(checker, factory)
     else:
         checker.close()
-    outside = images_outside_dataset(config, frames) if config.input.trajectory else []
+    outside = prepared.outside_dataset
     if outside:
         logger.warning("%d image paths point outside the dataset folder (e.g. %r): they were "
                        "read and their thumbnails may appear in this report", len(outside),
                        outside[0])
     try:
-        return check_frames(frames, config, factory, t0=t0, input_keys=keys, inputs=inputs,
-                            trajectory=traj, trajectory_format=traj.format or "in-memory",
-                            outside_dataset=tuple(outside))
+        return check_frames(prepared, config, factory, t0=t0)
     finally:
         if isinstance(factory, _ReuseFirst):
             factory.close_unused()
@@ -153,25 +157,48 @@ def stored_measurements(records: Sequence[dict[str, Any]]) -> list[FrameMeasurem
         raise InputError(str(err)) from err
 
 
+@dataclass(frozen=True)
+class PreparedRun:
+    """What a run knows before it measures: its frames (in order) and trajectory, each frame's
+    input key (``frame_input_keys``: a stored record counts as done only if it carries the same
+    key), the run-wide content hashes (``{"mesh": ...}``) and the measurement fingerprint
+    computed from them once, and what summary.json says of the inputs (the trajectory's
+    format, image paths outside the dataset folder)."""
+
+    frames: tuple[Frame, ...]
+    trajectory: Trajectory
+    input_keys: Mapping[str, str]
+    inputs: Mapping[str, str]
+    fingerprint: str
+    trajectory_format: str = "in-memory"
+    outside_dataset: tuple[str, ...] = ()
+
+    @classmethod
+    def of(cls, frames: Sequence[Frame], config: RunConfig, *, input_keys: Mapping[str, str],
+           inputs: Mapping[str, str], trajectory: Trajectory | None = None,
+           trajectory_format: str = "in-memory",
+           outside_dataset: Sequence[str] = ()) -> PreparedRun:
+        """Both ``input_keys`` and ``inputs`` are required: a stored measurement is reused
+        only on matching content."""
+        frames = tuple(frames)
+        return cls(frames, trajectory if trajectory is not None else Trajectory(frames),
+                   dict(input_keys), dict(inputs), measurement_fingerprint(config, dict(inputs)),
+                   trajectory_format, tuple(outside_dataset))
+
+    @property
+    def ids(self) -> list[str]:
+        return [f.frame_id for f in self.frames]
+
+
 def check_frames(
-    frames: Sequence[Frame],
+    prepared: PreparedRun,
     config: RunConfig,
     checker_factory: Callable[[], Any],
     *,
-    input_keys: dict[str, str],
-    inputs: dict[str, str],
     t0: float | None = None,
-    trajectory: Trajectory | None = None,
-    trajectory_format: str = "in-memory",
-    outside_dataset: tuple[str, ...] = (),
 ) -> dict[str, Any]:
-    """Measure ``frames`` (skipping those already in the store), then write the outputs.
-
-    ``input_keys`` (frame id -> ``frame_input_keys``): a stored record counts as done only if
-    it carries the same key; ``inputs`` (run-wide content hashes, ``{"mesh": ...}``) enter the
-    fingerprint. Both are required: a stored measurement is reused only on matching content.
-    ``trajectory_format`` and ``outside_dataset`` (image paths outside the dataset folder) are
-    reported in summary.json.
+    """Measure the prepared run's frames (skipping those already in the store with the same
+    fingerprint and input key), then write the outputs.
 
     Measurements stream from the executor into ``out/records.jsonl`` as frames finish; the
     outputs are built from the store in ``frames`` order, so a resumed run writes the same
@@ -179,26 +206,16 @@ def check_frames(
     the output set is complete (``outputs.complete.json``): a second run into the same ``out``
     cannot write between the measurements and the outputs built from them.
     """
-    with _open_store(config, [f.frame_id for f in frames], inputs) as store:
-        return _check_frames_locked(
-            store, frames, config, checker_factory, t0=t0, input_keys=input_keys,
-            inputs=inputs, trajectory=trajectory, trajectory_format=trajectory_format,
-            outside_dataset=outside_dataset,
-        )
+    with _open_store(config, prepared) as store:
+        return _check_frames_locked(store, prepared, config, checker_factory, t0)
 
 
 def _check_frames_locked(
     store: Any,
-    frames: Sequence[Frame],
+    prepared: PreparedRun,
     config: RunConfig,
     checker_factory: Callable[[], Any],
-    *,
     t0: float | None,
-    input_keys: dict[str, str],
-    inputs: dict[str, str],
-    trajectory: Trajectory | None,
-    trajectory_format: str,
-    outside_dataset: tuple[str, ...],
 ) -> dict[str, Any]:
     """``check_frames`` with the store open (and locked) by the caller."""
     from pgt_check.executor import ExecutorStats
@@ -207,45 +224,42 @@ def _check_frames_locked(
     t0 = time.perf_counter() if t0 is None else t0
     out = Path(config.out)
     stats = ExecutorStats()
-    measurements, n_reused = _measure_into_store(
-        store, frames, config, checker_factory, stats, input_keys=input_keys
-    )
+    measurements, n_reused = _measure_into_store(store, prepared, config, checker_factory, stats)
     judged = judge_run(measurements, config)
-    traj = trajectory if trajectory is not None else Trajectory(tuple(frames))
+    traj = prepared.trajectory
     result = correct_stage(traj, measurements, judged, config, checker_factory)
     if config.self_test > 0:  # the stated detection limits tested (``verdict.self_test``)
         result = self_test_stage(traj, result, config)
-    assets = write_report_assets(
-        frames, result, config, checker_factory, measurement_fingerprint(config, inputs)
-    )
+    assets = write_report_assets(prepared.frames, result, config, checker_factory,
+                                 prepared.fingerprint)
     shadings = sorted({str(m.shading) for m in measurements if m.shading})
     facts = RunFacts(
-        trajectory_format=trajectory_format,
+        trajectory_format=prepared.trajectory_format,
         shading=shadings[0] if len(shadings) == 1 else (shadings or None),
         executor=ExecutorSummary(config.executor, stats.workers, stats.yielded, n_reused,
                                  stats.worker_crashes),
-        outside_dataset=outside_dataset,
+        outside_dataset=prepared.outside_dataset,
         wall_time_s=time.perf_counter() - t0,
     )
     return write_run(out, result, config, facts, assets=assets)
 
 
-def _open_store(config: RunConfig, ids: list[str], inputs: dict[str, str]) -> Any:
+def _open_store(config: RunConfig, prepared: PreparedRun) -> Any:
     """The run's ``RecordStore`` context manager; an unusable ``--out`` is an InputError."""
     from pgt_check.store import RecordStore
 
     out = Path(config.out)
     settings = config.measurement_settings()
-    if inputs:
-        settings["inputs"] = dict(inputs)
+    if prepared.inputs:
+        settings["inputs"] = dict(prepared.inputs)
     try:
         return RecordStore.open(
             out,
-            measurement_fingerprint(config, inputs),
+            prepared.fingerprint,
             resume=config.resume,
             overwrite=config.overwrite,
             settings=settings,
-            frame_ids=ids,
+            frame_ids=prepared.ids,
         )
     except OSError as err:
         raise InputError(
@@ -256,21 +270,19 @@ def _open_store(config: RunConfig, ids: list[str], inputs: dict[str, str]) -> An
 
 def _measure_into_store(
     store: Any,
-    frames: Sequence[Frame],
+    prepared: PreparedRun,
     config: RunConfig,
     checker_factory: Callable[[], Any],
     stats: Any,
-    *,
-    input_keys: dict[str, str],
 ) -> tuple[list[FrameMeasurement], int]:
     """Measure the frames not yet in ``store`` (streaming each record into it) and return all
-    measurements in ``frames`` order plus the number of frames reused from the store. Raises
+    measurements in trajectory order plus the number of frames reused from the store. Raises
     RunInterrupted when a Ctrl-C / SIGTERM stopped the run before every frame was done."""
     from pgt_check.executor import iter_results, stop_on_sigint
     from pgt_check.report.outputs import remove_completion_marker
 
     out = Path(config.out)
-    ids = [f.frame_id for f in frames]
+    frames, ids, input_keys = prepared.frames, prepared.ids, prepared.input_keys
     remove_completion_marker(out)  # the output set is incomplete from here on
     done = _done_ids(store, ids, input_keys)
     if done:
@@ -296,7 +308,7 @@ def _measure_into_store(
     return stored_measurements(store.records_in_order(ids)), len(done)
 
 
-def _done_ids(store: Any, ids: Sequence[str], input_keys: dict[str, str]) -> set[str]:
+def _done_ids(store: Any, ids: Sequence[str], input_keys: Mapping[str, str]) -> set[str]:
     """Frames of ``ids`` whose latest current record also has the current input key."""
     latest = store.latest(ids)
     return {fid for fid, rec in latest.items() if rec.get("input_key") == input_keys.get(fid)}

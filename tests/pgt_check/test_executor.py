@@ -270,11 +270,12 @@ def test_check_frames_store_and_rerun(tmp_path, monkeypatch):
     assert csv_without_timing(out / "frames.csv") == first
     # changed measurement settings: exit 2 unless --resume / --overwrite
     assert cli_main(cli_argv(out, "--max-keypoints", "100"), monkeypatch) == 2
-    from pgt_check.runner import check_frames
+    from pgt_check.runner import PreparedRun, check_frames
 
     with pytest.raises(InputError, match="match.max_keypoints"):
         cfg = RunConfig.from_dict({"out": str(out), "match": {"max_keypoints": 7}})
-        check_frames(list(make_frames(3)), cfg, FakeChecker, input_keys={}, inputs={})
+        check_frames(PreparedRun.of(list(make_frames(3)), cfg, input_keys={}, inputs={}),
+                     cfg, FakeChecker)
     assert cli_main(cli_argv(out, "--max-keypoints", "100", "--resume"), monkeypatch) in (0, 1)
     summary = json.loads((out / "summary.json").read_text())
     assert summary["executor"]["frames_measured"] == 40
@@ -287,7 +288,8 @@ def test_check_frames_store_and_rerun(tmp_path, monkeypatch):
     with pytest.raises(InputError, match="verdict.threshold_px"):
         cfg = RunConfig.from_dict({"out": str(out), "match": {"max_keypoints": 100},
                                    "verdict": {"threshold_px": 2.0}})
-        check_frames(list(make_frames(3)), cfg, FakeChecker, input_keys={}, inputs={})
+        check_frames(PreparedRun.of(list(make_frames(3)), cfg, input_keys={}, inputs={}),
+                     cfg, FakeChecker)
 
 
 def test_sigint_stops_cleanly_and_resume_completes(tmp_path, monkeypatch):

@@ -286,7 +286,7 @@ def test_a_failing_refinement_leaves_the_run_and_its_first_estimate(tmp_path, mo
     (verdicts and the first estimate), and says so in the log."""
     import pgt_check.correct.registration as rr
     from pgt_check.measure import MeasureReason, failed_measurement
-    from pgt_check.runner import check_frames
+    from pgt_check.runner import PreparedRun, check_frames
 
     class Checker:
         def measure(self, frame, keep=None):
@@ -301,14 +301,16 @@ def test_a_failing_refinement_leaves_the_run_and_its_first_estimate(tmp_path, mo
     monkeypatch.setattr(rr, "refine_run", broken)
     config = RunConfig.from_dict({"input": {"trajectory": "t", "mesh": "m"},
                                   "out": str(tmp_path / "out"), "report_details": 0})
-    summary = check_frames(list(_trajectory(4).frames), config, Checker, input_keys={}, inputs={})
+    frames = list(_trajectory(4).frames)
+    summary = check_frames(PreparedRun.of(frames, config, input_keys={}, inputs={}), config,
+                           Checker)
     assert summary["counts"]["UNVERIFIABLE"] == 4
     assert "refinement" not in summary["shared_errors"]["registration"]
     assert (tmp_path / "out" / "summary.json").is_file()
     strict = RunConfig.from_dict({"input": {"trajectory": "t", "mesh": "m"}, "fail_fast": True,
                                   "out": str(tmp_path / "out2"), "report_details": 0})
     with pytest.raises(RuntimeError, match="refinement broke"):
-        check_frames(list(_trajectory(4).frames), strict, Checker, input_keys={}, inputs={})
+        check_frames(PreparedRun.of(frames, strict, input_keys={}, inputs={}), strict, Checker)
 
 
 @pytest.mark.parametrize(
