@@ -89,8 +89,8 @@ def _relative_fallback(frame: Frame, m: FrameMeasurement, failed: Correction) ->
     raw render cannot be matched (colourless meshes). It is relative evidence: right when the
     references' poses are right (a single bad frame), so it is written only for frames that
     FAIL on their own (never for run-level failures) and with enough PnP inliers; the reason
-    says ``relative_evidence``. On the castle this corrects 10/10 injected errors within 0.1 deg
-    where raw rounds find nothing (reports/corrections.md)."""
+    says ``relative_evidence``. On the colourless castle mesh it corrects injected errors where
+    raw rounds find nothing (reports/corrections.md)."""
     p = m.pose
     if p is None or p.world_from_cam is None or p.n_inliers < MIN_RELATIVE_PNP_INLIERS:
         return failed

@@ -4,15 +4,15 @@ step after the verdicts; ``run_checks.refine_rounds``).
 When the run-level registration check fails, its estimate comes from evidence measured at the
 misregistered poses. Where the misregistration moves the images non-uniformly (the zoom and
 parallax of a translation) the per-frame edge alignment stops short of the far-off edges, and
-the pooled fit trades part of the translation for a rotation: the castle moved by 4 % of the
-scene depth was estimated as 2.2 deg + 0.10 units (truth 0 deg + 0.36). The image effect of
+the pooled fit trades part of the translation for a rotation (a castle trajectory moved along
+the depth is estimated mostly as a rotation: reports/shared_errors.md). The image effect of
 the estimate is right (what the check decides on); its split is not.
 
 Each round moves the checked frames by the correction estimated so far, measures their
 absolute evidence again (render, raw match, geometric edges; no enhancement, whose evidence is
 relative) and fits the correction that is left; the total is the composition (outer
 Gauss-Newton iterations). The remaining motion shrinks every round, where the alignment is
-unbiased: castle 4 % -> 27 % off after one round, 9 % after two.
+unbiased (reports/shared_errors.md, refinement).
 
 The rounds are bounded (issue #28: a run that fails pays only for what it reports): at most
 ``run_checks.refine_rounds`` rounds, at most ``correct.budget`` times the main
@@ -86,8 +86,8 @@ def _grew(
 ) -> bool:
     """What is left grew from one round to the next beyond the evidence's noise: larger than
     ``GROWTH_TOLERANCE`` x before and, where both rounds have a 95 % interval, with the new
-    interval wholly above the old one (7-Scenes moved by 2 deg + 4 %: 1.3 px [1.2, 2.1] then
-    2.4 px [1.9, 3.1] is noise, and stopping there kept 1.37 of the 2 deg)."""
+    interval wholly above the old one (a growth within overlapping intervals is noise, and
+    stopping there kept much of a moved 7-Scenes trajectory's error: reports/shared_errors.md)."""
     if prev is None or effect is None or not effect > GROWTH_TOLERANCE * prev:
         return False
     try:
@@ -109,8 +109,9 @@ def refine_frames(
     """The frames measured again: every measured frame, at most ``max_frames`` evenly spaced
     along the trajectory (those with absolute evidence in the main pass first). Frames the
     main pass left out of the pooled fit are not excluded: at misregistered poses the edge
-    alignment's bias differs from frame to frame, and 13 of 20 7-Scenes frames moved by 2 deg +
-    4 % looked like errors of their own; each round decides again which frames agree."""
+    alignment's bias differs from frame to frame, and most frames of a moved 7-Scenes
+    trajectory looked like errors of their own (reports/shared_errors.md); each round decides
+    again which frames agree."""
     by_id = {f.frame_id: f for f in frames}
     usable = [m for m in measurements if m.frame_id in by_id]
     with_ev = [m for m in usable if m.evidence is not None]

@@ -153,7 +153,8 @@ def _refined(
     produces it, whichever puts more edges exactly on photo edges (narrow score), polished and
     refined; replaced by the refined affine map of the tile shifts (``tiles.tile_start``) where
     that has the lower robust cost. (Choosing between the shift and rotation starts by their
-    refined cost instead made the castle's 2 deg rotation test off by 6.6 px at the corners.)
+    refined cost instead put the castle's rotation test off at the corners:
+    reports/edge_evidence.md.)
     The best of the rolled starts (``config.roll_starts_deg``) replaces that start when its
     narrow score is higher by ``_score_margin``. With ``select_model``, refined with the model
     ``select_model`` picks (returned)."""
