@@ -101,7 +101,7 @@ def self_test_stage(traj: Trajectory, result: CorrectedRun, config: RunConfig) -
     from pgt_check.verdict.self_test import run_self_test
 
     threshold = result.frames[0].threshold_px if result.frames else 0.0
-    acc = run_accuracy(result.rows(), result.shared_as_reported, config, threshold)
+    acc = run_accuracy(result, result.shared_as_reported, config, threshold)
     measure = PlainMeasure("pgt-check self-test")
     try:
         st = run_self_test(traj.frames, result, acc.limits, config, measure, config.self_test)

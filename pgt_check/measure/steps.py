@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 
 from pgt_check.config import EnhanceConfig, HomographyConfig, PoseConfig, RunConfig
+from pgt_check.constants import EDGES_DECISIVE_SUPPORT
 from pgt_check.errors import ImageSizeMismatchError, PixelCapError, ReferenceUnreadableError
 from pgt_check.measure.paths import PathResult
 from pgt_check.measure.record import (
@@ -44,8 +45,6 @@ NO_ENHANCE = (
     EnhanceWhy.EDGES_DECISIVE,
 )
 
-#: the edge path decides alone when its share of supported render edges is at least this
-EDGES_DECISIVE_SUPPORT = 0.5
 
 
 def edges_decisive(path: Any, threshold: float, enhance_cfg: Any) -> bool:

@@ -25,6 +25,7 @@ import numpy as np
 
 from pgt_check.config import GateConfig, RunConfig
 from pgt_check.verdict.accuracy_text import _fmt, _need, accuracy_sentences  # re-exported
+from pgt_check.verdict.result import RunResult
 from pgt_check.verdict.shared import SharedChecks
 
 logger = logging.getLogger(__name__)
@@ -303,13 +304,16 @@ def detection_limits(
 
 
 def run_accuracy(
-    rows: Sequence[Mapping[str, Any]],
+    rows: RunResult | Sequence[Mapping[str, Any]],
     shared: SharedChecks | Mapping[str, Any] | None,
     config: RunConfig,
     threshold_px: float,
 ) -> RunAccuracy:
-    """The run's accuracy statement from judged rows (with ``ACCURACY_COLUMNS``) and the
-    run-level checks (``SharedChecks`` or their summary.json section)."""
+    """The run's accuracy statement from the verdicts (a ``RunResult``, or judged rows with
+    ``ACCURACY_COLUMNS``) and the run-level checks (``SharedChecks`` or their summary.json
+    section)."""
+    if isinstance(rows, RunResult):
+        rows = rows.rows()
     if isinstance(shared, SharedChecks):
         shared = shared.summary()
     bounded = [

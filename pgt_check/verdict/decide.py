@@ -11,9 +11,9 @@ from typing import Any
 import numpy as np
 
 from pgt_check.config import VerdictConfig
+from pgt_check.constants import CLEAR_MARGIN
 from pgt_check.enhance.base import Evidence
 from pgt_check.measure.record import FrameMeasurement, MeasureReason, PathMeasurement
-from pgt_check.verdict.constants import CLEAR_MARGIN
 from pgt_check.verdict.status import FAILED, NOT_CHECKED, PASSED
 
 

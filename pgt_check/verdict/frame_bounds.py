@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from pgt_check.config import RunChecksConfig
+from pgt_check.constants import FEATURE_ONLY_MIN_POINTS
 from pgt_check.geometry.frame_accuracy import FrameAccuracy, frame_accuracy
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.verdict.calibration import CameraCalibration, camera_matrix
@@ -55,13 +56,6 @@ ACCURACY_COLUMNS: dict[str, str] = {
 
 _MAX_POINTS = 400  # per frame (evenly spaced): the fit's cost stays a few ms
 
-#: the bound rests on the feature paths' points alone (raw, enhanced) when they have at least
-#: this many and give a bound: the geometric-edge points' photo positions come from a 2D
-#: alignment model and carry no parallax, so their fit turns a camera shift into a rotation;
-#: fewer feature points alone were so noisy on 7-Scenes at 320 px that the run's median noise,
-#: and the stated single-frame limit with it, grew many times (reports/accuracy.md, "Translation
-#: bound bias")
-FEATURE_ONLY_MIN_POINTS = 40
 
 
 def bound_points(

@@ -24,13 +24,13 @@ import math
 import statistics
 from collections.abc import Sequence
 
-from pgt_check.measure.record import FrameMeasurement, MeasureReason
-from pgt_check.verdict.constants import (
+from pgt_check.constants import (
     MIN_NEIGHBOUR_FACTOR,
     MIN_NEIGHBOURS,
     NEIGHBOURS_PER_SIDE,
     OFF_MESH_RATIO,
 )
+from pgt_check.measure.record import FrameMeasurement, MeasureReason
 
 OFF_MESH = "off_mesh"
 

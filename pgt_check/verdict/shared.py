@@ -29,19 +29,19 @@ from typing import Any
 import numpy as np
 
 from pgt_check.config import RunConfig
+from pgt_check.constants import (  # re-exported: callers and tests use them here
+    DRIFT_THRESHOLD_FACTOR,
+    MAX_FRAME_EVIDENCE_POINTS,
+    MAX_POOLED_POINTS,
+    MIN_FRAME_EVIDENCE_POINTS,
+    OWN_ERROR_FRACTION,
+)
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.verdict.calibration import (
     CameraCalibration,
     camera_matrix,
     frame_homographies,
     trusted_calibration,
-)
-from pgt_check.verdict.constants import (  # re-exported: callers and tests use them here
-    DRIFT_THRESHOLD_FACTOR,
-    MAX_FRAME_EVIDENCE_POINTS,
-    MAX_POOLED_POINTS,
-    MIN_FRAME_EVIDENCE_POINTS,
-    OWN_ERROR_FRACTION,
 )
 from pgt_check.verdict.shared_entries import (
     calibration_change_entry,

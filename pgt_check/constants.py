@@ -1,10 +1,16 @@
 """The named constants that change verdicts, in one place (the settings a user may change are
 in ``pgt_check.config``: ``verdict``, ``gate``, ``run_checks``). Each says what it decides and
 why it has its value; the measured reasons are in the reports linked. The modules that use them
-import them from here.
+(``measure``, ``verdict``) import them from here (layer 0: every stage may).
 """
 
 from __future__ import annotations
+
+# --- which paths a frame's verdict rests on (``measure.steps``) -----------------------------
+
+#: the edge path decides alone (the enhanced path is left out) when its share of supported
+#: render edges is at least this
+EDGES_DECISIVE_SUPPORT = 0.5
 
 # --- per-frame verdict (``verdict.decide``) ------------------------------------------------
 
@@ -46,3 +52,11 @@ MAX_FRAME_EVIDENCE_POINTS = 200
 #: it); their precision is then already far below the threshold (reports/scaling.md)
 MAX_POOLED_POINTS = 40_000
 MIN_FRAME_EVIDENCE_POINTS = 24
+
+# --- per-frame pose bounds (``verdict.frame_bounds``; the ``--require-accuracy`` gate) --------
+
+#: the bound rests on the feature paths' points alone (raw, enhanced) when they have at least
+#: this many and give a bound: the geometric-edge points' photo positions come from a 2D
+#: alignment model and carry no parallax, so their fit turns a camera shift into a rotation;
+#: fewer feature points alone were too noisy (reports/accuracy.md, "Translation bound bias")
+FEATURE_ONLY_MIN_POINTS = 40
