@@ -7,14 +7,18 @@
 # frames' own rig applied to themselves (in sample: what is left when the estimate fits them).
 # Prints the registration / calibration effect left on the disjoint frames (reports/accuracy.md).
 #
-#   [EXTRA=--calibration-translation] [STEP=10] nice -n 10 bash benchmarks/accuracy_calibration.sh [WORK_DIR]
-# (STEP: the estimation frames are those whose id is a multiple of it; 30 by default)
+#   [EXTRA=--calibration-translation] [STEP=10] [EST='awk condition'] \
+#     nice -n 10 bash benchmarks/accuracy_calibration.sh [WORK_DIR]
+# (STEP: the estimation frames are those whose id is a multiple of it; 30 by default. EST: an
+# awk condition on the frame id $1 that chooses them instead, e.g. the neighbouring segments
+# EST='($1>=400 && $1<=490) || ($1>=650 && $1<=740)')
 set -euo pipefail
 D=${PGT_SHARED_DATA:-$(cd "$(dirname "$0")/../.." && pwd)/shared/data}/7scenes_redkitchen
 W=${1:-/tmp/pgt-check-accuracy-calibration}
 mkdir -p "$W/a" "$W/b"
 head -1 "$D/trajectories.txt" > "$W/a/trajectories.txt"
-awk -F, -v s="${STEP:-30}" 'NR>1 && ($1%s==0) && !($1>=500 && $1<=640)' "$D/trajectories.txt" >> "$W/a/trajectories.txt"
+awk -F, -v s="${STEP:-30}" "NR>1 && (${EST:-(\$1%s==0)}) && !(\$1>=500 && \$1<=640)" \
+  "$D/trajectories.txt" >> "$W/a/trajectories.txt"
 for t in trajectories trajectories_dslam_rgb; do
   head -1 "$D/$t.txt" > "$W/b/$t.txt"
   grep -E "^(5[0-9]0|6[0-4]0)," "$D/$t.txt" >> "$W/b/$t.txt"
