@@ -319,7 +319,7 @@ def write_report_assets(
     result: RunResult,
     config: RunConfig,
     checker_factory: Callable[[], Any],
-    fingerprint: str | None = None,
+    fingerprint: str,
 ) -> dict[str, dict[str, str]] | None:
     """Panels for the report's detail frames (``report.assets.report_panels``); the selected
     frames without panels from the main pass are measured again here (in this process,
@@ -330,8 +330,7 @@ def write_report_assets(
         return None
     again = _PanelImages(checker_factory, {f.frame_id: f for f in frames})
     try:
-        return report_panels(config.out, result, config.report_details,
-                             fingerprint or measurement_fingerprint(config), again)
+        return report_panels(config.out, result, config.report_details, fingerprint, again)
     finally:
         again.close()
 
