@@ -92,3 +92,31 @@ def test_sift_run_without_mariner_does_not_import_torch(tmp_path, sample_scene, 
     )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert res.stdout.split()[-2:] == ["False", "False"]
+
+
+def test_report_rejudges_a_run_folder_of_the_older_config_layout(tmp_path, capsys, sample_scene):
+    """config.json of runs before the gate / run_checks sections (issue #26): `pgt-check report`
+    reads the moved settings at their new place, its flags set the new sections, and the
+    config.json it rewrites has the current layout."""
+    from pgt_check.config_judge import MOVED_KEYS
+
+    out = tmp_path / "out"
+    assert main([str(sample_scene / "trajectories.txt"), "--mesh",
+                 str(sample_scene / "mesh.glb"), "--out", str(out), "--limit", "8",
+                 "--report-details", "0", "-q"]) in (0, 1)
+    cfg = json.loads((out / "config.json").read_text())
+    old = {k: dict(v) if isinstance(v, dict) else v for k, v in cfg.items()}
+    for (old_sec, old_key), (new_sec, new_key) in MOVED_KEYS.items():
+        old[old_sec][old_key] = old[new_sec].pop(new_key)
+    del old["gate"], old["run_checks"]
+    old["verdict"]["max_fail_fraction"] = 1.0  # a stored setting of the older layout
+    (out / "config.json").write_text(json.dumps(old))
+    assert main(["report", str(out)]) == 0  # the stored gate setting is read: passes
+    rewritten = json.loads((out / "config.json").read_text())
+    assert rewritten["gate"]["max_fail_fraction"] == 1.0
+    assert "max_fail_fraction" not in rewritten["verdict"]
+    assert main(["report", str(out), "--max-fail-fraction", "0", "--shared-checks",
+                 "false"]) == 1
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["settings"]["run_checks"]["enabled"] is False
+    assert "shared_errors" not in summary
