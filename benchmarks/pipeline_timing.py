@@ -8,7 +8,8 @@ the registration refinement, the per-frame corrections, the report. Then ``--pai
 each case against ``benchmarks/bare_loop.py`` as whole processes, A B A B (wall and CPU from
 the OS), and reports the median ratio per pair. Writes reports/pipeline_timing.{md,json}.
 
-    python benchmarks/pipeline_timing.py [--cases 7s,7s-fast,7s-cal,castle,boxes] [--pairs 3]
+    python benchmarks/pipeline_timing.py [--cases 7s,7s-fast,7s-cal,7s-xfeat,castle,
+        castle-xfeat,boxes] [--pairs 3]
 """
 
 from __future__ import annotations
@@ -34,7 +35,12 @@ CASES: dict[str, tuple[str, int | None, tuple[str, ...], str]] = {
                "7-Scenes, 30 frames, default + --remove-calibration (passes)"),
     "7s-fast": ("7scenes", 30, ("--preset", "fast"),
                 "7-Scenes, 30 frames, --preset fast (fails on its calibration offset)"),
+    "7s-xfeat": ("7scenes", 30, ("--matcher", "xfeat"),
+                 "7-Scenes, 30 frames, default with --matcher xfeat (the Pareto point of "
+                 "reports/error_vs_runtime.md)"),
     "castle": ("castle", None, (), "castle, 10 frames, default"),
+    "castle-xfeat": ("castle", None, ("--matcher", "xfeat"),
+                     "castle, 10 frames, default with --matcher xfeat"),
     "boxes": ("boxes", None, (), "generated boxes (sample_data/boxes), 24 frames, default"),
 }
 
