@@ -429,6 +429,10 @@ PRESETS: dict[str, dict[str, Any]] = {
     "accurate": {
         "match": {"method": "xfeat", "resize_max": 640},
         "enhance": {"mode": "auto", "method": "reproject"},
+        # the edge path on every frame: XFeat's matches are decisive on coloured meshes, and a
+        # mesh coloured with the poses under test hides their shared error from texture
+        # matches (reports/pipeline_timing.md, "The XFeat lever")
+        "edges": {"mode": "always"},
     },
 }
 

@@ -365,11 +365,13 @@ def shared_error_lines(shared: dict[str, Any]) -> list[str]:
     entries += list((shared.get("calibration") or {}).values())
     entries += list((shared.get("calibration_change") or {}).values())
     texture = shared.get("texture") or {}
-    if texture.get("status") == "finding":  # informational: printed only as a finding
+    # informational: printed as a finding, or when it could not be checked at all
+    if texture.get("status") == "finding" or texture.get("reason") == "no_geometric_evidence":
         entries.append(texture)
     return [
         str(e["message"]) for e in entries
-        if isinstance(e, dict) and e.get("status") in ("failed", "inconclusive", "finding")
+        if isinstance(e, dict) and (e.get("status") in ("failed", "inconclusive", "finding")
+                                    or e.get("reason") == "no_geometric_evidence")
     ]
 
 

@@ -23,15 +23,19 @@ def texture_entry(measurements: Sequence[FrameMeasurement], threshold: float) ->
     bound above ``threshold``) means the colours sit off the geometry in every photo alike:
     the mesh was likely coloured with these poses (or with a camera offset), so texture
     matches cannot show a calibration error that the geometry shows. Informational: it does
-    not change verdicts. None when no frame has both kinds of evidence."""
+    not change verdicts. Not checked (``no_geometric_evidence``) where coloured renders gave
+    texture matches but no frame has geometric-edge evidence: a shared error the mesh colours
+    carry would then go unseen, which the entry says. None when no frame has texture matches."""
     from pgt_check.geometry.shared_errors.texture import FramePoints, texture_offset
 
     frames = []
+    n_texture = 0
     for m in measurements:
         if m.evidence is None or m.shading not in COLOURED_SHADINGS or m.intrinsics is None:
             continue
         parts = m.evidence.by_source()
         geo = [parts[s] for s in GEOMETRIC_SOURCES if s in parts]
+        n_texture += "raw" in parts
         if "raw" not in parts or not geo:
             continue
         frames.append(
@@ -43,7 +47,13 @@ def texture_entry(measurements: Sequence[FrameMeasurement], threshold: float) ->
             )
         )
     if not frames:
-        return None
+        return None if not n_texture else TextureCheck(
+            NOT_CHECKED, "no_geometric_evidence", 0,
+            f"mesh colours vs geometry not checked: {n_texture} frames have texture matches "
+            "and none has geometric-edge evidence; a shared error that the mesh colours carry "
+            "(a mesh coloured with these poses) is invisible to texture matches (--edges "
+            "always checks it)",
+        )
     est = texture_offset(frames)
     if not est.success:
         return TextureCheck(

@@ -106,3 +106,18 @@ def test_evidence_counts_split_the_points_and_round_trip():
     assert old.by_source() == {}  # records written before the counts: split unknown
     with pytest.raises(ValueError, match="counts"):
         dataclasses.replace(m.evidence, counts=(20, 79))
+
+
+def test_texture_matches_without_geometry_say_the_check_could_not_run():
+    """Decisive texture matches and no edge evidence (e.g. XFeat on a coloured mesh): a shared
+    error painted into the colours would go unseen; the entry and the CLI say so."""
+    raw_only = [
+        dataclasses.replace(m, evidence=AbsoluteEvidence(
+            ("raw",), m.evidence.pts2d[:20], m.evidence.pts_cam[:20], (20,)))
+        for m in _measurements((6.0, 3.0))
+    ]  # fmt: skip
+    se = judge_run(raw_only, RunConfig()).shared.summary()
+    tex = se["texture"]
+    assert tex["status"] == "not_checked" and tex["reason"] == "no_geometric_evidence"
+    assert "--edges always" in tex["message"] and "10 frames" in tex["message"]
+    assert tex["message"] in shared_error_lines(se)
