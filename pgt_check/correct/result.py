@@ -11,7 +11,7 @@ from typing import Any
 from pgt_check.correct.calibration import CalibratedRig
 from pgt_check.correct.frames import CorrectionsSummary
 from pgt_check.correct.pose import Correction
-from pgt_check.verdict.result import RunResult
+from pgt_check.verdict.result import FrameResult, RunResult
 from pgt_check.verdict.self_test_curves import SelfTest
 from pgt_check.verdict.shared import SharedChecks
 
@@ -39,14 +39,11 @@ class CorrectedRun(RunResult):
     def shared_as_reported(self) -> SharedChecks | None:
         return self.reported_shared if self.reported_shared is not None else self.shared
 
-    def rows(self) -> list[dict[str, Any]]:
-        """frames.csv rows with the correction columns of the corrected frames (frames
-        without a correction have none: empty cells)."""
-        out = []
-        for f in self.frames:
-            row, c = f.row(), self.corrections.get(f.frame_id)
-            out.append({**row, **c.row()} if c is not None else row)
-        return out
+    def row(self, frame: FrameResult) -> dict[str, Any]:
+        """The frame's row with the correction columns where it was corrected (frames without
+        a correction have none: empty cells)."""
+        row, c = frame.row(), self.corrections.get(frame.frame_id)
+        return {**row, **c.row()} if c is not None else row
 
     def summary_extra(self) -> dict[str, Any]:
         """summary.json's sections of the run-level checks (as reported) and the corrections."""

@@ -6,6 +6,7 @@ summary.json sections (``row``, ``rows``)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 from pgt_check.measure.record import FrameMeasurement
@@ -82,9 +83,18 @@ class RunResult:
     shared: SharedChecks | None
 
     def rows(self) -> list[dict[str, Any]]:
-        """frames.csv rows (``FrameResult.row``), for ``pgt_check.report`` and column-wise
-        statistics over the run."""
-        return [f.row() for f in self.frames]
+        """frames.csv rows (``row`` of each frame), for ``pgt_check.report`` and column-wise
+        statistics over the run. Built once per result: the report panels, the accuracy
+        statement and the outputs read the same list (none of them changes it)."""
+        return self._rows
+
+    @cached_property
+    def _rows(self) -> list[dict[str, Any]]:
+        return [self.row(f) for f in self.frames]
+
+    def row(self, frame: FrameResult) -> dict[str, Any]:
+        """One frame's row (``FrameResult.row``; a subclass adds its own columns)."""
+        return frame.row()
 
     def summary_extra(self) -> dict[str, Any]:
         """summary.json's run-level section (``shared_errors``)."""
