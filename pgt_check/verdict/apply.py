@@ -19,8 +19,8 @@ from pgt_check.verdict.decide import (
     vouched_reference,
 )
 from pgt_check.verdict.frame_bounds import (
-    calibrations_to_remove,
     frame_bounds,
+    trusted_calibrations,
     world_sensitivity,
 )
 from pgt_check.verdict.off_mesh import off_mesh_frames
@@ -59,9 +59,8 @@ def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> Ru
     first = {m.frame_id: j.verdict for m, j in zip(ms, judged, strict=True)}
     # the pose accuracy each frame's absolute evidence supports (``verdict.frame_bounds``), after
     # taking out the calibration error the verdicts take out
-    cals = calibrations_to_remove(
-        config.run_checks, None if shared is None else shared.summary(), [m.camera_id for m in ms]
-    )
+    cals = (shared.removed_calibrations if shared is not None
+            else trusted_calibrations(config.run_checks, [m.camera_id for m in ms]))
     bounds = frame_bounds(ms, cals)
     frames = []
     for m, j in zip(ms, judged, strict=True):

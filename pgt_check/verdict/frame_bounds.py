@@ -234,22 +234,17 @@ def world_axis_sensitivity(
     return rot, tra
 
 
-def calibrations_to_remove(
-    config: RunChecksConfig, shared: Mapping[str, Any] | None, camera_ids: Sequence[str]
+def trusted_calibrations(
+    config: RunChecksConfig, camera_ids: Sequence[str]
 ) -> dict[str, CameraCalibration]:
-    """The calibration errors the verdicts take out (the same the run-level checks used)."""
-    if config.calibration_from:
-        from pgt_check.verdict.calibration import trusted_calibration
+    """The trusted run's calibration errors (``--calibration-from``) the bounds take out when
+    the run-level checks are off (with them on, ``SharedChecks.removed_calibrations`` holds
+    what the checks removed); {} without a trusted run."""
+    if not config.calibration_from:
+        return {}
+    from pgt_check.verdict.calibration import trusted_calibration
 
-        return trusted_calibration(config.calibration_from, sorted(set(camera_ids)))
-    if config.remove_calibration and shared:
-        cals = {}
-        for cam_id, entry in (shared.get("calibration") or {}).items():
-            cal = CameraCalibration.from_summary(entry) if isinstance(entry, Mapping) else None
-            if cal is not None:
-                cals[cam_id] = cal
-        return cals
-    return {}
+    return trusted_calibration(config.calibration_from, sorted(set(camera_ids)))
 
 
 # --- the run ---------------------------------------------------------------------------------

@@ -93,9 +93,14 @@ class SharedChecks:
     #: with ``--calibration-from``, per camera id: what is left of the calibration after
     #: removing the trusted run's (``calibration_change_entry``); a FAILED camera's frames FAIL
     calibration_change: dict[str, CalibrationCheck] = field(default_factory=dict)
-    #: the verdicts take a calibration error out (``run_checks.removes_calibration``): the
-    #: absolute paths are judged on homographies with the camera's calibration removed
-    removes_calibration: bool = False
+    #: camera id -> the calibration error the checks took out of the evidence
+    #: (``run_checks.removes_calibration``: this run's estimate, or a trusted run's); the
+    #: absolute paths are judged, and the per-frame bounds fitted, with it removed
+    removed_calibrations: dict[str, CameraCalibration] = field(default_factory=dict)
+
+    @property
+    def removes_calibration(self) -> bool:
+        return bool(self.removed_calibrations)
 
     def calibration_homography(self, frame_id: str, camera_id: str) -> np.ndarray | None:
         """The calibration error's photo_from_render for this frame (None if not estimated)."""
@@ -327,5 +332,6 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
     reg, sim = (replace(e, frames_left_out=tuple(left_out)) for e in (reg, sim))
     return SharedChecks(
         thr, reg, sim, drift, calib, drift_px, flagged, homs, frozenset(left_out), frame_homs,
-        drift_thr, texture_entry(measurements, thr), change, v.removes_calibration,
+        drift_thr, texture_entry(measurements, thr), change,
+        cals if v.removes_calibration else {},
     )  # fmt: skip
