@@ -104,9 +104,11 @@ class ReferenceConfig:
     max_translation: float | None = None
     max_rotation_deg: float = 45.0
     min_frame_gap: int = 1
-    #: references tried per frame; the enhanced result with the most homography inliers is
+    #: references tried per frame, best first, until one gives a clear PASS (aligned, enough
+    #: inliers, below the auto band); the enhanced result with the most homography inliers is
     #: kept (a reference whose own pose is wrong paints texture on the wrong surfaces, which
-    #: costs inliers, so a second reference guards against one bad neighbour)
+    #: costs inliers and moves the result off, so a second reference guards against one bad
+    #: neighbour)
     count: int = 2
 
     def __post_init__(self) -> None:
@@ -159,8 +161,10 @@ class RenderConfig:
 class MatchConfig:
     method: str = "sift"
     max_keypoints: int = 4096
-    #: longest image side used for matching (render is made at that size); None = original
-    resize_max: int | None = 640
+    #: longest image side used for matching (render is made at that size); None = original.
+    #: 320: the error-vs-runtime Pareto point (reports/error_vs_runtime.md); the geometric
+    #: edges work at their own, larger size (``edges.resize_max``)
+    resize_max: int | None = 320
     #: LoFTR checkpoint (no LoFTR weights are bundled); only for method "loftr"
     loftr_weights: str | None = None
 

@@ -146,8 +146,15 @@ class CorrectConfig:
     #: always runs (0 = no bound). The rounds also stop when what is left grows (the estimate
     #: oscillates)
     budget: float = 2.0
+    #: longest image side of the corrections' renders and matching, where larger than
+    #: ``match.resize_max`` (None / 0 = the original size): a pose is estimated from these
+    #: matches, not only checked, so they work finer than the verdict's matching
+    resize_max: int | None = 640
 
     def __post_init__(self) -> None:
+        if self.resize_max == 0:  # 0 = the original size (as match.resize_max)
+            object.__setattr__(self, "resize_max", None)
+        _check_range("correct.resize_max", self.resize_max, 16, 65_536)
         _check_range("correct.rounds", self.rounds, 1, 1000)
         _check_range("correct.bootstrap", self.bootstrap, 0, 10_000)
         _check_range("correct.budget", self.budget, 0, 1e6)

@@ -312,7 +312,8 @@ def refine_pose(
     if frame.image_file is None or not Path(frame.image_file).is_file():
         return Correction(frame.frame_id, False, "image_missing", start=start_kind)
     photo, camera = prepare_photo(load_image(frame.image_file), frame.camera)
-    size = working_scale(camera.width, camera.height, checker.config.match.resize_max)
+    size = max(working_scale(camera.width, camera.height, side)
+               for side in (checker.config.match.resize_max, checker.config.correct.resize_max))
     photo_w = resize_image(photo, size)
     thr = (
         checker.config.verdict.threshold_for(camera.width, camera.height)

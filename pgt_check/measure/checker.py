@@ -39,6 +39,7 @@ from pgt_check.measure.steps import (  # format_exception, pick_references: re-e
     NO_ENHANCE,
     Clock,
     Working,
+    clear_pass,
     edges_decisive,
     enhance_decision,
     format_exception,
@@ -92,8 +93,12 @@ class FrameChecker:
     def renderer(self):
         if self._renderer is None:
             from pgt_check.render import make_renderer
+            from pgt_check.render.cache import CachedRenderer
 
-            self._renderer = make_renderer(self.mesh, backend=self.config.render.backend)
+            # kept renders: the references' views are mostly frames this run renders anyway
+            self._renderer = CachedRenderer(
+                make_renderer(self.mesh, backend=self.config.render.backend)
+            )
         return self._renderer
 
     @property
@@ -267,7 +272,7 @@ class FrameChecker:
         if why in ENHANCE:
             view = View(w.render, w.cam_w, frame.world_from_cam)
             enh, ref_id, enh_img, n_tried, others = self._enhanced_path(
-                frame, view, w.photo, w.size, w.scale, w.camera, clock
+                frame, view, w, threshold, clock
             )
             if n_tried == 0:
                 why, detail = EnhanceWhy.NO_REFERENCE, ""
@@ -371,16 +376,11 @@ class FrameChecker:
         )
 
     def _enhanced_path(
-        self,
-        frame: Frame,
-        view: View,
-        photo_w: np.ndarray,
-        size: tuple[int, int],
-        scale: tuple[float, float],
-        camera: Camera,
-        clock: Clock,
+        self, frame: Frame, view: View, w: Working, threshold: float, clock: Clock,
     ) -> tuple[PathResult | None, str | None, np.ndarray | None, int, list[tuple[str, PathResult]]]:
-        """Enhance with each reference, match again; keep the result with the most inliers.
+        """Enhance with each reference in turn and match again; keep the result with the most
+        inliers. The references after one whose result is a clear PASS (``clear_pass``) are
+        left out: another reference could only add a result the verdict does not need.
 
         Returns (result, reference id, enhanced image, number of references tried, the other
         references' aligned results as (reference id, result): the verdict may prefer one
@@ -403,15 +403,17 @@ class FrameChecker:
             # keypoints are detected where the mesh covers the render (the reference may
             # leave holes, which keep the render's own colour)
             res = match_path(
-                self.matcher, self.config.homography, out.image, photo_w,
-                view.render.coverage, size, scale, camera, clock,
+                self.matcher, self.config.homography, out.image, w.photo,
+                view.render.coverage, w.size, w.scale, w.camera, clock,
                 self.enhancer.detail_short_side,
             )
             tried.append((ref.frame_id, res))
             if best is None or res.n_inliers > best.n_inliers:
                 best, best_id, best_img = res, ref.frame_id, out.image
+            if clear_pass(res, threshold, self.config.enhance):
+                break
         others = [(rid, r) for rid, r in tried if rid != best_id and r.success]
-        return best, best_id, best_img, len(refs), others
+        return best, best_id, best_img, len(tried), others
 
 
 def _chosen_path(raw: PathResult, enh: PathResult | None, edges: EdgePath | None,

@@ -59,6 +59,18 @@ def edges_decisive(path: Any, threshold: float, enhance_cfg: Any) -> bool:
     return path.corner_error_px < (1.0 - enhance_cfg.auto_margin) * threshold
 
 
+def clear_pass(path: PathResult, threshold: float, e: EnhanceConfig) -> bool:
+    """A feature path's clear PASS: aligned with at least ``auto_min_inliers`` inliers and its
+    corner error below the ``auto_margin`` band around the threshold (the band in which a
+    result is not decisive, ``enhance_decision``)."""
+    return (
+        path.success
+        and path.n_inliers >= e.auto_min_inliers
+        and path.corner_error_px is not None
+        and path.corner_error_px < (1.0 - e.auto_margin) * threshold
+    )
+
+
 @dataclass(frozen=True, eq=False)
 class Working:
     """One frame at working resolution: photo, cameras (original and working), the size and

@@ -241,7 +241,7 @@ def test_tiny_image(scene_factory, room_mesh):
 
 def test_large_photo_end_to_end(scene_factory, sample_scene):
     """A 4000x3000 photo of the sample scene (camera scaled 12.5x) is rendered and matched at
-    resize_max (640): the correct pose PASSes, a perturbed one FAILs; errors are reported in
+    resize_max (320): the correct pose PASSes, a perturbed one FAILs; errors are reported in
     4000 px units (threshold = 2 % of the 5000 px diagonal = 100 px)."""
     from pgt_check.io import read_trajectory
     from pgt_check.render import load_mesh
@@ -253,7 +253,7 @@ def test_large_photo_end_to_end(scene_factory, sample_scene):
     assert (big.width, big.height) == (4000, 3000)
     pose = f0.world_from_cam
     recs = s.check([s.frame(big, pose), s.frame(big, pose, rotated(pose, 4.0))])
-    assert recs[0]["match_width"] == 640 and recs[0]["width"] == 4000
+    assert recs[0]["match_width"] == 320 and recs[0]["width"] == 4000
     assert recs[0]["threshold_px"] == pytest.approx(100.0)
     assert verdicts(recs) == ["PASS", "FAIL"]
 

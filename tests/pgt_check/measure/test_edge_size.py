@@ -78,7 +78,7 @@ def test_tile_grid_reaches_the_alignment(monkeypatch, grid):
 @pytest.mark.slow
 def test_castle_edge_evidence_carries_a_one_degree_misregistration(shared_data):
     """Castle photos are 1416 px wide; 1 deg about the trajectory centroid moves them by ~8 px
-    (3.6 px at the 640 px matching size, where frames 3, 5 and 7 carried 38-61 % of it)."""
+    (3.6 px at 640 px, where frames 3, 5 and 7 carried 38-61 % of it)."""
     root = shared_data / "sceaux_castle"
     full = read_trajectory(root / "trajectories.txt")
     moved_all = move_trajectory(full, shared_transform(full, 1.0, 0.0, seed=1))
@@ -89,7 +89,7 @@ def test_castle_edge_evidence_carries_a_one_degree_misregistration(shared_data):
     # rule a castle frame moved by 1 deg sits near alpha; reports/edge_evidence.md)
     ms = _measure(moved, root / "mesh.ply", {"mode": "always", "decision": "support"})
     for m in ms:
-        assert m.match_width == 640  # matching keeps its size
+        assert m.match_width == RunConfig().match.resize_max  # matching keeps its size
         assert m.edges is not None and m.edges.success, m.edges
     ev = frame_evidence(ms)
     assert len(ev) == len(pick)
