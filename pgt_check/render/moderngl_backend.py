@@ -10,6 +10,7 @@ a renderer can be built in one process and used in a spawned worker only.
 from __future__ import annotations
 
 import logging
+from collections import OrderedDict
 from typing import Any
 
 import numpy as np
@@ -21,6 +22,16 @@ from pgt_check.render.projection import centred_view, opengl_projection
 from pgt_check.types import Camera
 
 logger = logging.getLogger(__name__)
+
+#: framebuffers kept per renderer (one per image size in use)
+MAX_FRAMEBUFFERS = 4
+
+
+def _release(fbo: Any, attachments: tuple[Any, ...]) -> None:
+    fbo.release()
+    for att in attachments:
+        att.release()
+
 
 _VERTEX_SHADER = """
 #version 330
@@ -87,8 +98,10 @@ class ModernGLRenderer:
         self._prog: Any = None
         self._draws: list[tuple[Any, Any]] = []  # (vao, texture)
         self._resources: list[Any] = []
-        self._fbo: Any = None
-        self._fbo_size: tuple[int, int] | None = None
+        # framebuffers by size, most recently used last: a frame renders at the matching size,
+        # the edge path's size and its references' size in turn, and re-creating the buffers
+        # at every change of size cost about 7 ms a frame (reports/pipeline_timing.md)
+        self._fbos: OrderedDict[tuple[int, int], tuple[Any, tuple[Any, ...]]] = OrderedDict()
 
     # -- GL resources ------------------------------------------------------------------------
     def _init_gl(self) -> None:
@@ -157,19 +170,21 @@ class ModernGLRenderer:
         return tex
 
     def _framebuffer(self, width: int, height: int) -> Any:
-        if self._fbo_size != (width, height):
-            if self._fbo is not None:
-                self._fbo.release()
-                for att in self._fbo_attachments:
-                    att.release()
-            ctx = self._ctx
-            color = ctx.renderbuffer((width, height), components=4, dtype="f4")
-            zbuf = ctx.renderbuffer((width, height), components=1, dtype="f4")
-            depth = ctx.depth_renderbuffer((width, height))
-            self._fbo = ctx.framebuffer(color_attachments=[color, zbuf], depth_attachment=depth)
-            self._fbo_attachments = (color, zbuf, depth)
-            self._fbo_size = (width, height)
-        return self._fbo
+        size = (width, height)
+        kept = self._fbos.get(size)
+        if kept is not None:
+            self._fbos.move_to_end(size)
+            return kept[0]
+        while len(self._fbos) >= MAX_FRAMEBUFFERS:
+            _, (old, attachments) = self._fbos.popitem(last=False)
+            _release(old, attachments)
+        ctx = self._ctx
+        color = ctx.renderbuffer(size, components=4, dtype="f4")
+        zbuf = ctx.renderbuffer(size, components=1, dtype="f4")
+        depth = ctx.depth_renderbuffer(size)
+        fbo = ctx.framebuffer(color_attachments=[color, zbuf], depth_attachment=depth)
+        self._fbos[size] = (fbo, (color, zbuf, depth))
+        return fbo
 
     # -- API ---------------------------------------------------------------------------------
     def render(self, camera: Camera, world_from_cam: np.ndarray) -> Render:
@@ -226,16 +241,13 @@ class ModernGLRenderer:
         if self._ctx is None:
             return
         with self._ctx:
-            if self._fbo is not None:
-                self._fbo.release()
-                for att in self._fbo_attachments:
-                    att.release()
+            for fbo, attachments in self._fbos.values():
+                _release(fbo, attachments)
             for r in reversed(self._resources):
                 r.release()
             if self._prog is not None:
                 self._prog.release()
-        self._fbo = None
-        self._fbo_size = None
+        self._fbos = OrderedDict()
         self._resources = []
         self._draws = []
         self._prog = None
