@@ -61,6 +61,24 @@ from pgt_check.verdict import judge_run
 CACHE = Path("/tmp/pgt-check-bench-cache")
 
 
+def _code_version() -> str:
+    """A hash of the pgt_check sources: a cached measurement is reused only by the code that
+    made it (a measurement cached by another working tree once served a later run)."""
+    import hashlib
+
+    import pgt_check
+
+    h = hashlib.blake2b(digest_size=6)
+    for f in sorted(Path(pgt_check.__file__).parent.rglob("*.py")):
+        h.update(f.read_bytes())
+    return h.hexdigest()
+
+
+def _cached(key: str, cfg: RunConfig) -> Path:
+    """The cache file of ``key`` measured with ``cfg``'s measurement settings by this code."""
+    return CACHE / f"{key}-{cfg.measurement_fingerprint()}-{_code_version()}.json"
+
+
 def measure(
     traj: Trajectory, mesh: Path, cfgd: dict, key: str = ""
 ) -> tuple[RunConfig, list, float]:
@@ -68,7 +86,7 @@ def measure(
     from pgt_check.measure import FrameMeasurement
 
     cfg = RunConfig.from_dict({"input": {"trajectory": str(mesh), "mesh": str(mesh)}, **cfgd})
-    path = CACHE / f"{key}.json"
+    path = _cached(key, cfg)
     if key and path.is_file():
         d = json.loads(path.read_text())
         return cfg, [FrameMeasurement.from_json(m) for m in d["ms"]], d["tpf"]
@@ -99,7 +117,7 @@ def refined_estimate(key: str, t: Trajectory, mesh: Path, cfg: RunConfig, ms) ->
     j = judge_run(ms, cfg)
     if j.shared is None:
         return {}
-    path = CACHE / f"{key}-refined.json"
+    path = _cached(f"{key}-refined", cfg)
     if path.is_file():
         d = json.loads(path.read_text())
         refined = None if d["refined"] is None else RefinedRegistration.from_json(d["refined"])
