@@ -279,3 +279,34 @@ def test_build_frame_checker_loads_its_resources_up_front(mesh):
 
 def test_pick_references_is_empty_when_the_enhancement_is_off(traj, mesh):
     assert pick_references(traj, traj.frames, _config(mesh, **RAW_ONLY)) == {}
+
+
+def test_references_are_tried_until_one_gives_a_clear_pass(traj, mesh):
+    """Issue #28: the second reference is left out where the first already gives a clear PASS,
+    and tried where the first reference's own pose is off (its texture lands elsewhere)."""
+    cfg = _config(mesh, enhance={"mode": "always", "method": "reproject"}, edges={"mode": "never"})
+    frame = traj.frames[6]  # frames 3 and 7 of the sample scene are perturbed: not used here
+    good = (traj.frames[5], traj.frames[4])
+    bad_first = (_moved(traj.frames[5], 4.0, seed=2), traj.frames[4])
+    seen = []
+    checker = FrameChecker(cfg, {})
+    enhance = checker.enhancer.enhance
+
+    def counting(view, reference, renderer):
+        seen.append(reference.frame_id)
+        return enhance(view, reference, renderer)
+
+    checker.enhancer.enhance = counting
+    try:
+        checker.references = {frame.frame_id: good}
+        m = checker.measure(frame)
+        assert seen == [good[0].frame_id]  # a clear PASS: the second is left out
+        assert m.enhanced.reference_id == good[0].frame_id and not m.enhanced_alternatives
+        assert m.enhanced.n_inliers >= cfg.enhance.auto_min_inliers
+        seen.clear()
+        checker.references = {frame.frame_id: bad_first}
+        m = checker.measure(frame)
+        assert seen == [f.frame_id for f in bad_first]  # not clear: the second is tried
+        assert m.enhanced.reference_id == bad_first[1].frame_id
+    finally:
+        checker.close()
