@@ -104,16 +104,25 @@ def measure(
     return cfg, ms, tpf
 
 
+#: the rounds the refinement is measured with (``--registration-rounds``)
+REFINE_ROUNDS = 8
+
+
 def refined_estimate(key: str, t: Trajectory, mesh: Path, cfg: RunConfig, ms) -> dict:
-    """The run's registration refinement (``pgt_check.correct.registration``, as a run does it
-    after a failed registration check; cached under ``key``): the refined estimate replaces
-    the row's, the first pass's is kept as ``*_first``."""
+    """The run's registration refinement (``pgt_check.correct.registration``, as a run with
+    ``--registration-rounds 8`` does it after a failed registration check (the default defers
+    it); cached under ``key``): the refined estimate replaces the row's, the first pass's is
+    kept as ``*_first``."""
+    from dataclasses import replace
+
     from pgt_check.correct.registration import (
         RefinedRegistration,
         apply_refinement,
         refine_registration,
     )
 
+    if cfg.run_checks.refine_rounds == 0:
+        cfg = replace(cfg, run_checks=replace(cfg.run_checks, refine_rounds=REFINE_ROUNDS))
     j = judge_run(ms, cfg)
     if j.shared is None:
         return {}

@@ -421,10 +421,6 @@ PRESETS: dict[str, dict[str, Any]] = {
         # and no cross-validated refit of the frames the fixed model does not pass (on a
         # failing run that is every frame)
         "edges": {"resize_max": 640, "select_model": "never"},
-        # a failing run pays only for what it reports: the registration refinement is left to
-        # an explicit --registration-rounds N (the first estimate is reported; with --resume
-        # a rerun measures only the rounds); reports/pipeline_timing.md
-        "run_checks": {"refine_rounds": 0},
     },
     "balanced": {
         "match": {"method": "sift", "resize_max": 320},

@@ -110,10 +110,13 @@ class RunChecksConfig:
     calibration_from: str | None = None
     #: when the registration check fails: at most this many rounds of measuring frames again
     #: at the poses the estimate corrects and fitting what is left, stopping once what is left
-    #: is below the shared threshold twice (0 = off): the first estimate's rotation /
-    #: translation split is far off where the misregistration zooms the images
-    #: (reports/shared_errors.md); bounded in time by ``correct.budget``
-    refine_rounds: int = 8
+    #: is below the shared threshold twice: the first estimate's rotation / translation split
+    #: is far off where the misregistration zooms the images (reports/shared_errors.md);
+    #: bounded in time by ``correct.budget``. 0 (default): deferred, so that a failing run pays
+    #: only for what it measured (a round costs about what the main pass's evidence cost:
+    #: reports/pipeline_timing.md); ``--registration-rounds 8 --resume`` measures only the
+    #: rounds and writes registered_trajectory.txt
+    refine_rounds: int = 0
     #: frames measured per round (evenly spaced; the pooled fit needs a few dozen)
     refine_frames: int = 30
 

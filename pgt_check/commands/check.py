@@ -132,8 +132,9 @@ def _add_method_args(p: argparse.ArgumentParser) -> None:
                    help="render -> match -> PnP rounds per corrected frame (default 3)")
     g.add_argument("--registration-rounds", type=int, default=None, metavar="N",
                    help="when the registration check fails, up to N rounds of measuring up to "
-                   "30 frames again at the corrected poses to refine its estimate (default 8, "
-                   "stopping once converged; 0 = off); writes registered_trajectory.txt")
+                   "30 frames again at the corrected poses to refine its estimate (8 will "
+                   "do, stopping once converged; default 0: deferred, with --resume a rerun "
+                   "measures only the rounds); writes registered_trajectory.txt")
 
 
 def _add_verdict_args(p: argparse.ArgumentParser) -> None:

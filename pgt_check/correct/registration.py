@@ -14,7 +14,9 @@ relative) and fits the correction that is left; the total is the composition (ou
 Gauss-Newton iterations). The remaining motion shrinks every round, where the alignment is
 unbiased (reports/shared_errors.md, refinement).
 
-The rounds are bounded (issue #28: a run that fails pays only for what it reports): at most
+By default the refinement is deferred (``run_checks.refine_rounds`` 0: the registration entry
+says so, and ``--registration-rounds 8 --resume`` measures only the rounds). The rounds are
+bounded (issue #28: a run that fails pays only for what it reports): at most
 ``run_checks.refine_rounds`` rounds, at most ``correct.budget`` times the main
 pass's measuring time, and they stop when what is left grows from one round to the next beyond
 the evidence's noise (its 95 % interval wholly above the last one; the
@@ -350,6 +352,23 @@ def refine_run(
     path = out / REGISTERED_NAME
     if refined is None:
         path.unlink(missing_ok=True)  # a previous run's file would no longer be true
+        if config.run_checks.refine_rounds == 0 and needs_refinement(shared):
+            return _deferred(shared)
         return shared
     write_trajectory_file(registered_trajectory(trajectory, refined), path)
     return apply_refinement(shared, refined)
+
+
+#: what the registration entry of a failed check says where the refinement is deferred
+DEFERRED = ("Not refined (run_checks.refine_rounds 0): the split between rotation and "
+            "translation of a first estimate can be off where the misregistration zooms the "
+            "images; --registration-rounds 8 --resume refines it (only the rounds are measured) "
+            "and writes registered_trajectory.txt")
+
+
+def _deferred(shared: SharedChecks) -> SharedChecks:
+    """``shared`` with the rigid registration entry saying that its refinement was deferred."""
+    reg = shared.registration
+    if reg.corrected_world_from_world is None or DEFERRED in reg.message:
+        return shared
+    return replace(shared, registration=replace(reg, message=f"{reg.message}. {DEFERRED}"))

@@ -105,7 +105,8 @@ def moved_case():
     true = _trajectory()
     move = shared_transform(true, DEG, TRANS, seed=1)
     checked = move_trajectory(true, move)
-    config = RunConfig.from_dict({"input": {"trajectory": "t", "mesh": "m"}})
+    config = RunConfig.from_dict({"input": {"trajectory": "t", "mesh": "m"},
+                                  "run_checks": {"refine_rounds": 8}})
     fake = FakeMeasure(true)
     ms = fake([*reversed(checked.frames)], config)
     fake.calls.clear()
@@ -245,10 +246,28 @@ def test_config_and_cli_reach_the_rounds():
         RunConfig.from_dict({"run_checks": {"refine_rounds": -1}})
     with pytest.raises(ConfigError, match="refine_frames"):
         RunConfig.from_dict({"run_checks": {"refine_frames": 2}})
-    args = build_parser().parse_args(["t.txt", "--mesh", "m.ply", "--registration-rounds", "0"])
-    assert load_config(args).run_checks.refine_rounds == 0
-    args = build_parser().parse_args(["t.txt", "--mesh", "m.ply"])
+    args = build_parser().parse_args(["t.txt", "--mesh", "m.ply", "--registration-rounds", "8"])
     assert load_config(args).run_checks.refine_rounds == 8
+    # deferred by default (issue #28: a failing run pays only for what it measured)
+    args = build_parser().parse_args(["t.txt", "--mesh", "m.ply"])
+    assert load_config(args).run_checks.refine_rounds == 0
+
+
+def test_a_deferred_refinement_is_said_and_writes_no_registered_trajectory(moved_case,
+                                                                         tmp_path):
+    true, checked, move, config, ms, judged = moved_case
+    deferred = replace(config, run_checks=replace(config.run_checks, refine_rounds=0))
+    fake = FakeMeasure(true)
+    (tmp_path / REGISTERED_NAME).write_text("an older run's file\n")
+    out = refine_run(checked, ms, judged.shared, deferred, fake, tmp_path)
+    assert fake.calls == []  # nothing measured again
+    reg = out.summary()["registration"]
+    assert "refinement" not in reg and reg["angle_deg"] == judged.shared.registration.angle_deg
+    assert "Not refined" in reg["message"] and "--registration-rounds 8 --resume" in reg["message"]
+    assert not (tmp_path / REGISTERED_NAME).exists()  # no longer true of this run
+    # said once, also when the stage runs again on its own output (pgt-check report)
+    again = refine_run(checked, ms, out, deferred, fake, tmp_path).summary()["registration"]
+    assert again["message"].count("Not refined") == 1
 
 
 def test_the_runners_measure_keeps_one_serial_checker_over_the_rounds(monkeypatch):
