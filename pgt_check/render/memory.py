@@ -164,8 +164,11 @@ def estimate_run_memory(counts: MeshCounts, width: int, height: int, workers: in
     its own copy."""
     if workers < 0 or width <= 0 or height <= 0:
         raise ValueError(f"need workers >= 0 and a positive size, got {workers}, {width}x{height}")
+    from pgt_check.render.cache import DEFAULT_MAX_BYTES
+
     peak, resident = estimate_mesh_bytes(counts)
-    frame = width * height * BYTES_PER_PIXEL
+    # one frame's buffers, and the renders a checker keeps (``render.cache``)
+    frame = width * height * BYTES_PER_PIXEL + DEFAULT_MAX_BYTES
     if workers == 0:
         return peak + frame
     return max(peak, resident + workers * (WORKER_BASE_BYTES + peak + frame))

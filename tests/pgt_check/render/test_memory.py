@@ -71,6 +71,13 @@ def test_estimate_grows_with_faces_and_workers():
     two = estimate_run_memory(MeshCounts(1_000_000, 2_000_000), 640, 480, workers=2)
     four = estimate_run_memory(MeshCounts(1_000_000, 2_000_000), 640, 480, workers=4)
     assert one < two < four
+    # every process also keeps its latest renders (render.cache): counted per worker
+    from pgt_check.render.cache import DEFAULT_MAX_BYTES
+
+    tiny = MeshCounts(4, 2)
+    assert estimate_run_memory(tiny, 64, 48) > DEFAULT_MAX_BYTES
+    assert (estimate_run_memory(tiny, 64, 48, workers=2)
+            - estimate_run_memory(tiny, 64, 48, workers=1)) > DEFAULT_MAX_BYTES
     with pytest.raises(ValueError):
         estimate_run_memory(MeshCounts(3, 1), 0, 480)
 
