@@ -235,10 +235,14 @@ def run_calibration_from(name: str, traj: Trajectory, mesh: Path, cfgd: dict,
 
 
 def run_dataset(
-    name: str, traj: Trajectory, mesh: Path, cfgd: dict, edges_off: bool, presets: list[str]
+    name: str, traj: Trajectory, mesh: Path, cfgd: dict, edges_off: bool, presets: list[str],
+    depth: float | None = None,
 ) -> dict:
+    """Every case of one dataset. ``depth``: the scene depth the perturbations scale with
+    (default: the median evidence depth of the given run, which depends on the settings; pin
+    it to compare two commits on the same perturbations)."""
     cfg, ms, tpf = measure(traj, mesh, cfgd, f"{name}-given")
-    depth = scene_depth(ms)
+    depth = scene_depth(ms) if depth is None else depth
     res = {"dataset": name, "frames": len(ms), "depth": depth, "s_per_frame": tpf, "rows": []}
     if cfgd.get("run_checks", {}).get("remove_calibration"):
         plain = {k: v for k, v in cfgd.items() if k != "run_checks"}
@@ -305,6 +309,10 @@ def main() -> None:
         help="run everything with edges.tile_grid (reports/shared_errors_tiles.md)",
     )
     p.add_argument(
+        "--depth", action="append", default=[], metavar="DATASET=DEPTH",
+        help="pin a dataset's scene depth (the perturbations' scale) to compare commits",
+    )
+    p.add_argument(
         "--from-json",
         action="store_true",
         help="only rewrite the reports from reports/shared_errors.json",
@@ -319,7 +327,9 @@ def main() -> None:
         if args.edges_tile_grid:
             cfgd = {**cfgd, "edges": {"tile_grid": args.edges_tile_grid}}
             name = f"{name}+tiles"
-        results.append(run_dataset(name, traj, mesh, cfgd, args.edges_off, presets))
+        pinned = dict(x.split("=", 1) for x in args.depth)
+        depth = float(pinned[name]) if name in pinned else None
+        results.append(run_dataset(name, traj, mesh, cfgd, args.edges_off, presets, depth))
         write_reports(results, args)
 
 
