@@ -32,8 +32,9 @@ def _report_intro(args: argparse.Namespace, head: str) -> list[str]:
         + (f" (edge tile start on, `--edges-tile-grid {args.edges_tile_grid}`)\n"
            if _suffix(args) else "\n"),
         head,
-        "Flagged = frames not PASS (FAIL or UNVERIFIABLE). Default settings (SIFT 640 px, "
-        "auto reprojection, auto edges, run-level checks). Registration columns: the "
+        "Flagged = frames not PASS (FAIL or UNVERIFIABLE). Default settings (SIFT 320 px, "
+        "auto reprojection, auto edges at 640 / 1024 px, run-level checks). Registration "
+        "columns: the "
         "run-level estimate of the correction (deg, scene units, px of image "
         "displacement; a similarity's scale is the correction's, 1/1.03 for x1.03). "
         "7-Scenes runs use `--remove-calibration` (the given poses carry a real "
@@ -223,8 +224,9 @@ def _preset_section(results: list[dict]) -> list[str]:
     return _section(
         "Presets",
         "The key cases under each `--preset` (`fast`: SIFT 320 px, raw only, no PnP; "
-        "`balanced`: SIFT 320 px + auto reprojection; `accurate`: XFeat 640 px + auto "
-        "reprojection), with the same run-level checks and the edge path on auto.",
+        "`balanced`: SIFT 320 px + auto reprojection, the default's feature paths; "
+        "`accurate`: XFeat 640 px + auto reprojection, edges on every frame), with the same "
+        "run-level checks.",
         head,
         rows,
     )
