@@ -4,8 +4,8 @@ For each scene, ``--frames`` frames (evenly spaced) get a random pose error (rot
 ``--rot`` degrees about a random axis, camera-centre shift uniform in ``--trans`` x the frame's
 median render depth, random direction; seeded). Each perturbed frame is measured as a run
 would (default settings: SIFT at 320 px, enhance auto with reproject, PnP), then corrected
-(``pgt_check.correct.frames.correct_frame``: 3 rounds of render -> raw match at 640 px -> PnP from the
-measurement's PnP estimate). Reported: share of corrected poses within 0.1 deg AND 1 % of the
+(``pgt_check.correct.frames.correct_frame``: 3 rounds of render -> raw match at 640 px -> PnP
+from the measurement's PnP estimate). Reported: share of corrected poses within 0.1 deg AND 1 % of the
 median scene depth of the reference pose, the error medians, and the baseline: the same
 correction started from the reference pose itself (where the renders' own fixed point lies;
 on real data the reference poses are not perfect).
