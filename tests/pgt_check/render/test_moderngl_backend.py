@@ -246,19 +246,22 @@ def test_empty_view_facing_away(renderer_factory):
 
 
 def test_framebuffer_resizes_per_camera(renderer_factory):
-    """Sizes in turn (as a frame's matching, edge and reference renders) give the renders of
-    one size alone; the framebuffers kept are bounded."""
+    """Sizes in turn (as a frame's matching, edge and reference renders) give the render a
+    fresh renderer makes of that view alone, also where a kept framebuffer last held another
+    view (nothing of it may remain); the framebuffers kept are bounded."""
     from pgt_check.render.moderngl_backend import MAX_FRAMEBUFFERS
 
     mesh = _tiny_quad(np.array([0.0, 0.0, 2.0]), 0.3)
-    alone = renderer_factory(mesh)
     r = renderer_factory(mesh)
+    aside = np.eye(4)
+    aside[0, 3] = 0.45  # the quad seen in a corner: most of the image is background
     sizes = [(32, 24), (50, 70), (32, 24), (20, 20), (41, 33), (64, 48), (50, 70), (32, 24)]
-    for w, h in sizes:
+    for i, (w, h) in enumerate(sizes):
         cam = Camera.pinhole(w, h, 40, 40, (w - 1) / 2, (h - 1) / 2)
-        out = r.render(cam, np.eye(4))
+        pose = aside if i % 3 == 2 else np.eye(4)
+        out = r.render(cam, pose)
         assert out.rgb.shape == (h, w, 3) and out.coverage.any()
-        want = alone.render(cam, np.eye(4))
+        want = renderer_factory(mesh).render(cam, pose)
         assert np.array_equal(out.rgb, want.rgb) and np.array_equal(out.depth, want.depth)
         assert len(r._fbos) <= MAX_FRAMEBUFFERS
     assert len(r._fbos) == MAX_FRAMEBUFFERS and list(r._fbos)[-1] == (32, 24)
