@@ -27,6 +27,7 @@ the Markdown in ``shared_errors_report.py``. The names other benchmarks import f
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import time
 from pathlib import Path
@@ -61,9 +62,11 @@ from pgt_check.verdict import judge_run
 CACHE = Path("/tmp/pgt-check-bench-cache")
 
 
+@functools.lru_cache(maxsize=1)
 def _code_version() -> str:
-    """A hash of the pgt_check sources: a cached measurement is reused only by the code that
-    made it (a measurement cached by another working tree once served a later run)."""
+    """A hash of the pgt_check sources (read once per process): a cached measurement is reused
+    only by the code that made it (a measurement cached by another working tree once served a
+    later run)."""
     import hashlib
 
     import pgt_check
