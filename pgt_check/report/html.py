@@ -334,7 +334,7 @@ def build_report(
     assets: Mapping[str, Mapping[str, str]] | None = None,
     absolute_paths: bool = False,
 ) -> Path:
-    """Write ``report.html`` (+ plots as PNG in ``assets/``) and ``junit.xml`` into ``out_dir``.
+    """Write ``report.html`` (+ plots as SVG in ``assets/``) and ``junit.xml`` into ``out_dir``.
 
     records: judged records (``verdict``, ``reason``, ``threshold_px`` set); summary: as written
     to summary.json; assets: ``{frame_id: {kind: relative path}}`` from ``write_frame_assets``

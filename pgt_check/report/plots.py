@@ -1,4 +1,4 @@
-"""Report plots (matplotlib, Agg backend, imported lazily) written as PNG files under assets/.
+"""Report plots, written as SVG files under assets/ (``svg_chart``: no plotting library).
 
 Each function takes the judged records and writes one figure; ``write_plots`` writes all that
 apply and returns ``[{"name", "title", "path"}]`` with paths relative to the output directory.
@@ -14,29 +14,15 @@ from typing import Any
 
 import numpy as np
 
+from pgt_check.report.svg_chart import Axis, Chart, hstack
+
 logger = logging.getLogger(__name__)
 
 VERDICT_COLOURS = {"PASS": "#2e7d32", "FAIL": "#c62828", "UNVERIFIABLE": "#9e9e9e"}
-PLOT_DPI = 96
 
 
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg", force=True)
-    import matplotlib.pyplot as plt
-
-    return plt
-
-
-def _figure(figsize: tuple[float, float], ncols: int = 1, right: float = 0.97):
-    """A figure with fixed margins: a layout engine (constrained / tight) measures every label's
-    extent at each draw, which took about half the report's plotting time
-    (reports/pipeline_timing.md, report files)."""
-    fig, axes = _pyplot().subplots(1, ncols, figsize=figsize)
-    fig.subplots_adjust(left=0.1 if ncols == 1 else 0.08, right=right, bottom=0.15, top=0.9,
-                        wspace=0.3)
-    return fig, axes
+def _chart(title: str, x: Axis, y: Axis, width: int = 600, height: int = 350, **kw) -> Chart:
+    return Chart(width, height, title=title, x=x, y=y, **kw)
 
 
 def _num(rec: Mapping[str, Any], key: str) -> float:
@@ -56,20 +42,11 @@ def has_enhanced(records: Sequence[Mapping[str, Any]]) -> bool:
     )
 
 
-def _integer_axis(axis) -> None:
-    """Ticks at whole numbers only (frame counts, frame indices)."""
-    from matplotlib.ticker import MaxNLocator
-
-    axis.set_major_locator(MaxNLocator(integer=True))
-
-
-def _save(fig, out_dir: Path, name: str) -> str:
-    rel = f"assets/plot_{name}.png"
+def _save(svg: str, out_dir: Path, name: str) -> str:
+    rel = f"assets/plot_{name}.svg"
     path = out_dir / rel
     path.parent.mkdir(parents=True, exist_ok=True)
-    # no metadata: the PNG carries no machine-specific text
-    fig.savefig(path, dpi=PLOT_DPI, metadata={"Software": None})
-    _pyplot().close(fig)
+    path.write_text(svg, encoding="utf-8")
     return rel
 
 
@@ -84,36 +61,29 @@ def _threshold(records: Sequence[Mapping[str, Any]], summary: Mapping[str, Any])
 
 def plot_histogram(records, summary, out_dir: Path) -> str:
     thr = _threshold(records, summary)
-    fig, ax = _figure((6, 3.6))
     errs = {
         v: np.array([_num(r, "corner_error_px") for r in records if r.get("verdict") == v])
         for v in ("PASS", "FAIL")
     }
     allv = np.concatenate([e[np.isfinite(e)] for e in errs.values()])
+    n_unv = sum(1 for r in records if r.get("verdict") == "UNVERIFIABLE")
+    chart = _chart(f"Corner error ({n_unv} UNVERIFIABLE frames not shown)",
+                   Axis("corner error [px] (log)", log=bool(len(allv))),
+                   Axis("frames", integer=True, lo=0.0))
     if len(allv):
         lo = max(min(allv.min(), thr if math.isfinite(thr) else allv.min()), 1e-2)
         hi = max(allv.max(), thr if math.isfinite(thr) else allv.max(), lo * 10)
         bins = np.geomspace(lo, hi * 1.01, 40)
-        data = [np.clip(e[np.isfinite(e)], lo, None) for e in errs.values()]
-        ax.hist(
-            data,
-            bins=bins,
-            stacked=True,
-            label=list(errs),
-            color=[VERDICT_COLOURS[v] for v in errs],
-        )
-        ax.set_xscale("log")
+        base = np.zeros(len(bins) - 1)
+        for v, e in errs.items():
+            counts, _ = np.histogram(np.clip(e[np.isfinite(e)], lo, None), bins=bins)
+            chart.bars(bins, counts, VERDICT_COLOURS[v], base=base, label=v)
+            base = base + counts
     else:
-        ax.text(0.5, 0.5, "no frame was measured", ha="center", transform=ax.transAxes)
-    if math.isfinite(thr):
-        ax.axvline(thr, color="k", ls="--", lw=1.2, label=f"threshold {thr:.1f} px")
-    n_unv = sum(1 for r in records if r.get("verdict") == "UNVERIFIABLE")
-    ax.set_xlabel("corner error [px] (log)")
-    ax.set_ylabel("frames")
-    _integer_axis(ax.yaxis)
-    ax.set_title(f"Corner error ({n_unv} UNVERIFIABLE frames not shown)", fontsize=10)
-    ax.legend(fontsize=8)
-    return _save(fig, out_dir, "error_hist")
+        chart.note = "no frame was measured"
+    if math.isfinite(thr) and (thr > 0 or not chart.x.log):
+        chart.vline(thr, label=f"threshold {thr:.1f} px")
+    return _save(chart.svg(), out_dir, "error_hist")
 
 
 def _order_key(records) -> tuple[np.ndarray, str]:
@@ -128,76 +98,58 @@ def plot_error_along_trajectory(records, summary, out_dir: Path) -> str:
     x, xlabel = _order_key(records)
     err = np.array([_num(r, "corner_error_px") for r in records])
     verdict = np.array([str(r.get("verdict")) for r in records])
-    fig, ax = _figure((6, 3.6), right=0.74)  # the legend stands right of the axes
     finite = err[np.isfinite(err) & (err > 0)]
     floor = float(finite.min()) / 2 if len(finite) else 0.1
+    log = bool(len(finite)) or (math.isfinite(thr) and thr > 0)
+    chart = _chart("Corner error along the trajectory",
+                   Axis(xlabel, integer=xlabel == "frame index"),
+                   Axis("corner error [px]" + (" (log)" if log else ""), log=log))
     order = np.argsort(x, kind="stable")
     ok = np.isfinite(err[order])
-    ax.plot(x[order][ok], np.maximum(err[order][ok], floor), color="#90a4ae", lw=0.6, zorder=1)
+    chart.line(x[order][ok], np.maximum(err[order][ok], floor), "#90a4ae", width=0.6)
     for v in ("PASS", "FAIL"):
         m = (verdict == v) & np.isfinite(err)
-        ax.scatter(
-            x[m], np.maximum(err[m], floor), s=8, color=VERDICT_COLOURS[v], label=v, zorder=2
-        )
+        chart.points(x[m], np.maximum(err[m], floor), VERDICT_COLOURS[v], label=v)
     m = verdict == "UNVERIFIABLE"
     if m.any():
-        ax.scatter(
-            x[m],
-            np.full(m.sum(), floor),
-            marker="x",
-            s=14,
-            color=VERDICT_COLOURS["UNVERIFIABLE"],
-            label="UNVERIFIABLE",
-            zorder=2,
-        )
+        chart.points(x[m], np.full(m.sum(), floor), VERDICT_COLOURS["UNVERIFIABLE"],
+                     marker="x", label="UNVERIFIABLE (at the floor)")
     if math.isfinite(thr) and thr > 0:
-        ax.axhline(thr, color="k", ls="--", lw=1.0, label="threshold")
-    if len(finite) or (math.isfinite(thr) and thr > 0):
-        ax.set_yscale("log")
-    ax.set_xlabel(xlabel)
-    if xlabel == "frame index":
-        _integer_axis(ax.xaxis)
-    ax.set_ylabel("corner error [px] (log)")
-    ax.set_title("Corner error along the trajectory", fontsize=10)
-    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.0, 1.0))
-    return _save(fig, out_dir, "error_time")
+        chart.hline(thr, label="threshold")
+    return _save(chart.svg(), out_dir, "error_time")
 
 
 def plot_raw_vs_enhanced(records, summary, out_dir: Path) -> str:
     thr = _threshold(records, summary)
-    fig, axes = _figure((8, 3.8), ncols=2)
-    for ax, key, label, log in (
-        (axes[0], "corner_error_px", "corner error [px]", True),
-        (axes[1], "inlier_ratio", "inlier ratio", False),
+    verdict = np.array([str(r.get("verdict")) for r in records])
+    charts = []
+    for key, label, log in (
+        ("corner_error_px", "corner error [px]", True),
+        ("inlier_ratio", "inlier ratio", False),
     ):
         raw = np.array([_num(r, f"{key}_raw") for r in records])
         enh = np.array([_num(r, f"{key}_enhanced") for r in records])
-        verdict = np.array([str(r.get("verdict")) for r in records])
         ok = np.isfinite(raw) & np.isfinite(enh)
         if log:
             ok &= (raw > 0) & (enh > 0)
+        chart = _chart(f"{label}: raw vs enhanced ({int(ok.sum())} frames)",
+                       Axis(f"raw {label}", log=log), Axis(f"enhanced {label}", log=log),
+                       width=440, height=360)
+        first = not charts  # the legend is drawn once, beside the first chart
         for v, col in VERDICT_COLOURS.items():
             m = ok & (verdict == v)
             if m.any():
-                ax.scatter(raw[m], enh[m], s=8, color=col, label=v)
+                chart.points(raw[m], enh[m], col, label=v if first else None)
         if ok.any():
             lo, hi = min(raw[ok].min(), enh[ok].min()), max(raw[ok].max(), enh[ok].max())
-            ax.plot([lo, hi], [lo, hi], color="k", lw=0.8, ls=":")
-        if log:
-            ax.set_xscale("log")
-            ax.set_yscale("log")
-            if math.isfinite(thr):
-                ax.axvline(thr, color="k", ls="--", lw=0.8)
-                ax.axhline(thr, color="k", ls="--", lw=0.8)
-        ax.set_xlabel(f"raw {label}")
-        ax.set_ylabel(f"enhanced {label}")
-        ax.set_title(f"{label}: raw vs enhanced ({int(ok.sum())} frames)", fontsize=10)
-    if axes[0].get_legend_handles_labels()[0]:
-        axes[0].legend(fontsize=8)
-    else:  # no frame has both a raw and an enhanced value (e.g. raw matching failed everywhere)
-        axes[0].text(0.5, 0.5, "no frame measured on both paths", ha="center",
-                     transform=axes[0].transAxes)
-    return _save(fig, out_dir, "raw_vs_enhanced")
+            chart.line([lo, hi], [lo, hi], "#000", width=0.8, dash="2,2")
+        elif first:  # no frame has both a raw and an enhanced value (raw matching failed)
+            chart.note = "no frame measured on both paths"
+        if log and math.isfinite(thr) and thr > 0:
+            chart.vline(thr, width=0.8)
+            chart.hline(thr, width=0.8)
+        charts.append(chart)
+    return _save(hstack(charts), out_dir, "raw_vs_enhanced")
 
 
 def drift_per_frame(summary: Mapping[str, Any]) -> list[Mapping[str, Any]]:
@@ -225,20 +177,15 @@ def plot_drift(records, summary, out_dir: Path) -> str | None:
     x = np.array([_num(e, "index") for e in per])
     eff = np.array([_num(e, "effect_px") for e in per])
     lo = np.array([_num(e, "lo_px") for e in per])
-    fig, ax = _figure((6, 3.6))
-    ax.plot(x, eff, color="#1565c0", lw=1.2, marker=".", ms=4, label="drift effect")
+    chart = _chart("Drift along the trajectory", Axis("frame index", integer=True),
+                   Axis("drift effect [px]", lo=0.0))
     if np.isfinite(lo).any():
-        ax.fill_between(x, np.where(np.isfinite(lo), lo, eff), eff, color="#90caf9", alpha=0.5,
-                        label="lower bound .. estimate")
+        chart.band(x, np.where(np.isfinite(lo), lo, eff), eff, "#90caf9",
+                   label="lower bound .. estimate")
+    chart.line(x, eff, "#1565c0", width=1.2, marker="o", label="drift effect")
     if math.isfinite(thr):
-        ax.axhline(thr, color="k", ls="--", lw=1.0, label=f"threshold {thr:.1f} px")
-    ax.set_xlabel("frame index")
-    _integer_axis(ax.xaxis)
-    ax.set_ylabel("drift effect [px]")
-    ax.set_ylim(bottom=0)
-    ax.set_title("Drift along the trajectory", fontsize=10)
-    ax.legend(fontsize=8)
-    return _save(fig, out_dir, "drift")
+        chart.hline(thr, label=f"threshold {thr:.1f} px")
+    return _save(chart.svg(), out_dir, "drift")
 
 
 def top_view_axes(centers: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -273,25 +220,15 @@ def plot_top_view(records, summary, out_dir: Path) -> str | None:
     u, v = top_view_axes(c)
     xy = np.stack([(c - c.mean(axis=0)) @ u, (c - c.mean(axis=0)) @ v], axis=1)
     verdicts_a = np.array(verdicts)
-    fig, ax = _figure((6, 3.8))
-    ax.plot(xy[:, 0], xy[:, 1], color="#cfd8dc", lw=0.6, zorder=1)
-    for verdict in ("PASS", "UNVERIFIABLE", "FAIL"):
+    chart = _chart("Camera centres, top view (plane of largest spread)",
+                   Axis("1st principal axis [world units]"), Axis("2nd principal axis"),
+                   height=370, equal_aspect=True)
+    chart.line(xy[:, 0], xy[:, 1], "#cfd8dc", width=0.6)
+    for verdict in ("PASS", "UNVERIFIABLE", "FAIL"):  # FAIL drawn last, on top
         m = verdicts_a == verdict
         if m.any():
-            ax.scatter(
-                xy[m, 0],
-                xy[m, 1],
-                s=10,
-                color=VERDICT_COLOURS[verdict],
-                label=verdict,
-                zorder=3 if verdict == "FAIL" else 2,
-            )
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel("1st principal axis [world units]")
-    ax.set_ylabel("2nd principal axis")
-    ax.set_title("Camera centres, top view (plane of largest spread)", fontsize=10)
-    ax.legend(fontsize=8)
-    return _save(fig, out_dir, "top_view")
+            chart.points(xy[m, 0], xy[m, 1], VERDICT_COLOURS[verdict], label=verdict, size=3)
+    return _save(chart.svg(), out_dir, "top_view")
 
 
 def write_plots(
@@ -312,10 +249,12 @@ def write_plots(
         path = fn(records, summary, out_dir)
         if path:
             plots.append({"name": name, "title": title, "path": path})
-    stale = {f"plot_{p}.png" for p in ("raw_vs_enhanced", "top_view", "drift")} - {
-        Path(p["path"]).name for p in plots
-    }
-    for name in stale:  # a regenerated report must not show a plot of an older run
+    # a regenerated report must not show a plot of an older run (nor keep the PNG plots of
+    # versions before the SVG ones)
+    stale = {f"plot_{p}.svg" for p in ("raw_vs_enhanced", "top_view", "drift")} | {
+        f"plot_{p}.png" for p, _, _ in specs} | {"plot_drift.png", "plot_top_view.png"}
+    stale -= {Path(p["path"]).name for p in plots}
+    for name in stale:
         (out_dir / "assets" / name).unlink(missing_ok=True)
     logger.debug("wrote %d plots", len(plots))
     return plots

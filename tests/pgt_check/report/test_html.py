@@ -62,8 +62,8 @@ def test_report_for_sample_data(tmp_path, config, records):
     assert (tmp_path / "junit.xml").is_file()
     assert (tmp_path / "assets" / "index.json").is_file()
     for name in ("error_hist", "error_time", "top_view"):
-        assert (tmp_path / "assets" / f"plot_{name}.png").is_file()
-    assert not (tmp_path / "assets" / "plot_raw_vs_enhanced.png").exists()
+        assert (tmp_path / "assets" / f"plot_{name}.svg").is_file()
+    assert not (tmp_path / "assets" / "plot_raw_vs_enhanced.svg").exists()
     assert "corner_error_px_raw" not in [c["key"] for c in data["columns"]]
 
 
@@ -158,13 +158,13 @@ def test_enhanced_columns_and_plot_when_present(tmp_path, config):
     keys = [c["key"] for c in data["columns"]]
     for k in ("enhanced", "corner_error_px_raw", "corner_error_px_enhanced", "reference_id"):
         assert k in keys
-    assert (tmp_path / "assets" / "plot_raw_vs_enhanced.png").is_file()
+    assert (tmp_path / "assets" / "plot_raw_vs_enhanced.svg").is_file()
     # a later run without the enhanced path must not keep the stale plot
     recs2 = judged(synthetic_measurements(40), config)
     make_run(tmp_path, config, recs2, with_assets=False)
-    assert not (tmp_path / "assets" / "plot_raw_vs_enhanced.png").exists()
+    assert not (tmp_path / "assets" / "plot_raw_vs_enhanced.svg").exists()
     page, _ = parse_report(tmp_path / "report.html")
-    assert "assets/plot_raw_vs_enhanced.png" not in page.refs
+    assert "assets/plot_raw_vs_enhanced.svg" not in page.refs
 
 
 def _store(out: Path, config: RunConfig, flat: list[dict]) -> None:

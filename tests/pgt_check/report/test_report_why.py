@@ -1,4 +1,4 @@
-"""The report shows why: raw-vs-enhanced table and marker, columns, shared errors, plots."""
+"""The report shows why: raw-vs-enhanced table and marker, columns, shared errors, plot files."""
 
 from __future__ import annotations
 
@@ -79,7 +79,7 @@ def test_no_enhanced_path_no_comparison_no_empty_plot(tmp_path, config):
             r[k] = None
     write_outputs(tmp_path, recs, config)
     page, data = parse_report(tmp_path / "report.html")
-    assert "assets/plot_raw_vs_enhanced.png" not in page.refs
+    assert "assets/plot_raw_vs_enhanced.svg" not in page.refs
     keys = [c["key"] for c in data["columns"]]
     assert "disagree" not in keys and "corner_error_px_enhanced" not in keys
     assert "raw-vs-enhanced" not in page.text_by_id
@@ -127,13 +127,13 @@ def test_shared_errors_section_and_drift_plot(tmp_path, config):
     assert "1.0040 [0.9700, 1.0300]" in text  # scale
     assert "calibration (camera cam0)" in text
     assert "&lt;b&gt;cam1&lt;/b&gt;" in html and "<b>cam1</b>" not in html  # escaped
-    assert "assets/plot_drift.png" in page.refs and (tmp_path / "assets/plot_drift.png").is_file()
+    assert "assets/plot_drift.svg" in page.refs and (tmp_path / "assets/plot_drift.svg").is_file()
     # without shared errors: no section, and the stale drift plot is gone
     del summary["shared_errors"]
     build_report(tmp_path, recs, summary)
     page, _ = parse_report(tmp_path / "report.html")
     assert "shared-errors" not in page.text_by_id
-    assert not (tmp_path / "assets/plot_drift.png").exists()
+    assert not (tmp_path / "assets/plot_drift.svg").exists()
 
 
 def test_page_context_without_comparison_in_summary(config):
@@ -143,27 +143,3 @@ def test_page_context_without_comparison_in_summary(config):
     ctx = page_context(recs, summary, {}, [])
     assert ctx["comparison"] and ctx["comparison"][0][0] == "frames matched"
     assert ctx["comparison"][0][1] == str(path_comparison(recs)["raw"]["frames_ran"])
-
-
-def test_frame_count_axes_have_integer_ticks(tmp_path, config, monkeypatch):
-    from matplotlib.ticker import MaxNLocator
-
-    from pgt_check.report import plots
-
-    seen = {}
-
-    def keep(fig, out_dir, name):
-        seen[name] = fig.axes[0]
-        return f"assets/plot_{name}.png"
-
-    monkeypatch.setattr(plots, "_save", keep)
-    recs = judged(synthetic_measurements(8, hostile=False), config)
-    for r in recs:
-        r["timestamp"] = None  # ordered by frame index
-    plots.plot_histogram(recs, {}, tmp_path)
-    plots.plot_error_along_trajectory(recs, {}, tmp_path)
-    plots.plot_drift(recs, {"shared_errors": shared_errors_summary(8)}, tmp_path)
-    for name, axis in (("error_hist", "yaxis"), ("error_time", "xaxis"), ("drift", "xaxis")):
-        loc = getattr(seen[name], axis).get_major_locator()
-        assert isinstance(loc, MaxNLocator) and loc._integer, name
-    assert plots.plot_drift(recs, {}, tmp_path) is None
