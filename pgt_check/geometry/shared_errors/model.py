@@ -205,50 +205,60 @@ def _residuals(
 
     Column order: world [rotation (3), translation (3), log scale (1, similarity)], then per
     camera [rotation (3), log zoom (1), translation (3) when ``p.n_cal`` is 7].
+    Written row by row with explicit cross products: the run-level checks call it some hundred
+    times per run, and numpy's batched (N, 2, 3) @ (N, 3, 3) products and ``np.cross`` were most
+    of their time (reports/pipeline_timing.md).
     """
     sig = np.exp(st.log_sigma)
     w = sig * (p.y @ st.q.T)  # (N, 3): sigma Q Y
     f = p.fidx
     g = p.cam[f]
     xw = w + st.tau - p.centre[f]
-    m_f = st.rcal[p.cam] @ p.rt  # (F, 3, 3) true_cam_from_world rotation
-    xp = _bmv(m_f[f], xw) + st.tcal[g]
-    k = p.K[f]
-    fx, sk, fy = k[:, 0, 0], k[:, 0, 1], k[:, 1, 1]
+    mf = (st.rcal[p.cam] @ p.rt)[f]  # (N, 3, 3) true_cam_from_world rotation of each point
+    xr = _bmv(mf, xw)  # rotated into the true camera, before the calibration translation
+    xp = xr + st.tcal[g]
+    fx, sk, fy, cx, cy = p.K[:, (0, 0, 1, 0, 1), (0, 1, 1, 2, 2)][f].T
     z = xp[:, 2]
     m0 = (fx * xp[:, 0] + sk * xp[:, 1]) / z
     m1 = fy * xp[:, 1] / z
     e = np.exp(st.log_zoom[g])
-    pred = np.stack([k[:, 0, 2] + e * m0, k[:, 1, 2] + e * m1], axis=1)
+    pred = np.stack([cx + e * m0, cy + e * m1], axis=1)
     r = pred - p.obs
     if not jac:
         return r, None
     nw, off, ncol = _layout(p, world, similarity, calib)
     n = len(r)
-    d = np.zeros((n, 2, 3))  # d pred / d xp
-    d[:, 0, 0] = e * fx / z
-    d[:, 0, 1] = e * sk / z
-    d[:, 0, 2] = -e * m0 / z
-    d[:, 1, 1] = e * fy / z
-    d[:, 1, 2] = -e * m1 / z
+    ez = e / z
+    # the two rows of d pred / d xp, (N, 3) each
+    d = (np.stack([ez * fx, ez * sk, -ez * m0], axis=1),
+         np.stack([np.zeros(n), ez * fy, -ez * m1], axis=1))
     jm = np.zeros((n, 2, ncol))
     if world:
-        a = d @ m_f[f]  # d pred / d (D(Y))
-        jm[:, :, 0:3] = np.cross(w[:, None, :], a)
-        jm[:, :, 3:6] = a
-        if similarity:
-            jm[:, :, 6] = np.sum(a * w[:, None, :], axis=2)
+        for row, dr in enumerate(d):
+            a = dr[:, 0:1] * mf[:, 0] + dr[:, 1:2] * mf[:, 1] + dr[:, 2:3] * mf[:, 2]
+            jm[:, row, 0:3] = _cross(w, a)  # d pred / d (rotation of D(Y))
+            jm[:, row, 3:6] = a
+            if similarity:
+                jm[:, row, 6] = np.sum(a * w, axis=1)
     if calib:
-        jr = np.cross(xp[:, None, :], d)
-        jz = np.stack([e * m0, e * m1], axis=1)
-        for gi in range(p.n_cams):
-            sel = g == gi
+        jz = (e * m0, e * m1)
+        blocks = [slice(None)] if p.n_cams == 1 else [g == gi for gi in range(p.n_cams)]
+        for gi, sel in enumerate(blocks):
             c0 = off + p.n_cal * gi
-            jm[sel, :, c0 : c0 + 3] = jr[sel]
-            jm[sel, :, c0 + 3] = jz[sel]
-            if p.n_cal == 7:
-                jm[sel, :, c0 + 4 : c0 + 7] = d[sel]
+            for row, dr in enumerate(d):
+                # the rotation update turns xr, not the translation added after it
+                jm[sel, row, c0 : c0 + 3] = _cross(xr[sel], dr[sel])
+                jm[sel, row, c0 + 3] = jz[row][sel]
+                if p.n_cal == 7:
+                    jm[sel, row, c0 + 4 : c0 + 7] = dr[sel]
     return r, jm
+
+
+def _cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of (N, 3) arrays (``np.cross`` without its broadcasting set-up)."""
+    a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
+    b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
+    return np.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=1)
 
 
 def _update(
