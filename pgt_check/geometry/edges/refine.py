@@ -101,16 +101,22 @@ def _jacobian(u: np.ndarray, v: np.ndarray, n: np.ndarray, model: str) -> np.nda
 
 
 def _update_matrix(delta: np.ndarray, model: str) -> np.ndarray:
-    a = np.zeros((3, 3))
+    return _update_matrices(np.asarray(delta, dtype=np.float64)[None], model)[0]
+
+
+def _update_matrices(deltas: np.ndarray, model: str) -> np.ndarray:
+    """(K, 3, 3) I + A of each parameter step (rows of ``deltas``, (K, P))."""
+    a = np.zeros((len(deltas), 3, 3))
     if model == "shift":
-        a[0, 2], a[1, 2] = delta
+        a[:, 0, 2], a[:, 1, 2] = deltas[:, 0], deltas[:, 1]
     elif model == "similarity":
-        s, r, tx, ty = delta
-        a[:2, :] = [[s, -r, tx], [r, s, ty]]
+        s, r = deltas[:, 0], deltas[:, 1]
+        a[:, 0, 0], a[:, 0, 1], a[:, 0, 2] = s, -r, deltas[:, 2]
+        a[:, 1, 0], a[:, 1, 1], a[:, 1, 2] = r, s, deltas[:, 3]
     else:
-        a[0, :], a[1, :] = delta[0:3], delta[3:6]
+        a[:, 0, :], a[:, 1, :] = deltas[:, 0:3], deltas[:, 3:6]
         if model == "homography":
-            a[2, :2] = delta[6:8]
+            a[:, 2, :2] = deltas[:, 6:8]
     return np.eye(3) + a
 
 
@@ -143,10 +149,13 @@ def _observable_solve(
     eps = 1e-6
     base = warp_points(hn, corners)
     keep = np.zeros(len(ev), dtype=bool)
-    for i in np.flatnonzero(ev > 0):
-        moved = warp_points(_update_matrix(eps * vecs[:, i], model) @ hn, corners)
-        per_unit = float(np.sqrt(np.mean(np.sum((moved - base) ** 2, axis=1)))) / eps / scale
-        keep[i] = per_unit * math.sqrt(n_weight / ev[i]) <= max_gain
+    pos = np.flatnonzero(ev > 0)
+    if len(pos):  # all directions at once: this runs at every iteration of every refinement
+        mats = _update_matrices(eps * vecs[:, pos].T, model) @ hn
+        ph = corners @ mats[:, :2, :2].transpose(0, 2, 1) + mats[:, None, :2, 2]
+        moved = ph / (corners @ mats[:, 2, :2, None] + mats[:, None, 2, 2:3])
+        per_unit = np.sqrt(np.mean(np.sum((moved - base) ** 2, axis=2), axis=1)) / eps / scale
+        keep[pos] = per_unit * np.sqrt(n_weight / ev[pos]) <= max_gain
     proj = vecs[:, keep].T @ g
     return vecs[:, keep] @ (proj / (ev[keep] + lam))
 
