@@ -51,6 +51,9 @@ CASES: dict[str, tuple[str, int | None, tuple[str, ...], str]] = {
 #: before issue #28) and 320 px (the default matching size since; the edge path still works at
 #: 640 / 1024 px)
 BARE_SIZES = (640, 320)
+#: the environment of the bare loop's third variant: 640 px with one OpenCV thread, as the run
+#: uses by default (``RunConfig.threads``)
+ONE_THREAD = {"OPENCV_FOR_THREADS_NUM": "1"}
 
 #: stage name -> timed functions ("module:attr" or "module:Class.method")
 STAGES: dict[str, tuple[str, ...]] = {
@@ -179,12 +182,12 @@ def _inputs(dataset: str) -> tuple[Path, Path]:
     return root / "trajectories.txt", root / "mesh.ply"
 
 
-def _timed_process(cmd: list[str]) -> tuple[float, float]:
+def _timed_process(cmd: list[str], env: dict[str, str] | None = None) -> tuple[float, float]:
     """(wall s, CPU s of the process and its children) of one whole process."""
     before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     subprocess.run(cmd, check=False, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
-                   cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)})
+                   cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO), **(env or {})})
     wall = time.perf_counter() - t0
     after = resource.getrusage(resource.RUSAGE_CHILDREN)
     return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
@@ -242,8 +245,10 @@ def main() -> None:
                 b = _timed_process(bare[BARE_SIZES[0]])
                 a = _timed_process([sys.executable, "-m", "pgt_check", *run])
                 b2 = _timed_process(bare[BARE_SIZES[1]])
+                b3 = _timed_process(bare[BARE_SIZES[0]], ONE_THREAD)
                 pairs.append({"bare_wall_s": b[0], "bare_cpu_s": b[1], "run_wall_s": a[0],
-                              "run_cpu_s": a[1], "bare2_wall_s": b2[0], "bare2_cpu_s": b2[1]})
+                              "run_cpu_s": a[1], "bare2_wall_s": b2[0], "bare2_cpu_s": b2[1],
+                              "bare1t_wall_s": b3[0], "bare1t_cpu_s": b3[1]})
             res["pairs"] = pairs
             res["load_after_pairs"] = _load()
             results[case] = res
@@ -280,6 +285,8 @@ def _end_to_end_rows(results: dict[str, dict]) -> list[list]:
             f"{med('run_wall_s'):.1f} / {med('run_cpu_s'):.1f}",
             ratio("run_wall_s", "bare_wall_s"), ratio("run_cpu_s", "bare_cpu_s"),
             f"{med('bare2_cpu_s'):.1f} / {ratio('run_cpu_s', 'bare2_cpu_s')}",
+            f"{med('bare1t_wall_s'):.1f} / {med('bare1t_cpu_s'):.1f} / "
+            f"{ratio('run_cpu_s', 'bare1t_cpu_s')}",
             "-" if ref is None else f"{ref['rounds']} ({ref['stopped'].split(':')[0]})",
             r.get("corrections", 0), r["load_before"] + " -> " + r["load_after_pairs"],
         ])
@@ -341,14 +348,18 @@ def render(meta: dict, results: dict[str, dict]) -> str:
         "",
         "`benchmarks/bare_loop.py` on the same frames (same renderer, OpenCV SIFT, ratio "
         "test, RANSAC homography) at 640 px, the issue's baseline (the run matches at 320 px "
-        "and aligns edges at 640 / 1024 px); the bare loop at 320 px, timed in the same "
-        "pairs, is beside it. Medians over the pairs; ratio = run / bare, per pair, then the "
-        "median.",
+        "and aligns edges at 640 / 1024 px), with OpenCV's default threads, the issue's "
+        "baseline. Beside it, timed in the same pairs: the bare loop at 320 px, and at 640 px "
+        "with one OpenCV thread, as the run has by default (`threads`, "
+        "`pgt_check/threads.py`): one thread makes the bare loop cheaper but slower, the run "
+        "both cheaper and faster. Medians over the pairs; ratio = run / bare, per pair, then "
+        "the median.",
         "",
     ]
     rows = _end_to_end_rows(results)
     lines.append(md_table(["case", "frames", "pairs", "bare s (wall / CPU)", "run s (wall / CPU)",
                            "ratio wall", "ratio CPU", "bare at 320 px: CPU s / ratio CPU",
+                           "bare, 1 OpenCV thread: wall / CPU s / ratio CPU",
                            "refinement rounds", "corrections", "load"], rows))
     lines += ["", "## Per stage (the profiled run)", "",
               "CPU seconds of the process (all its threads) per phase, then the stage's total "

@@ -40,6 +40,7 @@ from pgt_check.measure import (
 from pgt_check.progress import frame_progress, log_progress
 from pgt_check.remeasure import PlainMeasure, correct_stage, self_test_stage
 from pgt_check.store import mesh_content_hash
+from pgt_check.threads import opencv_threads
 from pgt_check.types import Frame, Trajectory
 from pgt_check.verdict import RunResult, judge_run
 
@@ -72,7 +73,13 @@ def run_trajectory(
     """``run`` on an already read trajectory (the Python API passes in-memory ones): the one
     path from frames to outputs, so the CLI and the API key stored measurements alike (the
     mesh's content hash with its side files in the fingerprint, ``frame_input_keys`` per
-    record): a moved pose, a replaced photo or a changed mesh is never reused from ``out``."""
+    record): a moved pose, a replaced photo or a changed mesh is never reused from ``out``.
+    OpenCV's threads are ``config.threads`` until it returns."""
+    with opencv_threads(config.threads):
+        return _run_trajectory(traj, config, t0)
+
+
+def _run_trajectory(traj: Trajectory, config: RunConfig, t0: float | None) -> dict[str, Any]:
     t0 = time.perf_counter() if t0 is None else t0
     frames = list(traj.frames)
     if config.limit is not None:
@@ -206,7 +213,7 @@ def check_frames(
     the output set is complete (``outputs.complete.json``): a second run into the same ``out``
     cannot write between the measurements and the outputs built from them.
     """
-    with _open_store(config, prepared) as store:
+    with opencv_threads(config.threads), _open_store(config, prepared) as store:
         return _check_frames_locked(store, prepared, config, checker_factory, t0)
 
 

@@ -221,6 +221,8 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
                    help="serial (default), a local process pool, or a Dask cluster")
     g.add_argument("--workers", type=int, default=None,
                    help="worker processes for process / local Dask (default: all cores)")
+    g.add_argument("--threads", type=int, default=None,
+                   help="OpenCV threads per process (default 1; 0 = every core)")
     g.add_argument("--scheduler", default=None,
                    help="address of a running Dask scheduler, e.g. tcp://host:8786 "
                    "(implies --executor dask)")
@@ -288,6 +290,7 @@ def _override_table(args: argparse.Namespace) -> dict[tuple[str, ...], Any]:
         ("limit",): args.limit,
         ("executor",): args.executor or ("dask" if args.scheduler else None),
         ("workers",): args.workers,
+        ("threads",): args.threads,
         ("scheduler",): args.scheduler,
     }
 
@@ -333,6 +336,7 @@ _OPTION_OF = {
     "input.max_image_pixels": "--max-image-pixels",
     "limit": "--limit",
     "workers": "--workers",
+    "threads": "--threads",
     "report_details": "--report-details",
     "edges.tile_grid": "--edges-tile-grid",
     "correct.rounds": "--correct-rounds",

@@ -1,0 +1,77 @@
+"""OpenCV's thread count: set per run, restored for the API's caller, configurable, same results."""
+
+from __future__ import annotations
+
+import cv2
+import pytest
+
+from pgt_check.config import RunConfig
+from pgt_check.errors import ConfigError
+from pgt_check.io import read_trajectory
+from pgt_check.threads import opencv_threads, set_opencv_threads
+
+
+@pytest.fixture
+def caller_threads():
+    """The caller's own OpenCV setting (3 threads), restored after the test."""
+    before = cv2.getNumThreads()
+    cv2.setNumThreads(3)
+    yield 3
+    cv2.setNumThreads(before)
+
+
+def test_context_sets_and_restores_even_on_error(caller_threads):
+    with opencv_threads(1):
+        assert cv2.getNumThreads() == 1
+    assert cv2.getNumThreads() == caller_threads
+    with pytest.raises(RuntimeError), opencv_threads(2):
+        assert cv2.getNumThreads() == 2
+        raise RuntimeError("boom")
+    assert cv2.getNumThreads() == caller_threads
+    with pytest.raises(ValueError, match=">= 1"):
+        set_opencv_threads(0)
+    assert cv2.getNumThreads() == caller_threads
+
+
+def test_config_default_zero_and_range():
+    assert RunConfig().threads == 1
+    assert RunConfig.from_dict({"threads": 0}).threads is None  # OpenCV's default
+    assert RunConfig.from_dict({"threads": 4}).threads == 4
+    with pytest.raises((ConfigError, ValueError), match="threads"):
+        RunConfig.from_dict({"threads": -2})
+    # not a measurement setting: stored measurements stay valid whatever the thread count
+    assert (RunConfig.from_dict({"threads": 4}).measurement_fingerprint()
+            == RunConfig().measurement_fingerprint())
+
+
+def test_cli_option_reaches_the_config():
+    from pgt_check.commands.check import build_parser, load_config
+
+    args = build_parser().parse_args(["t.txt", "--mesh", "m.ply", "--threads", "0"])
+    assert load_config(args).threads is None
+
+
+def test_a_run_measures_with_its_threads_and_gives_the_callers_back(
+        tmp_path, sample_scene, caller_threads, monkeypatch):
+    from pgt_check.api import check
+    from pgt_check.measure import checker as checker_mod
+
+    seen = []
+    measure = checker_mod.FrameChecker.measure
+
+    def spy(self, frame, *a, **kw):
+        seen.append(cv2.getNumThreads())
+        return measure(self, frame, *a, **kw)
+
+    monkeypatch.setattr(checker_mod.FrameChecker, "measure", spy)
+    traj = read_trajectory(sample_scene / "trajectories.txt")
+    out = {}
+    for threads in (1, 2):
+        df = check(traj, sample_scene / "mesh.glb", out=str(tmp_path / f"t{threads}"),
+                   limit=3, report_details=0, threads=threads, correct={"frames": "none"})
+        out[threads] = df
+        assert seen and set(seen) == {threads}
+        seen.clear()
+        assert cv2.getNumThreads() == caller_threads
+    cols = ["frame_id", "verdict", "corner_error_px", "n_inliers"]
+    assert out[1][cols].equals(out[2][cols])
