@@ -51,9 +51,9 @@ CASES: dict[str, tuple[str, int | None, tuple[str, ...], str]] = {
 #: before issue #28) and 320 px (the default matching size since; the edge path still works at
 #: 640 / 1024 px)
 BARE_SIZES = (640, 320)
-#: the environment of the bare loop's third variant: 640 px with one OpenCV thread, as the run
-#: uses by default (``RunConfig.threads``)
-ONE_THREAD = {"OPENCV_FOR_THREADS_NUM": "1"}
+#: the environment of the bare loop's third variant: 640 px with one OpenCV and one BLAS
+#: thread, as the run uses by default (``RunConfig.threads``)
+ONE_THREAD = {"OPENCV_FOR_THREADS_NUM": "1", "OPENBLAS_NUM_THREADS": "1"}
 
 #: stage name -> timed functions ("module:attr" or "module:Class.method")
 STAGES: dict[str, tuple[str, ...]] = {
@@ -350,7 +350,7 @@ def render(meta: dict, results: dict[str, dict]) -> str:
         "test, RANSAC homography) at 640 px, the issue's baseline (the run matches at 320 px "
         "and aligns edges at 640 / 1024 px), with OpenCV's default threads, the issue's "
         "baseline. Beside it, timed in the same pairs: the bare loop at 320 px, and at 640 px "
-        "with one OpenCV thread, as the run has by default (`threads`, "
+        "with one OpenCV and one BLAS thread, as the run has by default (`threads`, "
         "`pgt_check/threads.py`): one thread makes the bare loop cheaper but slower, the run "
         "both cheaper and faster. Medians over the pairs; ratio = run / bare, per pair, then "
         "the median.",
@@ -359,7 +359,7 @@ def render(meta: dict, results: dict[str, dict]) -> str:
     rows = _end_to_end_rows(results)
     lines.append(md_table(["case", "frames", "pairs", "bare s (wall / CPU)", "run s (wall / CPU)",
                            "ratio wall", "ratio CPU", "bare at 320 px: CPU s / ratio CPU",
-                           "bare, 1 OpenCV thread: wall / CPU s / ratio CPU",
+                           "bare, 1 thread: wall / CPU s / ratio CPU",
                            "refinement rounds", "corrections", "load"], rows))
     lines += ["", "## Per stage (the profiled run)", "",
               "CPU seconds of the process (all its threads) per phase, then the stage's total "

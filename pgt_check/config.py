@@ -326,8 +326,8 @@ class RunConfig:
     executor: Literal["serial", "process", "dask"] = "serial"
     #: worker processes (process / local Dask cluster); None = all CPU cores
     workers: int | None = None
-    #: OpenCV threads per process (within a frame); None (0 in a file or on the command line)
-    #: = OpenCV's default, every core. 1: see pgt_check/threads.py
+    #: OpenCV and BLAS threads per process (within a frame); None (0 in a file or on the
+    #: command line) = the libraries' defaults, every core. 1: see pgt_check/threads.py
     threads: int | None = 1
     #: address of an existing Dask scheduler (tcp://host:8786); None = start a LocalCluster
     scheduler: str | None = None
@@ -343,7 +343,7 @@ class RunConfig:
 
     def __post_init__(self) -> None:
         _check_range("workers", self.workers, 1, 4096)
-        if self.threads == 0:  # 0 = OpenCV's default (as match.resize_max 0 = original size)
+        if self.threads == 0:  # 0 = the libraries' defaults (as match.resize_max 0 = original)
             object.__setattr__(self, "threads", None)
         _check_range("threads", self.threads, 1, 4096)
         _check_range("retries", self.retries, 0, 100)

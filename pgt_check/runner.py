@@ -40,7 +40,7 @@ from pgt_check.measure import (
 from pgt_check.progress import frame_progress, log_progress
 from pgt_check.remeasure import PlainMeasure, correct_stage, self_test_stage
 from pgt_check.store import mesh_content_hash
-from pgt_check.threads import opencv_threads
+from pgt_check.threads import run_threads
 from pgt_check.types import Frame, Trajectory
 from pgt_check.verdict import RunResult, judge_run
 
@@ -74,8 +74,8 @@ def run_trajectory(
     path from frames to outputs, so the CLI and the API key stored measurements alike (the
     mesh's content hash with its side files in the fingerprint, ``frame_input_keys`` per
     record): a moved pose, a replaced photo or a changed mesh is never reused from ``out``.
-    OpenCV's threads are ``config.threads`` until it returns."""
-    with opencv_threads(config.threads):
+    OpenCV's and BLAS's threads are ``config.threads`` until it returns."""
+    with run_threads(config.threads):
         return _run_trajectory(traj, config, t0)
 
 
@@ -213,7 +213,7 @@ def check_frames(
     the output set is complete (``outputs.complete.json``): a second run into the same ``out``
     cannot write between the measurements and the outputs built from them.
     """
-    with opencv_threads(config.threads), _open_store(config, prepared) as store:
+    with run_threads(config.threads), _open_store(config, prepared) as store:
         return _check_frames_locked(store, prepared, config, checker_factory, t0)
 
 

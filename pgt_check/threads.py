@@ -1,10 +1,16 @@
-"""OpenCV's thread count per process (``RunConfig.threads``).
+"""Threads per process of OpenCV and of the BLAS libraries (``RunConfig.threads``).
 
-pgt-check works on small images (matching at 320 px) with Python steps between the OpenCV
-calls; OpenCV's idle worker threads keep spinning after each call and take the cores from those
-steps and from the renderer's threads. On 2 cores one thread made the default run both faster
-and cheaper, with identical results (reports/pipeline_timing.md). More cores are used by
-spreading frames over processes (``--executor process``), one OpenCV thread each.
+pgt-check works on small images (matching at 320 px) and small matrices, with Python steps
+between the library calls. OpenCV's and OpenBLAS's idle worker threads keep spinning after each
+call and take the cores from those steps and from the renderer's threads: on 2 cores one
+thread each made the default run both faster and cheaper, with identical results
+(reports/pipeline_timing.md). More cores are used by spreading frames over processes
+(``--executor process``), one thread each.
+
+``run_threads(n)`` sets them for a block and restores the caller's settings after it (the
+Python API runs in the caller's process); ``limit_threads(n)`` applies them where libraries
+were loaded since (a BLAS library counts from its loading: trimesh loads scipy's with the mesh),
+through the enclosing block, or for the rest of the process in a worker.
 """
 
 from __future__ import annotations
@@ -12,31 +18,66 @@ from __future__ import annotations
 import contextlib
 import logging
 from collections.abc import Iterator
+from typing import Any
 
 logger = logging.getLogger(__name__)
 
 
-def set_opencv_threads(n: int | None) -> int:
-    """Set OpenCV's threads for this process (None: OpenCV's default, every core); returns the
-    count before, for ``restore``."""
-    import cv2
+class ThreadLimits:
+    """``n`` threads (None: the libraries' defaults, left alone) for OpenCV and every BLAS
+    library loaded when ``apply`` is called; ``restore`` undoes every ``apply``."""
 
-    before = int(cv2.getNumThreads())
-    if n is not None and n < 1:
-        raise ValueError(f"threads must be >= 1 or None, got {n}")
-    cv2.setNumThreads(-1 if n is None else int(n))
-    logger.debug("OpenCV threads: %d -> %d", before, cv2.getNumThreads())
-    return before
+    def __init__(self, n: int | None) -> None:
+        if n is not None and n < 1:
+            raise ValueError(f"threads must be >= 1 or None, got {n}")
+        self.n = n
+        self._cv_before: int | None = None
+        self._blas: list[Any] = []  # threadpoolctl limiters, in the order applied
+
+    def apply(self) -> None:
+        if self.n is None:
+            return
+        import cv2
+        from threadpoolctl import threadpool_limits
+
+        if self._cv_before is None:
+            self._cv_before = int(cv2.getNumThreads())
+        cv2.setNumThreads(int(self.n))
+        self._blas.append(threadpool_limits(limits=int(self.n), user_api="blas"))
+        logger.debug("threads: OpenCV and BLAS at %d", self.n)
+
+    def restore(self) -> None:
+        for limiter in reversed(self._blas):
+            limiter.restore_original_limits()
+        self._blas.clear()
+        if self._cv_before is not None:
+            import cv2
+
+            cv2.setNumThreads(self._cv_before)
+            self._cv_before = None
+
+
+_ACTIVE: list[ThreadLimits] = []
 
 
 @contextlib.contextmanager
-def opencv_threads(n: int | None) -> Iterator[None]:
-    """OpenCV's threads set to ``n`` inside the block and restored after it (the Python API
-    runs in the caller's process: its own OpenCV setting is left as it was)."""
-    import cv2
-
-    before = set_opencv_threads(n)
+def run_threads(n: int | None) -> Iterator[ThreadLimits]:
+    """OpenCV and BLAS at ``n`` threads inside the block; the settings before it come back
+    after it, also for libraries first limited inside it (``limit_threads``)."""
+    limits = ThreadLimits(n)
+    _ACTIVE.append(limits)
     try:
-        yield
+        limits.apply()
+        yield limits
     finally:
-        cv2.setNumThreads(before)
+        _ACTIVE.remove(limits)
+        limits.restore()
+
+
+def limit_threads(n: int | None) -> None:
+    """Apply ``n`` to the libraries loaded by now: through the innermost ``run_threads`` block
+    of this process (restored at its end), else for the rest of the process (a worker)."""
+    if _ACTIVE:
+        _ACTIVE[-1].apply()
+    else:
+        ThreadLimits(n).apply()

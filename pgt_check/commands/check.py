@@ -222,7 +222,7 @@ def _add_run_args(p: argparse.ArgumentParser) -> None:
     g.add_argument("--workers", type=int, default=None,
                    help="worker processes for process / local Dask (default: all cores)")
     g.add_argument("--threads", type=int, default=None,
-                   help="OpenCV threads per process (default 1; 0 = every core)")
+                   help="OpenCV and BLAS threads per process (default 1; 0 = every core)")
     g.add_argument("--scheduler", default=None,
                    help="address of a running Dask scheduler, e.g. tcp://host:8786 "
                    "(implies --executor dask)")

@@ -48,7 +48,7 @@ from pgt_check.measure.steps import (  # format_exception, pick_references: re-e
     pose_estimate,
     replace_measurement,
 )
-from pgt_check.threads import set_opencv_threads
+from pgt_check.threads import limit_threads
 from pgt_check.types import Camera, Frame
 
 logger = logging.getLogger(__name__)
@@ -442,9 +442,10 @@ def build_frame_checker(
     """Worker-side factory: a FrameChecker with its mesh, renderer and matcher loaded.
 
     ``panel_sink`` (picklable; one copy per worker) sees every measurement with its images.
-    Sets this process's OpenCV threads to ``config.threads`` (``pgt_check.threads``)."""
-    set_opencv_threads(config.threads)
+    Limits this process's OpenCV and BLAS threads to ``config.threads`` once the libraries
+    are loaded (``pgt_check.threads``)."""
     checker = FrameChecker(config, dict(references or {}), panel_sink)
     _ = checker.renderer
     _ = checker.matcher
+    limit_threads(config.threads)
     return checker

@@ -67,8 +67,9 @@ def plot_histogram(records, summary, out_dir: Path) -> str:
     }
     allv = np.concatenate([e[np.isfinite(e)] for e in errs.values()])
     n_unv = sum(1 for r in records if r.get("verdict") == "UNVERIFIABLE")
+    log = bool(len(allv))
     chart = _chart(f"Corner error ({n_unv} UNVERIFIABLE frames not shown)",
-                   Axis("corner error [px] (log)", log=bool(len(allv))),
+                   Axis("corner error [px]" + (" (log)" if log else ""), log=log),
                    Axis("frames", integer=True, lo=0.0))
     if len(allv):
         lo = max(min(allv.min(), thr if math.isfinite(thr) else allv.min()), 1e-2)
