@@ -42,6 +42,9 @@ CASES: dict[str, tuple[str, int | None, tuple[str, ...], str]] = {
     "castle-xfeat": ("castle", None, ("--matcher", "xfeat"),
                      "castle, 10 frames, default with --matcher xfeat"),
     "boxes": ("boxes", None, (), "generated boxes (sample_data/boxes), 24 frames, default"),
+    "7s-proc": ("7scenes", 30, ("--executor", "process", "--workers", "2"),
+                "7-Scenes, 30 frames, default on a pool of 2 worker processes (both cores; "
+                "the per-stage timers see only the main process)"),
     "7s-refine": ("7scenes", 30, ("--registration-rounds", "8"),
                   "7-Scenes, 30 frames, default + --registration-rounds 8 (the deferred "
                   "refinement run)"),
