@@ -79,6 +79,9 @@ STAGES: dict[str, tuple[str, ...]] = {
     "run-level checks + verdicts": ("pgt_check.runner:judge_run",),
     "report files (csv, json, html, plots)": ("pgt_check.report.outputs:write_outputs",),
 }
+#: timed functions that a process pool sends to its workers by reference: a wrapper would not
+#: pickle, so they are not timed in pooled cases
+PICKLED = {"pgt_check.measure.checker:build_frame_checker"}
 #: phase name -> function that runs it
 PHASES = {
     "main pass": "pgt_check.runner:_measure_into_store",
@@ -151,20 +154,24 @@ def child(argv: list[str], out_json: str) -> None:
 
     t_import = time.perf_counter() - t_start
     timers = Timers()
+    pooled = "--executor" in argv and argv[argv.index("--executor") + 1] != "serial"
     for stage, targets in STAGES.items():
         for t in targets:
+            if pooled and t in PICKLED:
+                continue
             _patch(t, lambda fn, s=stage: timers.wrap(fn, s))
     for phase, t in PHASES.items():
         _patch(t, lambda fn, p=phase: timers.phased(fn, p))
     t0 = time.perf_counter()
     rc = main(argv)
     wall = time.perf_counter() - t0
-    ru = resource.getrusage(resource.RUSAGE_SELF)
+    cpu = sum(getattr(resource.getrusage(who), f) for who in
+              (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN) for f in ("ru_utime", "ru_stime"))
     out = Path(argv[argv.index("--out") + 1])
     summary = json.loads((out / "summary.json").read_text())
     refinement = (summary.get("shared_errors", {}).get("registration", {}) or {}).get("refinement")
     Path(out_json).write_text(json.dumps({
-        "rc": rc, "import_s": t_import, "run_s": wall, "cpu_s": ru.ru_utime + ru.ru_stime,
+        "rc": rc, "import_s": t_import, "run_s": wall, "cpu_s": cpu,
         "n_frames": summary.get("n_frames"), "counts": summary.get("counts"),
         "gate": summary.get("gate", {}).get("passed"),
         "refinement": None if refinement is None else {
