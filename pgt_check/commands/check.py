@@ -15,7 +15,6 @@ import argparse
 import logging
 import sys
 from collections.abc import Sequence
-from pathlib import Path
 from typing import Any
 
 from pgt_check import __version__
@@ -364,49 +363,11 @@ def load_config(args: argparse.Namespace) -> RunConfig:
         raise
 
 
-def shared_error_lines(shared: dict[str, Any]) -> list[str]:
-    """One line per run-level check worth reading: failed, inconclusive or a finding."""
-    entries = [shared.get(k) for k in ("registration", "similarity", "drift")]
-    entries += list((shared.get("calibration") or {}).values())
-    entries += list((shared.get("calibration_change") or {}).values())
-    texture = shared.get("texture") or {}
-    # informational: printed as a finding, or when it could not be checked at all
-    if texture.get("status") == "finding" or texture.get("reason") == "no_geometric_evidence":
-        entries.append(texture)
-    return [
-        str(e["message"]) for e in entries
-        if isinstance(e, dict) and (e.get("status") in ("failed", "inconclusive", "finding")
-                                    or e.get("reason") == "no_geometric_evidence")
-    ]
-
-
 def _print_summary(summary: dict[str, Any], out: str) -> None:
-    from pgt_check.report.headline import failure_headline
+    from pgt_check.report.headline import summary_lines
 
-    # a run that failed on an error all frames share: what, how big, likely cause, the fix
-    for line in failure_headline(summary, out):
+    for line in summary_lines(summary, out):
         print(f"pgt-check: {safe_text(line)}")
-    c = summary["counts"]
-    err = summary["statistics"]["corner_error_px"]
-    med = "-" if err["median"] is None else f"{err['median']:.2f}"
-    print(
-        f"pgt-check: {summary['n_frames']} frames: {c['PASS']} PASS, {c['FAIL']} FAIL, "
-        f"{c['UNVERIFIABLE']} UNVERIFIABLE; median corner error {med} px "
-        f"(threshold {summary['threshold_px']:.1f} px)"
-    )
-    sysoff = summary["statistics"]["systematic_offset"]
-    if sysoff.get("systematic"):
-        print(f"pgt-check: {sysoff['message']}")
-    for line in shared_error_lines(summary.get("shared_errors") or {}):
-        print(f"pgt-check: {line}")
-    for line in (summary.get("accuracy") or {}).get("sentences") or ():
-        print(f"pgt-check: accuracy: {line}")
-    if (summary.get("self_test") or {}).get("sentence"):
-        print(f"pgt-check: {summary['self_test']['sentence']}")
-    gate = summary["gate"]
-    print(f"pgt-check: gate {'PASSED' if gate['passed'] else 'FAILED'}: {gate['explanation']}")
-    print(f"pgt-check: report: {safe_text(Path(out) / 'report.html')} (all outputs in "
-          f"{safe_text(out)})")
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -1,8 +1,9 @@
-"""The first lines after a run that failed on an error all frames share: what failed, how big
-(px, deg, scene units), what it most likely is, and the command that fixes or re-judges it.
+"""What ``pgt-check`` prints after a run (``summary_lines``), led by the first lines after a run
+that failed on an error all frames share (``failure_headline``): what failed, how big (px, deg,
+scene units), what it most likely is, and the command that fixes or re-judges it.
 
 Built from summary.json alone (``shared_errors``, ``accuracy``, ``settings``, and the files the
-run wrote), so ``pgt-check`` and ``pgt-check report`` print the same lines."""
+run wrote), so ``pgt-check`` and ``pgt-check report`` print the same headline."""
 
 from __future__ import annotations
 
@@ -195,3 +196,45 @@ def _drift_lines(summary: Mapping[str, Any], drift: Mapping[str, Any]) -> list[s
         "fix: re-estimate those segments' poses (corrected_trajectory.txt holds "
         "verified corrections of the FAIL frames, --correct fail)",
     ]
+
+
+def shared_error_lines(shared: Mapping[str, Any]) -> list[str]:
+    """One line per run-level check worth reading: failed, inconclusive or a finding."""
+    entries = [shared.get(k) for k in ("registration", "similarity", "drift")]
+    entries += list((shared.get("calibration") or {}).values())
+    entries += list((shared.get("calibration_change") or {}).values())
+    texture = shared.get("texture") or {}
+    # informational: printed as a finding, or when it could not be checked at all
+    if texture.get("status") == "finding" or texture.get("reason") == "no_geometric_evidence":
+        entries.append(texture)
+    return [
+        str(e["message"]) for e in entries
+        if isinstance(e, dict) and (e.get("status") in ("failed", "inconclusive", "finding")
+                                    or e.get("reason") == "no_geometric_evidence")
+    ]
+
+
+def summary_lines(summary: Mapping[str, Any], out: str | Path) -> list[str]:
+    """The lines printed after a run: the failure headline, counts and median error, the
+    systematic offset, the run-level checks worth reading, the accuracy statement, the self-test,
+    the gate and where the report is."""
+    lines = failure_headline(summary, out)
+    c = summary["counts"]
+    err = summary["statistics"]["corner_error_px"]
+    med = "-" if err["median"] is None else f"{err['median']:.2f}"
+    lines.append(
+        f"{summary['n_frames']} frames: {c['PASS']} PASS, {c['FAIL']} FAIL, "
+        f"{c['UNVERIFIABLE']} UNVERIFIABLE; median corner error {med} px "
+        f"(threshold {summary['threshold_px']:.1f} px)"
+    )
+    sysoff = summary["statistics"]["systematic_offset"]
+    if sysoff.get("systematic"):
+        lines.append(str(sysoff["message"]))
+    lines += shared_error_lines(summary.get("shared_errors") or {})
+    lines += [f"accuracy: {s}" for s in (summary.get("accuracy") or {}).get("sentences") or ()]
+    if (summary.get("self_test") or {}).get("sentence"):
+        lines.append(str(summary["self_test"]["sentence"]))
+    gate = summary["gate"]
+    lines.append(f"gate {'PASSED' if gate['passed'] else 'FAILED'}: {gate['explanation']}")
+    lines.append(f"report: {Path(out) / 'report.html'} (all outputs in {out})")
+    return lines

@@ -9,10 +9,10 @@ import dataclasses
 import numpy as np
 import pytest
 
-from pgt_check.commands.check import shared_error_lines
 from pgt_check.config import RunConfig
 from pgt_check.geometry.shared_errors.texture import FramePoints, texture_offset
 from pgt_check.measure import AbsoluteEvidence, FrameMeasurement
+from pgt_check.report.headline import shared_error_lines
 from pgt_check.verdict import judge_run
 
 F, CX, CY = 500.0, 319.5, 239.5
