@@ -442,8 +442,7 @@ def build_frame_checker(
     """Worker-side factory: a FrameChecker with its mesh, renderer and matcher loaded.
 
     ``panel_sink`` (picklable; one copy per worker) sees every measurement with its images.
-    Limits this process's OpenCV and BLAS threads to ``config.threads`` once the libraries
-    are loaded (``pgt_check.threads``)."""
+    Then limits this process's OpenCV and BLAS threads (``config.threads``, pgt_check.threads)."""
     checker = FrameChecker(config, dict(references or {}), panel_sink)
     _ = checker.renderer
     _ = checker.matcher
