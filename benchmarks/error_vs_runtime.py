@@ -27,6 +27,7 @@ from _common import REPORTS, command_line, machine, md_table, shared_data
 from pgt_check.config import RunConfig, merge
 from pgt_check.io import read_trajectory
 from pgt_check.measure import FrameChecker, pick_references
+from pgt_check.threads import run_threads
 from pgt_check.types import Trajectory
 from pgt_eval import perturb_trajectory, roc_auc
 
@@ -84,11 +85,12 @@ def run_point(traj, bad, mesh, base, point):
     cfg = RunConfig.from_dict(merge(merge({"input": {"trajectory": traj.source, "mesh": str(mesh)}},
                                           base), point))
     recs = []
-    for t in (traj, bad):
-        checker = FrameChecker(cfg, pick_references(t, t.frames, cfg))
-        checker.measure(t.frames[0])  # warm-up: GL context, model load
-        recs.append([checker.measure(f).row() for f in t.frames])
-        checker.close()
+    with run_threads(cfg.threads):  # OpenCV / BLAS threads as a run sets them
+        for t in (traj, bad):
+            checker = FrameChecker(cfg, pick_references(t, t.frames, cfg))
+            checker.measure(t.frames[0])  # warm-up: GL context, model load
+            recs.append([checker.measure(f).row() for f in t.frames])
+            checker.close()
     return recs
 
 
@@ -175,7 +177,8 @@ def _write_report(results: list[dict], t_start: float) -> None:
     text = "\n".join([
         "# Error against run time",
         "",
-        f"Machine: {machine()}; torch threads = 2; load average at the end "
+        f"Machine: {machine()}; torch threads = 2, OpenCV / BLAS threads as a run sets them "
+        f"(`threads`, default 1); load average at the end "
         f"{' / '.join(f'{x:.1f}' for x in os.getloadavg())} (1 / 5 / 15 min: other jobs on "
         f"the cores make the times pessimistic). Command: `{command_line()}`. "
         f"Total {time.perf_counter() - t_start:.0f} s.",
