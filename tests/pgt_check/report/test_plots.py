@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 import xml.etree.ElementTree as ET
 
 from report_testdata import judged, shared_errors_summary, synthetic_measurements
@@ -45,7 +46,7 @@ def test_figures_show_every_measured_frame_by_verdict(tmp_path, config):
     for rel in written.values():
         assert rel.endswith(".svg") and (tmp_path / rel).is_file()
     measured = [r for r in recs if r.get("verdict") in ("PASS", "FAIL")
-                and isinstance(r.get("corner_error_px"), float) and r["corner_error_px"] > 0]
+                and math.isfinite(plots._num(r, "corner_error_px"))]
     along = _svg(tmp_path, written["error_time"])
     colours = {v: c for v, c in plots.VERDICT_COLOURS.items()}
     dots = [c.get("fill") for c in along.iter(f"{NS}circle")]
