@@ -109,7 +109,8 @@ def time_mode(frames, factory, config) -> dict:
     errors = 0
     for rec in iter_results(iter(frames), factory, config, stats=stats):
         stamps.append(time.perf_counter())
-        errors += bool(rec.get("error"))
+        # a FrameMeasurement (real checker) or a dict (the synthetic stand-in)
+        errors += bool(rec.get("error") if isinstance(rec, dict) else rec.error.value)
     t_end = time.perf_counter()
     n = len(stamps)
     steady = (n - 1) / (stamps[-1] - stamps[0]) if n > 1 and stamps[-1] > stamps[0] else None
