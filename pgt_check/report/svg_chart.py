@@ -111,10 +111,7 @@ class Chart:
             if m.kind in ("line", "points"):
                 xs.append(m.xy[0])
                 ys.append(m.xy[1])
-            elif m.kind == "bars":
-                xs.append(m.xy[0])
-                ys += [m.xy[1], m.xy[2]]
-            elif m.kind == "band":
+            elif m.kind in ("bars", "band"):  # (x or edges, lower, upper)
                 xs.append(m.xy[0])
                 ys += [m.xy[1], m.xy[2]]
             elif m.kind == "hline":
@@ -373,7 +370,7 @@ def _legend_items(items: list[_Mark], x: float, y: float) -> list[str]:
     out = []
     for i, m in enumerate(items):
         cy = y + 8 + 16 * i
-        if m.kind in ("points",):
+        if m.kind == "points":
             sample = _markers(np.array([x + 9]), np.array([cy]), m)[0]
         elif m.kind in ("bars", "band"):
             op = f' fill-opacity="{m.opacity}"' if m.kind == "band" else ""
