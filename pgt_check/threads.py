@@ -38,11 +38,16 @@ class ThreadLimits:
         if self.n is None:
             return
         import cv2
-        from threadpoolctl import threadpool_limits
 
         if self._cv_before is None:
             self._cv_before = int(cv2.getNumThreads())
         cv2.setNumThreads(int(self.n))
+        try:
+            from threadpoolctl import threadpool_limits
+        except ImportError:  # a dependency; without it only the speed differs
+            logger.warning("threadpoolctl is not installed: the BLAS libraries keep their "
+                           "default threads (pip install threadpoolctl)")
+            return
         self._blas.append(threadpool_limits(limits=int(self.n), user_api="blas"))
         logger.debug("threads: OpenCV and BLAS at %d", self.n)
 

@@ -96,3 +96,13 @@ def test_a_run_measures_with_its_threads_and_gives_the_callers_back(
         assert cv2.getNumThreads() == caller_threads and _blas_threads() == {2}
     cols = ["frame_id", "verdict", "corner_error_px", "n_inliers"]
     assert out[1][cols].equals(out[2][cols])
+
+
+def test_without_threadpoolctl_only_opencv_is_limited(caller_threads, monkeypatch, caplog):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "threadpoolctl", None)  # import fails
+    with run_threads(1):
+        assert cv2.getNumThreads() == 1
+    assert cv2.getNumThreads() == caller_threads
+    assert "threadpoolctl is not installed" in caplog.text
