@@ -19,6 +19,8 @@ from pgt_check.report.svg_chart import Axis, Chart, hstack
 logger = logging.getLogger(__name__)
 
 VERDICT_COLOURS = {"PASS": "#2e7d32", "FAIL": "#c62828", "UNVERIFIABLE": "#9e9e9e"}
+#: every plot ``write_plots`` may write (assets/plot_<name>.svg)
+PLOT_NAMES = ("error_hist", "error_time", "raw_vs_enhanced", "top_view", "drift")
 
 
 def _chart(title: str, x: Axis, y: Axis, width: int = 600, height: int = 350, **kw) -> Chart:
@@ -252,8 +254,7 @@ def write_plots(
             plots.append({"name": name, "title": title, "path": path})
     # a regenerated report must not show a plot of an older run (nor keep the PNG plots of
     # versions before the SVG ones)
-    stale = {f"plot_{p}.svg" for p in ("raw_vs_enhanced", "top_view", "drift")} | {
-        f"plot_{p}.png" for p, _, _ in specs} | {"plot_drift.png", "plot_top_view.png"}
+    stale = {f"plot_{n}.{ext}" for n in PLOT_NAMES for ext in ("svg", "png")}
     stale -= {Path(p["path"]).name for p in plots}
     for name in stale:
         (out_dir / "assets" / name).unlink(missing_ok=True)

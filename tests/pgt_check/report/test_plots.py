@@ -69,7 +69,8 @@ def test_no_measured_frame_says_so(tmp_path, config):
 def test_stale_plots_of_an_older_run_or_version_are_removed(tmp_path, config):
     assets = tmp_path / "assets"
     assets.mkdir()
-    for name in ("plot_error_hist.png", "plot_drift.png", "plot_raw_vs_enhanced.svg"):
+    for name in ("plot_error_hist.png", "plot_drift.png", "plot_raw_vs_enhanced.svg",
+                 "plot_raw_vs_enhanced.png"):
         (assets / name).write_bytes(b"old")
     recs = judged(synthetic_measurements(10, hostile=False), config)
     written = plots.write_plots(recs, {}, tmp_path)
