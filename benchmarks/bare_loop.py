@@ -9,8 +9,9 @@ run it as a whole process beside ``pgt-check`` on the same frames, e.g.
         --mesh $PGT_SHARED_DATA/7scenes_redkitchen/mesh.ply --limit 30
 
 Same renderer as the run, longest side ``--resize-max`` (default 640 px: the issue's baseline;
-the run's ``match.resize_max`` is 320 px since issue #28, its edge path 640 / 1024 px), OpenCV SIFT with its default settings, brute-force k=2 matching,
-Lowe ratio 0.8, ``cv2.findHomography`` RANSAC at 3 px. Prints one line per frame and the median.
+the run's ``match.resize_max`` is 320 px since issue #28, its edge path 640 / 1024 px),
+OpenCV SIFT with its default settings, brute-force k=2 matching, Lowe ratio 0.8,
+``cv2.findHomography`` RANSAC at 3 px. Prints one line per frame and the median.
 """
 
 from __future__ import annotations

@@ -5,10 +5,10 @@ For each scene, ``--frames`` frames (evenly spaced) get a random pose error (rot
 median render depth, random direction; seeded). Each perturbed frame is measured as a run
 would (default settings: SIFT at 320 px, enhance auto with reproject, PnP), then corrected
 (``pgt_check.correct.frames.correct_frame``: 3 rounds of render -> raw match at 640 px -> PnP
-from the measurement's PnP estimate). Reported: share of corrected poses within 0.1 deg AND 1 % of the
-median scene depth of the reference pose, the error medians, and the baseline: the same
-correction started from the reference pose itself (where the renders' own fixed point lies;
-on real data the reference poses are not perfect).
+from the measurement's PnP estimate). Reported: share of corrected poses within 0.1 deg AND
+1 % of the median scene depth of the reference pose, the error medians, and the baseline: the
+same correction started from the reference pose itself (where the renders' own fixed point
+lies; on real data the reference poses are not perfect).
 
 Reference poses: sample scene: the generated truth (its trajectories.txt with the documented
 perturbations of perturbed.txt undone); 7-Scenes: trajectories.txt (D-SLAM; the mesh was fused

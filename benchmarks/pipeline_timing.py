@@ -358,11 +358,11 @@ def render(meta: dict, results: dict[str, dict]) -> str:
         "",
         "`benchmarks/bare_loop.py` on the same frames (same renderer, OpenCV SIFT, ratio "
         "test, RANSAC homography) at 640 px, the issue's baseline (the run matches at 320 px "
-        "and aligns edges at 640 / 1024 px), with OpenCV's default threads. Beside it, timed in the same pairs: the bare loop at 320 px, and at 640 px "
-        "with one OpenCV and one BLAS thread, as the run has by default (`threads`, "
-        "`pgt_check/threads.py`): one thread makes the bare loop cheaper but slower, the run "
-        "both cheaper and faster. Medians over the pairs; ratio = run / bare, per pair, then "
-        "the median.",
+        "and aligns edges at 640 / 1024 px), with OpenCV's default threads. Beside it, timed "
+        "in the same pairs: the bare loop at 320 px, and at 640 px with one OpenCV and one "
+        "BLAS thread, as the run has by default (`threads`, `pgt_check/threads.py`): one "
+        "thread makes the bare loop cheaper but slower, the run cheaper and no slower. Medians "
+        "over the pairs; ratio = run / bare, per pair, then the median.",
         "",
     ]
     rows = _end_to_end_rows(results)

@@ -3,9 +3,10 @@
 pgt-check works on small images (matching at 320 px) and small matrices, with Python steps
 between the library calls. OpenCV's and OpenBLAS's idle worker threads keep spinning after each
 call and take the cores from those steps and from the renderer's threads: on 2 cores one
-thread each made the default run both faster and cheaper, with identical results
-(reports/pipeline_timing.md). More cores are used by spreading frames over processes
-(``--executor process``), one thread each.
+thread each made the default run cheaper (about a quarter less CPU) and no slower, with
+identical results (reports/pipeline_timing.md; single-threaded SIFT is slower per frame at
+640 px and above: reports/error_vs_runtime.md). More cores are used by spreading frames over
+processes (``--executor process``), one thread each.
 
 ``run_threads(n)`` sets them for a block and restores the caller's settings after it (the
 Python API runs in the caller's process); ``limit_threads(n)`` applies them where libraries
