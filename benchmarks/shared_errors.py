@@ -325,12 +325,12 @@ def main() -> None:
         write_reports(json.loads((REPORTS / f"shared_errors{_suffix(args)}.json").read_text()), args)
         return
     results = []
+    pinned = dict(x.split("=", 1) for x in args.depth)  # --depth DATASET=DEPTH
     for name, (traj, mesh, cfgd) in datasets(args.datasets.split(","), args.frames).items():
         presets = [x for x in args.presets.split(",") if x]
         if args.edges_tile_grid:
             cfgd = {**cfgd, "edges": {"tile_grid": args.edges_tile_grid}}
             name = f"{name}+tiles"
-        pinned = dict(x.split("=", 1) for x in args.depth)
         depth = float(pinned[name]) if name in pinned else None
         results.append(run_dataset(name, traj, mesh, cfgd, args.edges_off, presets, depth))
         write_reports(results, args)
