@@ -67,6 +67,51 @@ def perturb_trajectory(
     )
 
 
+def perturb_runs(
+    trajectory: Trajectory,
+    fraction: float,
+    rotation_deg: tuple[float, float],
+    translation: tuple[float, float],
+    run_length: tuple[int, int] = (2, 4),
+    seed: int = 0,
+) -> tuple[Trajectory, list[Perturbation]]:
+    """Like ``perturb_trajectory``, but the wrong frames come in contiguous runs (trajectory
+    order) of ``run_length`` (low, high; inclusive) frames, so that a wrong frame's neighbours
+    (the references of relative evidence) are often wrong too. Each wrong frame has its own
+    rotation (random axis) and translation (random direction), drawn uniformly from the ranges;
+    runs never touch (a correct frame between two runs). ``round(fraction * n)`` frames in all
+    (fewer only when the runs cannot be placed)."""
+    rng = np.random.default_rng(seed)
+    n = len(trajectory)
+    k = int(round(fraction * n))
+    chosen: set[int] = set()
+    for _ in range(100 * max(1, n)):
+        left = k - len(chosen)
+        if left <= 0:
+            break
+        length = min(int(rng.integers(run_length[0], run_length[1] + 1)), left)
+        start = int(rng.integers(0, max(1, n - length + 1)))
+        span = range(start, min(n, start + length))
+        # a run neither overlaps nor touches another one
+        if any(i in chosen for i in range(max(0, start - 1), min(n, start + length + 1))):
+            continue
+        chosen.update(span)
+    frames: list[Frame] = []
+    injected: list[Perturbation] = []
+    for i, f in enumerate(trajectory.frames):
+        if i in chosen:
+            r = float(rng.uniform(*rotation_deg))
+            t = float(rng.uniform(*translation))
+            frames.append(f.with_pose(perturb_pose(f.world_from_cam, r, t, rng)))
+            injected.append(Perturbation(f.frame_id, r, t))
+        else:
+            frames.append(f)
+    return (
+        Trajectory(tuple(frames), trajectory.source, trajectory.format, dict(trajectory.metadata)),
+        injected,
+    )
+
+
 def roc_auc(scores: np.ndarray, labels: np.ndarray) -> float:
     """ROC-AUC of ``scores`` (higher = more likely positive) against boolean ``labels``.
 

@@ -33,3 +33,28 @@ def test_perturb_trajectory_fraction_and_labels():
     for a, b in zip(traj, new, strict=False):
         dt, dr = pose_difference(a.world_from_cam, b.world_from_cam)
         assert (dt > 0) == (a.frame_id in ids)
+
+
+def test_perturb_runs_places_contiguous_runs_of_wrong_frames():
+    from pgt_eval import perturb_runs
+
+    cam = Camera.pinhole(64, 48, 50, 50, 31.5, 23.5)
+    traj = Trajectory(tuple(Frame(str(i), cam, np.eye(4)) for i in range(30)))
+    new, injected = perturb_runs(traj, 0.4, (0.5, 4), (0.01, 0.08), run_length=(2, 4), seed=1)
+    assert len(injected) == 12
+    wrong = [i for i, (a, b) in enumerate(zip(traj, new, strict=True))
+             if pose_difference(a.world_from_cam, b.world_from_cam)[1] > 0]
+    assert wrong == sorted(int(p.frame_id) for p in injected)
+    runs, cur = [], [wrong[0]]
+    for i in wrong[1:]:
+        if i == cur[-1] + 1:
+            cur.append(i)
+        else:
+            runs.append(cur)
+            cur = [i]
+    runs.append(cur)
+    # every wrong frame has a wrong neighbour except where the count left a shorter last run
+    assert sum(len(r) >= 2 for r in runs) >= len(runs) - 1
+    assert all(len(r) <= 4 for r in runs)
+    for p in injected:
+        assert 0.5 <= p.rotation_deg <= 4 and 0.01 <= p.translation <= 0.08
