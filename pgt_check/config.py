@@ -351,6 +351,9 @@ class RunConfig:
         _check_range("limit", self.limit, 1)
         _check_range("report_details", self.report_details, 0)
         _check_scheduler(self.scheduler)
+        if not isinstance(self.out, str) or not self.out.strip():
+            raise ValueError(f"out: expected an output directory, got {self.out!r} (an empty "
+                             "path would write into the current directory)")
         if self.resume and self.overwrite:
             raise ValueError("resume and overwrite exclude each other: pick one")
 

@@ -139,6 +139,22 @@ def from_dict(cls: type, data: dict[str, Any]):
         raise ConfigError(f"{cls.__name__}: {err}") from err
 
 
+class DuplicateKeyError(ValueError):
+    """A JSON object that names one key twice (``json.loads`` would keep the last silently)."""
+
+
+def _unique_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """``object_pairs_hook`` of config JSON: a key given twice in one object is an error, as
+    TOML has it (``{"gate": {"max_fail_fraction": 0.0, "max_fail_fraction": 1.0}}`` must not
+    read as 1.0)."""
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise DuplicateKeyError(f"duplicate key {key!r}")
+        out[key] = value
+    return out
+
+
 def load_config_file(path: str | Path) -> dict[str, Any]:
     """Read a JSON or TOML config file into a dict (validated later by ``from_dict``)."""
     path = Path(path)
@@ -151,11 +167,14 @@ def load_config_file(path: str | Path) -> dict[str, Any]:
 
             data = tomllib.loads(text)
         else:
-            data = json.loads(text)
+            data = json.loads(text, object_pairs_hook=_unique_keys)
     except InputError as err:  # a special or oversized file, bytes that are not UTF-8
         raise ConfigError(f"cannot read config: {err}") from err
     except RecursionError:
         raise ConfigError(f"{path}: cannot parse config: nested too deeply") from None
+    except DuplicateKeyError as err:
+        raise ConfigError(f"{path}: cannot parse config: {err} (each key once per table)"
+                          ) from None
     except ValueError as err:  # JSON / TOML syntax
         raise ConfigError(f"{path}: cannot parse config: {err}") from err
     if not isinstance(data, dict):

@@ -128,13 +128,43 @@ def load_model(model_dir: Path) -> tuple[Any, dict[int, Camera]]:
     cameras_file = next(
         model_dir / f"cameras.{e}" for e in ("txt", "bin") if (model_dir / f"cameras.{e}").is_file()
     )
+    lines = _camera_lines(cameras_file) if cameras_file.suffix == ".txt" else {}
     cameras: dict[int, Camera] = {}
     for camera_id, cam in reconstruction.cameras.items():
         model = cam.model.name if hasattr(cam.model, "name") else str(cam.model)
+        line = lines.get(camera_id)
+        if not (0 < cam.width <= MAX_CAMERA_SIDE and 0 < cam.height <= MAX_CAMERA_SIDE):
+            # pycolmap reads a negative size of cameras.txt as a huge unsigned number
+            raise FormatError(cameras_file, line, f"camera {camera_id}: expected a positive "
+                              f"image size of at most {MAX_CAMERA_SIDE} px; got "
+                              f"{_signed(cam.width)}x{_signed(cam.height)}")
         cameras[camera_id] = camera_from_colmap(
-            cameras_file, None, model, cam.width, cam.height, [float(p) for p in cam.params]
+            cameras_file, line, model, cam.width, cam.height, [float(p) for p in cam.params]
         )
     return reconstruction, cameras
+
+
+#: largest image side a COLMAP camera may have (px)
+MAX_CAMERA_SIDE = 1 << 20
+
+
+def _signed(value: int) -> int:
+    """A size pycolmap read as unsigned 64 bits, as the signed number the file had."""
+    return value - (1 << 64) if value >= 1 << 63 else value
+
+
+def _camera_lines(path: Path) -> dict[int, int]:
+    """Camera id -> its line number in a cameras.txt (to name the line of a bad camera)."""
+    out: dict[int, int] = {}
+    with open(path, "rb") as fh:  # a regular file of bounded size (``_check_model_files``)
+        for i, row in enumerate(fh, start=1):
+            head = row.split(None, 1)
+            if head and not head[0].startswith(b"#"):
+                try:
+                    out.setdefault(int(head[0]), i)
+                except ValueError:
+                    continue
+    return out
 
 
 def cameras_by_image_name(path: str | Path) -> tuple[dict[str, Camera], list[Camera]]:

@@ -143,3 +143,16 @@ def test_project_root_is_descended_into(tmp_path: Path, random_rigid) -> None:
     (tmp_path / "empty" / "sparse" / "0").mkdir(parents=True)
     with pytest.raises(FormatError, match="sparse/0"):
         read_colmap(tmp_path / "empty")
+
+
+@pytest.mark.parametrize("size", ["-640 480", "640 0", "0 480", "640 -1"])
+def test_camera_size_not_positive_names_file_and_line(tmp_path: Path, size: str) -> None:
+    """A negative or zero width / height is a FormatError naming cameras.txt and the line
+    (pycolmap reads a negative size as a huge unsigned one: every frame was UNVERIFIABLE)."""
+    model = tmp_path / "m"
+    model.mkdir()
+    (model / "cameras.txt").write_text(f"# Camera list\n1 PINHOLE {size} 500 500 320 240\n")
+    (model / "images.txt").write_text("1 1 0 0 0 0 0 0 1 a.png\n\n")
+    (model / "points3D.txt").write_text("")
+    with pytest.raises(FormatError, match=r"cameras\.txt:2: camera 1: expected a positive"):
+        read_colmap(model)
