@@ -42,6 +42,34 @@ def _path_success_attr(path: str, attr: str) -> Callable[[FrameMeasurement], Any
     return get
 
 
+#: the headline columns (frames.csv, the report table and its sorting, JUnit, the summary's
+#: median): name -> how to read it from a named path of the record. The measurement fills them
+#: from ``chosen`` (the path with more inliers); the verdict stage fills them from the path the
+#: verdict rests on (``headline_values``), so a frame never shows another path's error
+_HEADLINE: dict[str, Callable[[str], Callable[[FrameMeasurement], Any]]] = {
+    "corner_error_px": lambda p: _path_attr(p, "corner_error_px"),
+    "n_matches": lambda p: _path_attr(p, "n_matches", 0),
+    "n_inliers": lambda p: _path_attr(p, "n_inliers", 0),
+    "inlier_ratio": lambda p: _path_attr(p, "inlier_ratio", 0.0),
+    "homography_reason": lambda p: _path_attr(p, "reason", ""),
+    "shift_dx_px": lambda p: _path_success_attr(p, "shift_dx_px"),
+    "shift_dy_px": lambda p: _path_success_attr(p, "shift_dy_px"),
+    "zoom": lambda p: _path_success_attr(p, "zoom"),
+    "n_kpts_render": lambda p: _path_attr(p, "n_kpts_render"),
+    "n_kpts_photo": lambda p: _path_attr(p, "n_kpts_photo"),
+}
+
+#: names of the headline columns (``_HEADLINE``)
+HEADLINE_COLUMNS: tuple[str, ...] = tuple(_HEADLINE)
+
+
+def headline_values(m: FrameMeasurement, path: str) -> dict[str, Any]:
+    """The headline columns read from the record's path ``path`` (raw, enhanced, edges)."""
+    if path not in ("raw", "enhanced", "edges"):
+        raise ValueError(f"unknown path {path!r} (raw, enhanced, edges)")
+    return {name: get(path)(m) for name, get in _HEADLINE.items()}
+
+
 def _timing(attr: str) -> Callable[[FrameMeasurement], Any]:
     return lambda m: getattr(m.timings, attr)
 
@@ -73,36 +101,37 @@ MEASUREMENT_COLUMNS: tuple[Column, ...] = (
     Column("error_detail", "details of the measurement error", lambda m: m.error_detail, csv=False),
     Column(
         "corner_error_px",
-        "corner error of the deciding path, photo px",
-        _path_attr("chosen", "corner_error_px"),
+        "corner error of the path the verdict rests on (decided_by; the one with more inliers "
+        "before judging), as the verdict compared it, photo px",
+        _HEADLINE["corner_error_px"]("chosen"),
     ),
-    Column("n_matches", "matches of the deciding path", _path_attr("chosen", "n_matches", 0)),
-    Column("n_inliers", "homography inliers of the deciding path", _path_attr("chosen", "n_inliers", 0)),
+    Column("n_matches", "matches of the deciding path", _HEADLINE["n_matches"]("chosen")),
+    Column("n_inliers", "homography inliers of the deciding path", _HEADLINE["n_inliers"]("chosen")),
     Column(
-        "inlier_ratio", "inliers / matches of the deciding path", _path_attr("chosen", "inlier_ratio", 0.0)
+        "inlier_ratio", "inliers / matches of the deciding path", _HEADLINE["inlier_ratio"]("chosen")
     ),
     Column(
         "homography_reason",
         "why the deciding path has no homography",
-        _path_attr("chosen", "reason", ""),
+        _HEADLINE["homography_reason"]("chosen"),
         csv=False,
     ),
     Column("coverage", "share of the render covered by the mesh", lambda m: m.coverage),
     Column(
         "shift_dx_px",
         "mean corner shift x of the deciding path, px",
-        _path_success_attr("chosen", "shift_dx_px"),
+        _HEADLINE["shift_dx_px"]("chosen"),
     ),
     Column(
         "shift_dy_px",
         "mean corner shift y of the deciding path, px",
-        _path_success_attr("chosen", "shift_dy_px"),
+        _HEADLINE["shift_dy_px"]("chosen"),
     ),
-    Column("zoom", "warped / original diagonal of the deciding path", _path_success_attr("chosen", "zoom")),
+    Column("zoom", "warped / original diagonal of the deciding path", _HEADLINE["zoom"]("chosen")),
     Column(
-        "n_kpts_render", "keypoints in the render (deciding path)", _path_attr("chosen", "n_kpts_render")
+        "n_kpts_render", "keypoints in the render (deciding path)", _HEADLINE["n_kpts_render"]("chosen")
     ),
-    Column("n_kpts_photo", "keypoints in the photo (deciding path)", _path_attr("chosen", "n_kpts_photo")),
+    Column("n_kpts_photo", "keypoints in the photo (deciding path)", _HEADLINE["n_kpts_photo"]("chosen")),
     Column("width", "photo width, px", lambda m: m.width),
     Column("height", "photo height, px", lambda m: m.height),
     Column("match_width", "width matched at, px", lambda m: m.match_width),

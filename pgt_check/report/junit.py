@@ -37,9 +37,12 @@ def _seconds(value: Any) -> str:
 
 
 def _frame_text(rec: Mapping[str, Any], path: str) -> str:
+    """The frame's line: the error, inliers and matches are those of the path its verdict
+    rests on (``decided_by``), named where known."""
+    by = f" ({rec['decided_by']} path)" if rec.get("decided_by") else ""
     return (
         f"frame {rec.get('frame_id')} ({path}): corner error "
-        f"{_fmt(rec.get('corner_error_px'))} px, threshold {_fmt(rec.get('threshold_px'))} px, "
+        f"{_fmt(rec.get('corner_error_px'))} px{by}, threshold {_fmt(rec.get('threshold_px'))} px, "
         f"{_fmt(rec.get('n_inliers'), 'd')} inliers of {_fmt(rec.get('n_matches'), 'd')} matches, "
         f"coverage {_fmt(rec.get('coverage'), '.3f')}"
     ) + _correction_text(rec)

@@ -45,11 +45,17 @@ def disagreement(row: Mapping[str, Any]) -> bool | None:
     return (raw > thr) != (enh > thr)
 
 
+def _decided(row: Mapping[str, Any]) -> Any:
+    """The path the row's verdict rests on (``decided_by``; ``verdict_path`` in rows judged
+    before it was recorded)."""
+    return row["decided_by"] if "decided_by" in row else row.get("verdict_path")
+
+
 def path_comparison(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     """``{"raw": stats, "enhanced": stats, "frames_both": n, "frames_disagree": n}``.
 
     stats: ``frames_ran`` (the path matched), ``frames_with_homography``, ``frames_decided``
-    (``verdict_path``), ``frames_above_threshold``, ``median_matches``, ``median_inliers``,
+    (``decided_by``: the path the verdict rests on), ``frames_above_threshold``, ``median_matches``, ``median_inliers``,
     ``median_inlier_ratio`` (over frames where the path ran) and ``median_corner_error_px``
     (over frames where it had a homography).
     """
@@ -64,7 +70,7 @@ def path_comparison(rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
         out[p] = {
             "frames_ran": len(ran),
             "frames_with_homography": len(errs),
-            "frames_decided": sum(1 for r in rows if r.get("verdict_path") == p),
+            "frames_decided": sum(1 for r in rows if _decided(r) == p),
             "frames_above_threshold": above,
             "median_matches": _median([float(r[f"n_matches_{p}"]) for r in ran]),
             "median_inliers": _median(

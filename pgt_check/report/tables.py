@@ -36,6 +36,7 @@ OPTIONAL_COLUMNS: tuple[Col, ...] = (
     ("evidence", "evidence", "str", None, False),
     ("drift_px", "drift [px]", "num", 2, False),
     ("decided_by", "decided by", "str", None, False),
+    ("corner_error_px_edges", "err edges [px]", "num", 2, False),
 )
 #: shown only when the enhanced path ran on some frame; ``disagree`` is computed when absent
 ENHANCED_COLUMNS: tuple[Col, ...] = (

@@ -96,6 +96,9 @@ class Judgement:
     enhanced_verdict: str
     #: the path the verdict rests on (raw, enhanced, edges; "" when none ran)
     decided_by: str = ""
+    #: that path's corner error as the verdict compared it (the camera's calibration error
+    #: removed where the run removes it), photo px; None without a deciding path or error
+    error_px: float | None = None
 
     @property
     def disagree(self) -> bool | None:
@@ -155,19 +158,30 @@ def own_outcome(
     return Verdict.UNVERIFIABLE, "no_absolute_path", ""
 
 
-def _error_ratio(m: FrameMeasurement, name: str, config: VerdictConfig, shared: Any) -> float:
-    """The named path's corner error (calibration removed where asked) over the threshold;
-    NaN when the path has none."""
-    p = getattr(m, name, None) if name else None
+def path_error_px(
+    m: FrameMeasurement, name: str, config: VerdictConfig, shared: Any = None
+) -> float | None:
+    """The named path's corner error as the verdict compares it (the camera's calibration
+    error removed where the run removes it), photo px; None when the path has none."""
+    p = getattr(m, name, None) if name in ("raw", "enhanced", "edges") else None
     if p is None or p.corner_error_px is None:
-        return float("nan")
+        return None
     err = p.corner_error_px
     h = _calibrated(m, p, config, shared)
     if h is not None:
         from pgt_check.geometry.homography import corner_error
 
         err = corner_error(h, m.width, m.height)
-    return float(err) / config.threshold_for(m.width, m.height)
+    return float(err)
+
+
+def _error_ratio(m: FrameMeasurement, name: str, config: VerdictConfig, shared: Any) -> float:
+    """The named path's corner error (calibration removed where asked) over the threshold;
+    NaN when the path has none."""
+    err = path_error_px(m, name, config, shared)
+    if err is None:
+        return float("nan")
+    return err / config.threshold_for(m.width, m.height)
 
 
 def own_outcomes(
@@ -234,10 +248,11 @@ def judge(
     (verdict, reason, evidence, path), final = _paths_decision(
         m, config, shared, out, ref_off, (base, why)
     )
+    err = path_error_px(m, path, config, shared)
     if final or verdict is not Verdict.PASS:
-        return Judgement(verdict, reason, evidence, raw_v, enh_v, path)
+        return Judgement(verdict, reason, evidence, raw_v, enh_v, path, err)
     run_level = _run_level(m.frame_id, shared, evidence, _absolute_pass(out), m.camera_id)
-    return Judgement(*run_level, raw_v, enh_v, path)
+    return Judgement(*run_level, raw_v, enh_v, path, err)
 
 
 def _paths_decision(

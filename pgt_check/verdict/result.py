@@ -9,6 +9,7 @@ from dataclasses import dataclass
 from functools import cached_property
 from typing import Any
 
+from pgt_check.measure.columns import headline_values
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.verdict.decide import Judgement
 from pgt_check.verdict.frame_bounds import FrameBound
@@ -55,9 +56,15 @@ class FrameResult:
 
     def row(self) -> dict[str, Any]:
         """The frame's frames.csv row (measurement columns + ``VERDICT_COLUMNS`` + the accuracy
-        columns) and ``camera_id`` (not a frames.csv column: calibrated_sensors.txt uses it)."""
+        columns; the headline columns, ``measure.columns.HEADLINE_COLUMNS``, read from the path
+        the verdict rests on) and ``camera_id`` (not a frames.csv column: calibrated_sensors.txt uses it)."""
         m, j = self.measurement, self.judgement
         row = m.row()
+        if j.decided_by:
+            # the headline columns are the deciding path's, its error as the verdict compared
+            # it: a frame decided by the edge path never shows the enhanced path's error
+            row.update(headline_values(m, j.decided_by))
+            row["corner_error_px"] = j.error_px
         row.update(
             verdict=j.verdict.value,
             reason=j.reason,
