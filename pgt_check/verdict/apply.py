@@ -19,6 +19,7 @@ from pgt_check.verdict.decide import (
     vouched_reference,
 )
 from pgt_check.verdict.frame_bounds import (
+    agreeing_paths,
     frame_bounds,
     trusted_calibrations,
     world_sensitivity,
@@ -57,16 +58,22 @@ def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> Ru
     # second pass: a frame judged through a reference the run does not pass is judged
     # through another tried reference that it passes, where one aligned (``vouched_reference``)
     first = {m.frame_id: j.verdict for m, j in zip(ms, judged, strict=True)}
-    # the pose accuracy each frame's absolute evidence supports (``verdict.frame_bounds``), after
-    # taking out the calibration error the verdicts take out
-    cals = (shared.removed_calibrations if shared is not None
-            else trusted_calibrations(config.run_checks, [m.camera_id for m in ms]))
-    bounds = frame_bounds(ms, cals)
-    frames = []
-    for m, j in zip(ms, judged, strict=True):
+    final = []
+    for m, j, out in zip(ms, judged, outs, strict=True):
         m2 = vouched_reference(m, j, first, v)
         if m2 is not None:
-            m, j = m2, judge(m2, v, shared, own, path_outcomes(m2, v, shared))
+            out = path_outcomes(m2, v, shared)
+            m, j = m2, judge(m2, v, shared, own, out)
+        final.append((m, j, out))
+    # the pose accuracy each frame's absolute evidence supports (``verdict.frame_bounds``), after
+    # taking out the calibration error the verdicts take out, from the paths that agree with
+    # its verdict (a path the verdict overruled measures its own error, not the pose's)
+    cals = (shared.removed_calibrations if shared is not None
+            else trusted_calibrations(config.run_checks, [m.camera_id for m in ms]))
+    agree = {m.frame_id: agreeing_paths(out, j.decided_by) for m, j, out in final}
+    bounds = frame_bounds(ms, cals, agree)
+    frames = []
+    for m, j, _ in final:
         drift = None if shared is None else shared.drift_px.get(m.frame_id)
         frames.append(FrameResult(m, j, v.threshold_for(m.width, m.height), drift,
                                   bounds[m.frame_id]))

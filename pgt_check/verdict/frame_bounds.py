@@ -12,7 +12,7 @@ error it shares with its references. The run-level statement is ``verdict.accura
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -49,7 +49,8 @@ ACCURACY_COLUMNS: dict[str, str] = {
     "acc_pts_px_per_unit": "the same per scene unit of camera translation, px",
     "acc_depth": "median depth of the fit's points, scene units",
     "acc_points": "2D-3D points of the fit (inliers / all)",
-    "acc_evidence": "what the bound rests on: absolute sources (raw, enhanced, edges), "
+    "acc_evidence": "what the bound rests on: the absolute sources (raw, enhanced, edges) of "
+    "the paths that agree with the verdict, "
     "'+calibration removed' when a calibration error was taken out first; '' = no bound",
     "acc_reason": "why the frame has no bound ('' when it has one)",
 }
@@ -58,20 +59,38 @@ _MAX_POINTS = 400  # per frame (evenly spaced): the fit's cost stays a few ms
 
 
 
+def source_path(source: str) -> str:
+    """The path an evidence source comes from: raw, edges, or enhanced (the source is then the
+    enhancer's name, e.g. mariner)."""
+    return source if source in ("raw", "edges") else "enhanced"
+
+
 def bound_points(
-    evidence: Any, features_only: bool = True
+    evidence: Any, features_only: bool = True, paths: Collection[str] | None = None
 ) -> tuple[np.ndarray, np.ndarray, tuple[str, ...]]:
     """(pts2d (N, 2), pts_cam (N, 3), sources) of an ``AbsoluteEvidence`` that the per-frame
     bound is fitted to: the feature paths' points alone when they have
     ``FEATURE_ONLY_MIN_POINTS`` (and ``features_only``), else every point (also when the split
-    is unknown)."""
+    is unknown). ``paths``: only the sources of these paths (raw, enhanced, edges; None: all;
+    with the split unknown, all points only when every source is among them, else none)."""
     split = evidence.by_source()
+    if paths is not None:
+        if not split:
+            if all(source_path(s) in paths for s in evidence.sources):
+                return bound_points(evidence, features_only)
+            return np.zeros((0, 2)), np.zeros((0, 3)), ()
+        split = {k: v for k, v in split.items() if source_path(k) in paths}
+        if not split:
+            return np.zeros((0, 2)), np.zeros((0, 3)), ()
     feats = {k: v for k, v in split.items() if k != "edges"}
     if features_only and split and len(feats) < len(split):
         n = sum(len(v[0]) for v in feats.values())
         if n >= FEATURE_ONLY_MIN_POINTS:
             return (np.concatenate([v[0] for v in feats.values()]),
                     np.concatenate([v[1] for v in feats.values()]), tuple(feats))
+    if paths is not None:
+        return (np.concatenate([v[0] for v in split.values()]),
+                np.concatenate([v[1] for v in split.values()]), tuple(split))
     p2 = np.asarray(evidence.pts2d, np.float64).reshape(-1, 2)
     pc = np.asarray(evidence.pts_cam, np.float64).reshape(-1, 3)
     return p2, pc, tuple(evidence.sources)
@@ -104,10 +123,15 @@ class FrameBound:
 def frame_bounds(
     measurements: Sequence[FrameMeasurement],
     calibrations: Mapping[str, CameraCalibration] | None = None,
+    paths: Mapping[str, Collection[str] | None] | None = None,
 ) -> dict[str, FrameBound]:
     """frame id -> the ``FrameBound`` of every measurement. ``calibrations``: camera id -> a
     calibration error to take out of the evidence first (``--remove-calibration``,
-    ``--calibration-from``)."""
+    ``--calibration-from``). ``paths``: frame id -> the paths whose evidence the bound may
+    rest on (``agreeing_paths``: those that agree with the frame's verdict; missing or None:
+    all): a bound fitted to the points of a path the verdict overruled measures that path's
+    error, not the pose's (issue #38: PASS frames decided by the edge path at 5-12 px were
+    stated to within 13 deg by the enhanced path's 24-42 px)."""
     out: dict[str, FrameBound] = {}
     for i, m in enumerate(measurements):
         out[m.frame_id] = FrameBound()
@@ -115,14 +139,36 @@ def frame_bounds(
             continue
         k = camera_matrix(m.intrinsics)
         cal = (calibrations or {}).get(m.camera_id)
-        fa, sources = _fit(m, i, k, cal, features_only=True)
-        if not fa.success and sources != tuple(m.evidence.sources):
+        keep = (paths or {}).get(m.frame_id)
+        fa, sources = _fit(m, i, k, cal, True, keep)
+        if not fa.success and sources != _all_sources(m.evidence, keep):
             # the feature points alone give no bound: every point (edges included)
-            fa, sources = _fit(m, i, k, cal, features_only=False)
+            fa, sources = _fit(m, i, k, cal, False, keep)
+        if not sources:
+            out[m.frame_id] = FrameBound(reason="no_agreeing_absolute_evidence")
+            continue
         evidence = "+".join(sources) + ("+calibration removed" if cal is not None else "")
         out[m.frame_id] = FrameBound(fa, evidence if fa.success else "", fa.reason if not
                                      fa.success else "")
     return out
+
+
+def _all_sources(evidence: Any, paths: Collection[str] | None) -> tuple[str, ...]:
+    """The evidence's sources among ``paths`` (None: all)."""
+    return tuple(s for s in evidence.sources if paths is None or source_path(s) in paths)
+
+
+def agreeing_paths(
+    outcomes: Mapping[str, Any], decided_by: str
+) -> tuple[str, ...] | None:
+    """The paths whose evidence a frame's bound rests on: those whose own outcome
+    (``verdict.decide.path_outcomes``) is the deciding path's PASS or FAIL; None (every
+    path) when no path decided or it is not verifiable."""
+    o = outcomes.get(decided_by) if decided_by else None
+    if o is None or o[0].value not in ("PASS", "FAIL"):
+        return None
+    return tuple(n for n in ("raw", "enhanced", "edges")
+                 if outcomes.get(n) is not None and outcomes[n][0] is o[0])
 
 
 def frame_accuracy_columns(
@@ -135,11 +181,13 @@ def frame_accuracy_columns(
 
 def _fit(
     m: FrameMeasurement, i: int, k: np.ndarray, cal: CameraCalibration | None,
-    features_only: bool,
+    features_only: bool, paths: Collection[str] | None = None,
 ) -> tuple[FrameAccuracy, tuple[str, ...]]:
     """The frame's bound from ``bound_points`` (at most ``_MAX_POINTS``, calibration taken
-    out when given) and the sources it rests on."""
-    p2, pc, sources = bound_points(m.evidence, features_only)
+    out when given) and the sources it rests on (() and no fit when none is left)."""
+    p2, pc, sources = bound_points(m.evidence, features_only, paths)
+    if not sources:
+        return FrameAccuracy(False, "too_few_points"), ()
     if len(p2) > _MAX_POINTS:
         keep = np.linspace(0, len(p2) - 1, _MAX_POINTS).round().astype(int)
         p2, pc = p2[keep], pc[keep]

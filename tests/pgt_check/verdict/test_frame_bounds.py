@@ -39,3 +39,96 @@ def test_bound_rests_on_feature_points_when_they_suffice():
                            tuple(map(tuple, np.r_[raw2d[:10], edge2d])),
                            tuple(map(tuple, np.r_[pts[:10], pts])), (10, n))
     assert 10 < FEATURE_ONLY_MIN_POINTS and bound_points(few)[2] == ("raw", "edges")
+
+
+def test_a_pass_is_bounded_by_the_evidence_it_rests_on():
+    """Issue #38: on a textureless scan the edge path decided PASS (a few px) while the
+    enhanced path (MaRINeR, absolute) had more inliers and 24-42 px of error; the bound rested
+    on the feature points (40 or more: the enhanced path's) and stated the PASS frames to
+    within 13 deg against a single-frame limit of 2.6 deg. The bound now rests on the paths
+    that agree with the verdict: the PASS frame's bound is the edge path's, within the
+    single-frame limit; the frame judged the other way (the enhanced path deciding a FAIL)
+    keeps the large one."""
+    from dataclasses import replace
+
+    from pgt_check.config import RunConfig
+    from pgt_check.enhance.base import Evidence
+    from pgt_check.measure import FrameMeasurement, PathMeasurement
+    from pgt_check.measure.record import AbsoluteEvidence
+    from pgt_check.verdict import judge_run
+    from pgt_check.verdict.accuracy import run_accuracy
+
+    rng = np.random.default_rng(1)
+    w, h, f = 320, 240, 288.0
+    k = np.array([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]])
+
+    def project(x: np.ndarray) -> np.ndarray:
+        return (x @ k.T)[:, :2] / x[:, 2:3]
+
+    def rot(deg: float, axis) -> np.ndarray:
+        from pgt_check.geometry.transforms import axis_angle_to_rotmat
+
+        return axis_angle_to_rotmat(np.asarray(axis, float), deg)
+
+    def frame(fid: str, edges_err: float, enh_err: float, enh_inliers: int) -> FrameMeasurement:
+        n = 150
+        pts = np.c_[rng.uniform(-1.5, 1.5, (n, 2)), rng.uniform(3.0, 5.0, n)]
+        edge2d = project(pts) + rng.normal(0, 0.5, (n, 2))  # the pose is right
+        wrong = pts @ rot(6.0, rng.normal(size=3)).T  # the enhanced matches: 6 deg off
+        enh2d = project(wrong) + rng.normal(0, 0.5, (n, 2))
+        ev = AbsoluteEvidence(("mariner", "edges"), tuple(map(tuple, np.r_[enh2d, edge2d])),
+                              tuple(map(tuple, np.r_[pts, pts])), (n, n))
+
+        def path(kind, err, inl):
+            return PathMeasurement(
+                kind=kind, method=kind, evidence=Evidence.ABSOLUTE, n_kpts_render=500,
+                n_kpts_photo=500, n_matches=2 * inl, n_inliers=inl, inlier_ratio=0.5,
+                reason="", photo_from_render=tuple(map(tuple, np.eye(3))),
+                corner_error_px=err)
+
+        return FrameMeasurement(
+            frame_id=fid, timestamp=0, image_path=f"{fid}.png", width=w, height=h,
+            center=(0.0, 0.0, 0.0), coverage=0.8, camera_id="cam0",
+            world_from_cam=tuple(map(tuple, np.eye(4))),
+            intrinsics=(f, f, (w - 1) / 2, (h - 1) / 2),
+            enhanced=path("enhanced", enh_err, enh_inliers), edges=path("edges", edges_err, 900),
+            evidence=ev, verdict_path="enhanced",
+        )
+
+    cfg = RunConfig()
+    cfg = replace(cfg, run_checks=replace(cfg.run_checks, enabled=False))
+    # PASS by the edges (clear, 2 px), the enhanced path's weak 30 px FAIL overruled
+    passing = frame("p", 2.0, 30.0, 30)
+    # FAIL by the enhanced path (confident), the edge path's PASS does not count
+    failing = frame("f", 2.0, 30.0, 150)
+    res = judge_run([passing, failing], cfg)
+    p, fl = res.frames
+    assert (p.verdict, p.judgement.decided_by) == ("PASS", "edges")
+    assert (fl.verdict, fl.judgement.decided_by) == ("FAIL", "enhanced")
+    assert p.bound.evidence == "edges" and fl.bound.evidence == "mariner"
+    limit = run_accuracy(res, None, cfg, p.threshold_px).limits.frame_deg
+    assert p.bound.accuracy.rotation_bound_deg < min(1.0, limit)
+    assert fl.bound.accuracy.rotation_deg == pytest.approx(6.0, rel=0.15)
+    # what the bound said before (every absolute source, the features first): the enhanced
+    # path's 6 deg on a PASS
+    from pgt_check.verdict.frame_bounds import frame_bounds
+
+    old = frame_bounds([passing])["p"]
+    assert old.evidence == "mariner" and old.accuracy.rotation_bound_deg > limit
+
+
+def test_a_frame_without_agreeing_absolute_evidence_has_no_bound():
+    """A frame whose verdict rests on paths with no absolute points of their own (a
+    reprojected reference) is not bounded by the points of a path that disagrees."""
+    from pgt_check.measure.record import AbsoluteEvidence
+    from pgt_check.verdict.frame_bounds import agreeing_paths, bound_points
+    from pgt_check.verdict.decide import Verdict
+
+    ev = AbsoluteEvidence(("raw",), ((1.0, 2.0),), ((0.0, 0.0, 1.0),), (1,))
+    assert bound_points(ev, paths=("enhanced",))[2] == ()
+    assert bound_points(ev, paths=("raw", "enhanced"))[2] == ("raw",)
+    outs = {"raw": (Verdict.FAIL, "x"), "enhanced": (Verdict.PASS, ""), "edges": None}
+    assert agreeing_paths(outs, "enhanced") == ("enhanced",)
+    assert agreeing_paths(outs, "raw") == ("raw",)
+    assert agreeing_paths(outs, "") is None
+    assert agreeing_paths({**outs, "raw": (Verdict.UNVERIFIABLE, "y")}, "raw") is None
