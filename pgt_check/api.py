@@ -13,6 +13,12 @@ top-level ``RunConfig`` keys; sections as dicts (``verdict={"threshold_px": 5}``
 ``limit``, ``out``, ``correct={"frames": "none"}``. Without ``out`` the run writes into a new
 temporary folder (``df.attrs["out"]``: frames.csv, report.html, corrected_trajectory.txt ...).
 
+An ``out`` of an earlier call: the frames whose settings and inputs are unchanged are reused and
+every other frame is measured again (the CLI's ``--resume``, the default here): a changed mesh,
+pose, photo or setting never returns the old results. ``overwrite=True`` discards the stored
+measurements and measures every frame again; ``resume=False`` refuses (InputError) an ``out``
+that holds measurements of other settings or inputs, as the CLI does without ``--resume``.
+
 Errors: every input problem raises ``pgt_check.errors.InputError`` with a one-line message that
 names the argument, file or setting: an argument of the wrong type (``config=5``, a
 ``trajectory`` that is neither a path nor a ``Trajectory``), an unknown or mistyped setting
@@ -134,6 +140,8 @@ def check(
         inp["trajectory"] = trajectory.source
     settings = _plain_paths(settings)
     data = merge(merge(base, {"input": inp}), settings)
+    if "resume" not in settings and not data.get("overwrite"):
+        data["resume"] = True  # changed inputs are measured again (module docstring)
     if "out" not in settings and "out" not in base:
         data["out"] = tempfile.mkdtemp(prefix="pgt-check-")
     cfg = RunConfig.from_dict(data)
