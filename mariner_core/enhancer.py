@@ -46,6 +46,10 @@ __all__ = [
 ]
 
 DEFAULT_CHECKPOINT = Path(__file__).resolve().parent / "weights" / "mariner.pt"
+#: default bound on the global matching of a frozen-matcher model: render x reference relu3_3
+#: positions compared. It admits a 640x480 render with a 640x480 reference (3.7e8); the cost
+#: and memory grow with the square of the image area (a 1416x1064 pair is 8.8e9).
+MAX_MATCH_PAIRS = 4.0e8
 FORMAT_VERSION = 1
 
 
@@ -157,8 +161,14 @@ def resize_short_side(x: torch.Tensor, short_side: int) -> torch.Tensor:
 class Enhancer:
     """Inference wrapper around a :class:`Mariner` model (eval mode, no grad, deterministic)."""
 
-    def __init__(self, model: Mariner, device: str | torch.device = "cpu", fp16: bool = False):
+    def __init__(
+        self, model: Mariner | FrozenMariner, device: str | torch.device = "cpu",
+        fp16: bool = False, max_match_pairs: float | None = MAX_MATCH_PAIRS,
+    ):
+        """``max_match_pairs``: refuse inputs whose global matching (frozen-matcher models)
+        compares more render x reference positions than this (None: no bound)."""
         self.device = _resolve_device(device)
+        self.max_match_pairs = max_match_pairs
         if fp16 and self.device.type != "cuda":
             raise ValueError("fp16 autocast is only supported on CUDA devices")
         self.fp16 = fp16
@@ -184,8 +194,25 @@ class Enhancer:
             raise FileNotFoundError(f"MaRINeR checkpoint not found: {p}{hint}")
         return cls(load_checkpoint(p), device=device, fp16=fp16)
 
+    def check_size(self, render_hw: tuple[int, int], reference_hw: tuple[int, int]) -> None:
+        """Raise ValueError (before any work) when a render / reference pair of these sizes
+        exceeds ``max_match_pairs``: the global matching's time and memory grow with the
+        product of the two images' areas."""
+        if self.max_match_pairs is None or not isinstance(self.model, FrozenMariner):
+            return
+        pairs = FrozenMariner.match_pairs(render_hw, reference_hw)
+        if pairs > self.max_match_pairs:
+            (h, w), (hr, wr) = render_hw, reference_hw
+            raise ValueError(
+                f"render {w}x{h} with reference {wr}x{hr} needs {pairs:.2g} patch comparisons, "
+                f"above max_match_pairs={self.max_match_pairs:.2g} (time and memory grow with "
+                "the square of the image area): use enhance_working(render, reference, "
+                "short_side=160), the method's native scale, or pass a larger max_match_pairs"
+            )
+
     @torch.inference_mode()
     def _run(self, x: torch.Tensor, ref: torch.Tensor, iterations: int | None) -> torch.Tensor:
+        self.check_size(tuple(x.shape[-2:]), tuple(ref.shape[-2:]))
         x = x.to(self.device, torch.float32)
         ref = ref.to(self.device, torch.float32)
         if ref.shape[0] == 1 and x.shape[0] > 1:
@@ -203,7 +230,8 @@ class Enhancer:
         """Enhance at the given size; returns the render's type, layout and size, in [0, 1].
 
         The reference may differ in size (>= ``cfg.min_reference_size`` px per side); a single
-        reference is broadcast over a batch of renders.
+        reference is broadcast over a batch of renders. Sizes whose matching exceeds
+        ``max_match_pairs`` raise ValueError naming :meth:`enhance_working`.
         """
         x, kind, batched = _to_tensor(render, "render")
         ref, _, _ = _to_tensor(reference, "reference")

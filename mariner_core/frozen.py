@@ -52,6 +52,8 @@ IMAGENET_STD = (0.229, 0.224, 0.225)
 PREPARED_KEYS = ("render", "warped", "score", "colour")
 #: relu3_3 is at 1/4 resolution: patches of 3x3 features cover 12x12 pixels
 STRIDE = 4
+#: initial gate logit of a gated decoder (sigmoid = 0.12)
+GATE_BIAS = -2.0
 
 
 @dataclass(frozen=True)
@@ -68,6 +70,9 @@ class FrozenMarinerConfig:
         iterations: kept for API compatibility with ``Mariner`` (the model runs once).
         min_reference_size: smallest reference side in pixels.
         max_match_positions: render x reference relu3_3 positions compared per chunk (memory).
+        gated: the decoder also predicts a per-pixel confidence ``g`` in (0, 1) and the output is
+            ``base + g * correction``: where it is unsure (e.g. on a scene unlike its training
+            data) the output stays at the matching-only base. False for the older weights.
     """
 
     architecture: str = ARCHITECTURE
@@ -79,6 +84,7 @@ class FrozenMarinerConfig:
     iterations: int = 1
     min_reference_size: int = 32
     max_match_positions: int = 32_000_000
+    gated: bool = False
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "blocks", tuple(int(b) for b in self.blocks))
@@ -225,9 +231,12 @@ class FrozenMariner(nn.Module):
         self.dec2 = _stage(4 * c, 2 * c, b[1])
         self.up2 = nn.Conv2d(2 * c, c, 1)
         self.dec1 = _stage(2 * c, c, b[0])
-        self.head = nn.Conv2d(c, 3, 3, padding=1)
+        self.head = nn.Conv2d(c, 4 if self.cfg.gated else 3, 3, padding=1)
         nn.init.zeros_(self.head.weight)
         nn.init.zeros_(self.head.bias)
+        if self.cfg.gated:  # start at the base, with a small confidence: corrections are earned
+            with torch.no_grad():
+                self.head.bias[3] = GATE_BIAS
 
     @classmethod
     def from_pretrained(cls, path: str) -> FrozenMariner:
@@ -253,6 +262,15 @@ class FrozenMariner(nn.Module):
         super().train(mode)
         self.vgg.eval()
         return self
+
+    @staticmethod
+    def match_pairs(render_hw: tuple[int, int], reference_hw: tuple[int, int]) -> float:
+        """relu3_3 positions compared by the global matching of a render / reference pair of
+        these (H, W) sizes: its time and memory are proportional to this."""
+        def positions(hw: tuple[int, int]) -> float:
+            return float(-(-int(hw[0]) // STRIDE)) * float(-(-int(hw[1]) // STRIDE))
+
+        return positions(render_hw) * positions(reference_hw)
 
     @torch.no_grad()
     def match(
@@ -367,8 +385,8 @@ class FrozenMariner(nn.Module):
         warped = prep["warped"].unflatten(1, (k, 3))
         return (warped * w.unsqueeze(2)).sum(1)
 
-    def fuse(self, prep: dict[str, torch.Tensor]) -> torch.Tensor:
-        """Prepared inputs (any H, W that are multiples of 4) -> (N, 3, H, W) unclamped."""
+    def _decode(self, prep: dict[str, torch.Tensor]) -> tuple[torch.Tensor, torch.Tensor]:
+        """(base (N, 3, H, W), head output (N, 3 or 4, H, W)) of prepared inputs."""
         base = self.base(prep)
         x = torch.cat([prep["render"], prep["warped"], prep["score"], prep["colour"], base], 1)
         h, w = x.shape[-2:]
@@ -378,7 +396,21 @@ class FrozenMariner(nn.Module):
         e3 = self.enc3(F.avg_pool2d(e2, 2))
         d2 = self.dec2(torch.cat([e2, F.interpolate(self.up3(e3), scale_factor=2.0)], 1))
         d1 = self.dec1(torch.cat([e1, F.interpolate(self.up2(d2), scale_factor=2.0)], 1))
-        return (base + self.head(d1)[..., :h, :w])
+        return base, self.head(d1)[..., :h, :w]
+
+    def fuse(self, prep: dict[str, torch.Tensor]) -> torch.Tensor:
+        """Prepared inputs (any H, W that are multiples of 4) -> (N, 3, H, W) unclamped."""
+        base, out = self._decode(prep)
+        if not self.cfg.gated:
+            return base + out
+        return base + torch.sigmoid(out[:, 3:4]) * out[:, :3]
+
+    def confidence(self, prep: dict[str, torch.Tensor]) -> torch.Tensor:
+        """The gate ``g`` (N, 1, H, W) of a gated model; ones for an ungated one."""
+        if not self.cfg.gated:
+            r = prep["render"]
+            return torch.ones(r.shape[0], 1, *r.shape[-2:], dtype=r.dtype)
+        return torch.sigmoid(self._decode(prep)[1][:, 3:4])
 
     def check_inputs(self, render: torch.Tensor, reference: torch.Tensor) -> None:
         """Validate render/reference tensors; raises ValueError with the reason."""

@@ -59,14 +59,31 @@ def _prepare_one(
 def build_triples(
     data: str | Path, out: str | Path, pairs: int = 2, val_offset: float = 20.0,
     val_every: int = 4, seed: int = 0, weights: str | Path | None = None,
+    min_gap: float = 10.0, max_gap: float = 60.0, self_share: float = 0.0,
+    exclude_mod: int | None = None, val_fraction: float = 0.15,
 ) -> None:
-    """Write the cached matching of training and validation triples (see module docstring)."""
+    """Write the cached matching of training and validation triples (see module docstring).
+
+    References are drawn ``min_gap``..``max_gap`` frames (``t`` units) away, or with
+    probability ``self_share`` are the frame's own photo (Ref = target: the model must learn to
+    trust an exact reference as much as to doubt a far one). Frames with ``t % exclude_mod == 0``
+    (a dataset's held-out evaluation frames) are never a target nor a reference. Validation is
+    the pool's last ``val_fraction``, separated from training by ``max_gap``.
+    """
     from .pretrained import backbone_state_dict
 
+    if not 0.0 <= self_share <= 1.0 or not 0 <= min_gap <= max_gap:
+        raise ValueError(f"bad reference settings: self_share {self_share}, gaps "
+                         f"{min_gap}..{max_gap}")
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     cache = load_frame_cache(data)
-    train_pos, val_pos = split_frames(cache.t)
+    keep = np.ones(len(cache.t), bool)
+    if exclude_mod:
+        keep = np.round(cache.t).astype(int) % int(exclude_mod) != 0
+    pos = np.flatnonzero(keep)
+    tr, va = split_frames(cache.t[pos], val_fraction=val_fraction, gap=max_gap)
+    train_pos, val_pos = pos[tr], pos[va]
     cfg = FrozenMarinerConfig()
     model = FrozenMariner(cfg).eval()
     model.load_vgg(backbone_state_dict("vgg16"))
@@ -74,12 +91,13 @@ def build_triples(
     variants = [v for v in RENDER_VARIANTS if v in cache.images]
     jobs: list[tuple[int, int, str]] = []
     for i in train_pos:
-        cand = reference_candidates(cache.t, int(i), train_pos, 10.0, 60.0)
-        if not len(cand):
-            continue
+        cand = reference_candidates(cache.t, int(i), train_pos, min_gap, max_gap)
         for v in variants:
-            for j in rng.choice(cand, size=min(pairs, len(cand)), replace=False):
-                jobs.append((int(i), int(j), v))
+            for _ in range(pairs):
+                if rng.random() < self_share or not len(cand):
+                    jobs.append((int(i), int(i), v))
+                else:
+                    jobs.append((int(i), int(rng.choice(cand)), v))
     jobs = [jobs[n] for n in rng.permutation(len(jobs))]  # any prefix is a random subset
     val_jobs: list[tuple[int, int, str, str]] = []
     for i in val_pos[::val_every]:
@@ -87,14 +105,15 @@ def build_triples(
         d_b = np.abs(cache.t[val_pos] - (cache.t[i] - val_offset))
         j = val_pos[np.argmin(d)] if d.min() <= d_b.min() else val_pos[np.argmin(d_b)]
         for v in ("render", "render_colourless"):
-            if v in cache.images:
+            if v in cache.images and j != i:
                 val_jobs.append((int(i), int(j), v, "offset"))
         if "render_colourless" in cache.images:
             val_jobs.append((int(i), int(i), "render_colourless", "ref_target"))
         val_jobs.append((int(i), int(i), "render", "ref_target"))
     meta = {
         "data": str(data), "pairs": pairs, "val_offset": val_offset, "seed": seed,
-        "config": cfg.to_dict(), "train_jobs": jobs,
+        "min_gap": min_gap, "max_gap": max_gap, "self_share": self_share,
+        "exclude_mod": exclude_mod, "config": cfg.to_dict(), "train_jobs": jobs,
         "val_jobs": [list(j) for j in val_jobs],
     }
     (out / "triples.json").write_text(json.dumps(meta))

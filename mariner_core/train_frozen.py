@@ -56,6 +56,10 @@ class TrainSettings:
     colour_aug: float = 0.0
     channels: int = 24
     blocks: tuple[int, int, int] = (1, 2, 3)
+    #: decoder output = base + confidence * correction (``FrozenMarinerConfig.gated``)
+    gated: bool = False
+    #: share of training crops whose render alone gets a random exposure / shading change
+    render_aug: float = 0.0
 
 
 def _recolour(
@@ -90,9 +94,33 @@ def _recolour(
     return change(target)
 
 
+def _reshade_render(
+    prep: dict[str, torch.Tensor], share: float, rng: np.random.Generator,
+) -> None:
+    """Change the exposure and shading of the render alone (gain, gamma, a linear brightness
+    ramp) on a random ``share`` of samples, in place.
+
+    Why: on a new scene the render's brightness says nothing reliable about the photo's (mesh
+    colours are averaged over views, shading is synthetic); the photo's appearance must come
+    from the reference. The target and the reference-derived inputs are left as they are.
+    """
+    r = prep["render"]
+    n, _, h, w = r.shape
+    on = torch.from_numpy(rng.random(n) < share)[:, None, None, None]
+    gain = torch.from_numpy(np.exp(rng.uniform(-0.5, 0.5, (n, 1, 1, 1)))).float()
+    gamma = torch.from_numpy(np.exp(rng.uniform(-0.4, 0.4, (n, 1, 1, 1)))).float()
+    ang = rng.uniform(0, 2 * np.pi, n)
+    amp = rng.uniform(0, 0.3, n)
+    yy, xx = torch.meshgrid(torch.linspace(-1, 1, h), torch.linspace(-1, 1, w), indexing="ij")
+    ramp = torch.stack([1 + a * (np.cos(t) * xx + np.sin(t) * yy) for a, t in zip(amp, ang,
+                                                                                 strict=True)])
+    changed = (gain * r.clamp_min(1e-4) ** gamma * ramp[:, None].float()).clamp(0, 1)
+    prep["render"] = torch.where(on, changed, r)
+
+
 def _batch_inputs(
     imgs: np.ndarray, scores: np.ndarray, k: int, idx: np.ndarray, crop: int | None,
-    rng: np.random.Generator | None, colour_aug: float = 0.0,
+    rng: np.random.Generator | None, colour_aug: float = 0.0, render_aug: float = 0.0,
 ) -> tuple[dict[str, torch.Tensor], torch.Tensor]:
     lay = layout(k)
     x = torch.from_numpy(np.ascontiguousarray(imgs[idx])).float().div_(255.0)
@@ -117,6 +145,8 @@ def _batch_inputs(
     target = x[:, lay["target"]]
     if colour_aug > 0 and rng is not None:
         target = _recolour(prep, target, colour_aug, rng)
+    if render_aug > 0 and rng is not None:
+        _reshade_render(prep, render_aug, rng)
     return prep, target
 
 
@@ -130,33 +160,50 @@ def _validate(model: FrozenMariner, imgs, scores, k: int, jobs: list) -> dict[st
         y = model.fuse(prep).clamp(0, 1)
         p = psnr_y(y, tgt).tolist()
         pr = psnr_y(prep["render"], tgt).tolist()
-        for m, (pv, prv) in enumerate(zip(p, pr, strict=True)):
+        pb = psnr_y(model.base(prep).clamp(0, 1), tgt).tolist()
+        for m, (pv, prv, pbv) in enumerate(zip(p, pr, pb, strict=True)):
             _, _, v, kind = jobs[idx[m]]
             key = f"{'colourless' if 'colourless' in v else 'coloured'}_{kind}"
             groups.setdefault(key, []).append(pv)
             groups.setdefault(key + "_raw", []).append(prv)
+            groups.setdefault(key + "_base", []).append(pbv)
     model.train()
     return {g: float(np.mean(v)) for g, v in groups.items()}
 
 
-def _load_triples(
-    out: Path, settings: TrainSettings,
-) -> tuple[dict, FrozenMarinerConfig, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The cached triples of ``out``: (meta, model config, train images, train scores,
-    validation images, validation scores); the training arrays are read into memory."""
-    meta = json.loads((out / "triples.json").read_text())
+@dataclass
+class _Scene:
+    """The cached triples of one training cache (one scene), training arrays in memory."""
+
+    name: str
+    imgs: np.ndarray
+    scores: np.ndarray
+    v_imgs: np.ndarray
+    v_scores: np.ndarray
+    val_jobs: list
+
+
+def _load_triples(cache: Path, settings: TrainSettings) -> tuple[FrozenMarinerConfig, _Scene]:
+    """(model config, scene) of the triple cache ``cache``; the training arrays are read into
+    memory (~0.2-3 GB)."""
+    meta = json.loads((cache / "triples.json").read_text())
     # the decoder's size does not change the cached matching: it may differ from the cache's
     cfg = FrozenMarinerConfig.from_dict(
-        {**meta["config"], "channels": settings.channels, "blocks": list(settings.blocks)}
+        {**meta["config"], "channels": settings.channels, "blocks": list(settings.blocks),
+         "gated": settings.gated}
     )
-    n_done = json.loads((out / "train_done.json").read_text())["n"]
-    imgs = np.load(out / "train_images.npy", mmap_mode="r")
-    scores = np.load(out / "train_scores.npy", mmap_mode="r")
-    imgs = np.ascontiguousarray(imgs[:n_done])  # into memory (~1-3 GB)
-    scores = np.ascontiguousarray(scores[:n_done])
-    v_imgs = np.load(out / "val_images.npy")
-    v_scores = np.load(out / "val_scores.npy")
-    return meta, cfg, imgs, scores, v_imgs, v_scores
+    n_done = json.loads((cache / "train_done.json").read_text())["n"]
+    imgs = np.load(cache / "train_images.npy", mmap_mode="r")
+    scores = np.load(cache / "train_scores.npy", mmap_mode="r")
+    scene = _Scene(
+        name=cache.name, imgs=np.ascontiguousarray(imgs[:n_done]),
+        scores=np.ascontiguousarray(scores[:n_done]),
+        v_imgs=np.load(cache / "val_images.npy"), v_scores=np.load(cache / "val_scores.npy"),
+        val_jobs=meta["val_jobs"],
+    )
+    if n_done == 0:
+        raise ValueError(f"{cache}: no cached training triples yet")
+    return cfg, scene
 
 
 def _initial_model(
@@ -192,18 +239,33 @@ def _resume(
     return state, rng
 
 
-def _open_log(out: Path, resume: bool) -> tuple[Any, csv.DictWriter]:
-    """``log.csv``: appended to when resuming an existing one, else written anew with a header."""
+VAL_GROUPS = ("coloured_offset", "colourless_offset", "coloured_ref_target",
+              "colourless_ref_target")
+
+
+def _open_log(out: Path, resume: bool, scenes: list[str]) -> tuple[Any, csv.DictWriter]:
+    """``log.csv``: appended to when resuming an existing one, else written anew with a header.
+
+    With several scenes the un-prefixed validation columns are means over scenes and every
+    scene has its own ``SCENE/group`` columns (the learning curve per scene)."""
     log_path = out / "log.csv"
     new_log = not (resume and log_path.is_file())
     log_file = log_path.open("w" if new_log else "a", newline="")
-    fieldnames = ["step", "minutes", "samples", "lr", "loss", "l1", "per",
-                  "val_mean", "coloured_offset", "colourless_offset", "coloured_ref_target",
-                  "colourless_ref_target", "coloured_offset_raw", "colourless_offset_raw"]
+    groups = [g + sfx for g in VAL_GROUPS for sfx in ("", "_base")] + [
+        "coloured_offset_raw", "colourless_offset_raw"]
+    fieldnames = ["step", "minutes", "samples", "lr", "loss", "l1", "per", "val_mean", *groups]
+    if len(scenes) > 1:
+        fieldnames += [f"{sc}/{g}" for sc in scenes for g in (*groups, "val_mean")]
     writer = csv.DictWriter(log_file, fieldnames=fieldnames, extrasaction="ignore")
     if new_log:
         writer.writeheader()
     return log_file, writer
+
+
+def _scene_mean(res: dict[str, float]) -> float:
+    """Checkpoint criterion of one scene: mean PSNR-Y over its far-reference groups."""
+    vals = [res[g] for g in ("coloured_offset", "colourless_offset") if g in res]
+    return float(np.mean(vals)) if vals else float("nan")
 
 
 @dataclass
@@ -219,6 +281,8 @@ class _Session:
     writer: csv.DictWriter
     t_start: float
     acc: dict[str, list[float]]
+    scenes: list[_Scene]
+    k: int
 
     def save_last(self) -> None:
         """Write ``last.pt`` (model, optimiser, state) through a temporary file."""
@@ -228,14 +292,31 @@ class _Session:
                     "state": self.state}, last.with_suffix(".tmp"))
         last.with_suffix(".tmp").replace(last)
 
-    def run_val(self, v_imgs: np.ndarray, v_scores: np.ndarray, k: int, val_jobs: list) -> None:
+    def validate(self) -> tuple[dict[str, float], float]:
+        """(log columns, checkpoint criterion): per scene, and the means over scenes. The
+        criterion is the mean over scenes, so a large scene cannot outvote a small one."""
+        per_scene = {sc.name: _validate(self.model, sc.v_imgs, sc.v_scores, self.k, sc.val_jobs)
+                     for sc in self.scenes}
+        if len(self.scenes) == 1:
+            res = next(iter(per_scene.values()))
+            return dict(res), _scene_mean(res)
+        cols: dict[str, float] = {}
+        keys = sorted({kk for r in per_scene.values() for kk in r})
+        for kk in keys:
+            cols[kk] = float(np.mean([r[kk] for r in per_scene.values() if kk in r]))
+        for name, r in per_scene.items():
+            cols.update({f"{name}/{kk}": v for kk, v in r.items()})
+            cols[f"{name}/val_mean"] = _scene_mean(r)
+        crit = float(np.nanmean([_scene_mean(r) for r in per_scene.values()]))
+        return cols, crit
+
+    def run_val(self) -> None:
         """Validate, log a row (with the mean training losses since the last one) and keep
-        ``best.pt`` when the mean offset PSNR-Y improved."""
+        ``best.pt`` when the criterion improved."""
         from .enhancer import save_checkpoint
 
         state, acc = self.state, self.acc
-        res = _validate(self.model, v_imgs, v_scores, k, val_jobs)
-        mean = float(np.mean([res.get("coloured_offset", 0), res.get("colourless_offset", 0)]))
+        res, mean = self.validate()
         minutes = round((time.perf_counter() - self.t_start) / 60, 2)
         row = {"step": state["step"], "minutes": minutes,
                "samples": state["samples"], "val_mean": round(mean, 3),
@@ -247,21 +328,33 @@ class _Session:
         row["lr"] = self.opt.param_groups[0]["lr"]
         self.writer.writerow(row)
         self.log_file.flush()
-        logger.info("val %s", row)
+        logger.info("val %s", {kk: v for kk, v in row.items() if "/" not in kk})
         if mean > state["best"]:
             state["best"] = mean
             save_checkpoint(self.model, self.out / "best.pt", fp16=True, extra={
                 "step": state["step"], "samples": state["samples"],
                 "minutes": row["minutes"], "val": {kk: float(v) for kk, v in res.items()},
                 "settings": asdict(self.settings),
+                "scenes": [sc.name for sc in self.scenes],
             })
 
-    def step(self, per, imgs: np.ndarray, scores: np.ndarray, k: int,
-             rng: np.random.Generator) -> None:
-        """One optimiser step on a random batch of crops; its losses go to ``acc``."""
+    def step(self, per, rng: np.random.Generator) -> None:
+        """One optimiser step on a batch of random crops, its samples spread evenly over the
+        scenes; its losses go to ``acc``."""
         settings, state, acc = self.settings, self.state, self.acc
-        idx = rng.integers(0, len(imgs), size=settings.batch_size)
-        prep, tgt = _batch_inputs(imgs, scores, k, idx, settings.crop, rng, settings.colour_aug)
+        which = rng.integers(0, len(self.scenes), size=settings.batch_size)
+        preps, tgts = [], []
+        for s_i, sc in enumerate(self.scenes):
+            m = int((which == s_i).sum())
+            if m == 0:
+                continue
+            idx = rng.integers(0, len(sc.imgs), size=m)
+            prep, tgt = _batch_inputs(sc.imgs, sc.scores, self.k, idx, settings.crop, rng,
+                                      settings.colour_aug, settings.render_aug)
+            preps.append(prep)
+            tgts.append(tgt)
+        prep = {kk: torch.cat([p[kk] for p in preps]) for kk in preps[0]}
+        tgt = torch.cat(tgts)
         y = self.model.fuse(prep)
         l1 = (y - tgt).abs().mean()
         lp = per(y, tgt) if settings.lambda_per > 0 else torch.zeros(())
@@ -278,21 +371,28 @@ class _Session:
 
 def train(
     out: str | Path, max_minutes: float, settings: TrainSettings, resume: bool,
-    init: str | Path | None = None,
+    init: str | Path | None = None, caches: list[str | Path] | None = None,
 ) -> Path:
-    """Train the fusion decoder on the cached triples; returns the path of ``best.pt``.
+    """Train the fusion decoder on cached triples; returns the path of ``best.pt``.
 
-    ``init``: start from these weights (e.g. the shipped checkpoint, whose decoder size must
-    match ``settings``) instead of a zero-initialised head; ignored when resuming ``last.pt``.
+    ``caches``: triple caches (``cache`` step outputs, one per scene) to train on together;
+    default: ``out`` itself. ``init``: start from these weights (e.g. the shipped checkpoint,
+    whose decoder size must match ``settings``) instead of a zero-initialised head; ignored
+    when resuming ``last.pt``.
     """
     from .losses import PerceptualLoss
 
     out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(settings.threads)
     torch.manual_seed(settings.seed)
-    meta, cfg, imgs, scores, v_imgs, v_scores = _load_triples(out, settings)
-    k = cfg.top_k
-    val_jobs = meta["val_jobs"]
+    loaded = [_load_triples(Path(c), settings) for c in (caches or [out])]
+    cfg = loaded[0][0]
+    if any(c.to_dict() != cfg.to_dict() for c, _ in loaded):
+        raise ValueError("the triple caches were matched with different configs")
+    scenes = [sc for _, sc in loaded]
+    if len({sc.name for sc in scenes}) != len(scenes):
+        raise ValueError(f"triple cache folder names must differ: {[sc.name for sc in scenes]}")
     model = _initial_model(cfg, out, init, resume)
     params = [p for n, p in model.named_parameters() if not n.startswith("vgg.")]
     opt = torch.optim.Adam(params, lr=settings.lr)
@@ -302,30 +402,32 @@ def train(
     last = out / "last.pt"
     if resume and last.is_file():
         state, rng = _resume(last, model, opt, settings)
-    log_file, writer = _open_log(out, resume)
+    log_file, writer = _open_log(out, resume, [sc.name for sc in scenes])
     budget = max_minutes * 60.0
     t_start = time.perf_counter() - state["elapsed"]
     t_val = t_ckpt = time.perf_counter()
     acc: dict[str, list[float]] = {"loss": [], "l1": [], "per": []}
-    logger.info("training %d parameters on %d triples", model.num_trainable(), len(imgs))
-    run = _Session(out, settings, model, opt, state, log_file, writer, t_start, acc)
+    logger.info("training %d parameters on %s triples", model.num_trainable(),
+                {sc.name: len(sc.imgs) for sc in scenes})
+    run = _Session(out, settings, model, opt, state, log_file, writer, t_start, acc, scenes,
+                   cfg.top_k)
 
     if state["step"] == 0:
-        run.run_val(v_imgs, v_scores, k, val_jobs)
+        run.run_val()
     while time.perf_counter() - t_start < budget:
         prog = (time.perf_counter() - t_start) / budget
         lr = cosine_lr(prog, settings.lr, settings.lr_min)
         for g in opt.param_groups:
             g["lr"] = lr
-        run.step(per, imgs, scores, k, rng)
+        run.step(per, rng)
         now = time.perf_counter()
         if now - t_val > settings.val_every_minutes * 60:
-            run.run_val(v_imgs, v_scores, k, val_jobs)
+            run.run_val()
             t_val = time.perf_counter()
         if now - t_ckpt > settings.ckpt_every_minutes * 60:
             run.save_last()
             t_ckpt = now
-    run.run_val(v_imgs, v_scores, k, val_jobs)
+    run.run_val()
     run.save_last()
     log_file.close()
     return out / "best.pt"
@@ -339,6 +441,15 @@ def main(argv: list[str] | None = None) -> int:
     c.add_argument("--out", required=True)
     c.add_argument("--pairs", type=int, default=2)
     c.add_argument("--seed", type=int, default=0)
+    c.add_argument("--min-gap", type=float, default=10.0,
+                   help="nearest reference, in frame-time units (t) of the cache")
+    c.add_argument("--max-gap", type=float, default=60.0, help="farthest reference (t units)")
+    c.add_argument("--self-share", type=float, default=0.0,
+                   help="share of triples whose reference is the frame's own photo")
+    c.add_argument("--exclude-mod", type=int, default=None,
+                   help="frames with t %% N == 0 are held out (never a target or reference)")
+    c.add_argument("--val-offset", type=float, default=20.0)
+    c.add_argument("--val-every", type=int, default=4)
     t = sub.add_parser("train")
     t.add_argument("--out", required=True)
     t.add_argument("--max-minutes", type=float, required=True)
@@ -353,15 +464,29 @@ def main(argv: list[str] | None = None) -> int:
     t.add_argument("--channels", type=int, default=TrainSettings.channels)
     t.add_argument("--colour-aug", type=float, default=TrainSettings.colour_aug,
                    help="share of crops whose reference and target change colour together")
+    t.add_argument("--render-aug", type=float, default=TrainSettings.render_aug,
+                   help="share of crops whose render alone changes exposure / shading")
+    t.add_argument("--gated", action="store_true",
+                   help="decoder output = base + confidence * correction")
+    t.add_argument("--caches", default=None,
+                   help="comma-separated triple caches (one per scene) to train on together; "
+                   "default: --out")
+    t.add_argument("--val-every-minutes", type=float, default=TrainSettings.val_every_minutes)
     args = parser.parse_args(argv)
     logging.basicConfig(level=logging.INFO, format="%(asctime)s %(name)s: %(message)s")
     if args.cmd == "cache":
-        build_triples(args.data, args.out, pairs=args.pairs, seed=args.seed)
+        build_triples(args.data, args.out, pairs=args.pairs, seed=args.seed,
+                      min_gap=args.min_gap, max_gap=args.max_gap, self_share=args.self_share,
+                      exclude_mod=args.exclude_mod, val_offset=args.val_offset,
+                      val_every=args.val_every)
         return 0
     settings = TrainSettings(crop=args.crop, batch_size=args.batch_size, lr=args.lr,
                              lambda_per=args.lambda_per, threads=args.threads,
-                             channels=args.channels, colour_aug=args.colour_aug)
-    train(args.out, args.max_minutes, settings, args.resume, init=args.init)
+                             channels=args.channels, colour_aug=args.colour_aug,
+                             render_aug=args.render_aug, gated=args.gated,
+                             val_every_minutes=args.val_every_minutes)
+    caches = [c for c in args.caches.split(",") if c] if args.caches else None
+    train(args.out, args.max_minutes, settings, args.resume, init=args.init, caches=caches)
     return 0
 
 

@@ -116,3 +116,25 @@ def test_fp16_requires_cuda(ckpt):
         pytest.skip("CUDA present")
     with pytest.raises(ValueError, match="CUDA"):
         Enhancer(ckpt[0], device="cpu", fp16=True)
+
+
+def test_native_size_is_bounded_before_any_work():
+    """The frozen matcher's global matching grows with the product of the image areas: a
+    castle-sized pair (1416x1064) is refused at once with a message naming enhance_working,
+    while the working size runs."""
+    import time
+
+    from mariner_core.frozen import FrozenMariner, FrozenMarinerConfig
+
+    enh = Enhancer(FrozenMariner(FrozenMarinerConfig(channels=4, blocks=(1, 1, 1))))
+    big = np.zeros((1064, 1416, 3), np.float32)
+    t0 = time.perf_counter()
+    with pytest.raises(ValueError, match="enhance_working"):
+        enh.enhance(big, big)
+    assert time.perf_counter() - t0 < 2.0
+    out = enh.enhance_working(big, big, short_side=64)
+    assert out.image.shape[:2] == (64, 85)
+    # the bound is a setting: None lifts it, and a small bound refuses a small pair
+    assert Enhancer(enh.model, max_match_pairs=None).max_match_pairs is None
+    with pytest.raises(ValueError, match="max_match_pairs"):
+        Enhancer(enh.model, max_match_pairs=10).enhance(big[:64, :64], big[:64, :64])

@@ -150,3 +150,27 @@ def test_from_pretrained_refuses_the_spec_network(tmp_path) -> None:
     path = save_checkpoint(spec, tmp_path / "spec.pt")
     with pytest.raises(ValueError, match="not a FrozenMariner"):
         FrozenMariner.from_pretrained(path)
+
+
+def test_gated_decoder_starts_at_the_base_and_its_gate_bounds_the_correction(tmp_path) -> None:
+    """Gated: output = base + g * correction with g in (0, 1); a new model is exactly the
+    matching-only base, and however large the correction, |output - base| <= |correction|."""
+    cfg = FrozenMarinerConfig(top_k=2, channels=4, blocks=(1, 1, 1), patch_size=3, gated=True)
+    m = FrozenMariner(cfg).eval()
+    prep = m.prepare(_textured(32, 40, 1), _textured(32, 40, 2))
+    with torch.no_grad():
+        torch.testing.assert_close(m.fuse(prep), m.base(prep), atol=0, rtol=0)
+        g = m.confidence(prep)
+        assert g.shape == (1, 1, 32, 40) and float(g.min()) > 0 and float(g.max()) < 1
+        m.head.weight.normal_(0, 0.5)
+        m.head.bias[:3].fill_(2.0)
+        _, out = m._decode(prep)
+        moved = (m.fuse(prep) - m.base(prep)).abs()
+        assert float(moved.max()) > 0
+        assert bool((moved <= out[:, :3].abs() + 1e-6).all())
+    # round trip keeps the gate
+    loaded = load_checkpoint(save_checkpoint(m, tmp_path / "g.pt"))
+    assert isinstance(loaded, FrozenMariner) and loaded.cfg.gated and loaded.head.out_channels == 4
+    # ungated models (the older weights) have no gate: confidence is one everywhere
+    plain = FrozenMariner(SMALL)
+    assert float(plain.confidence(plain.prepare(_textured(32, 32), _textured(32, 32))).min()) == 1

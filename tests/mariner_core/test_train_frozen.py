@@ -114,3 +114,53 @@ def test_recolour_changes_reference_and_target_together_not_render() -> None:
     assert torch.allclose(prep["colour"], target, atol=1e-6)
     untouched = {"warped": same.repeat(1, 4, 1, 1), "colour": same.clone()}
     assert torch.allclose(_recolour(untouched, same.clone(), 0.0, rng), same, atol=1e-6)
+
+
+def test_references_at_varied_distances_and_held_out_frames(tmp_path, converted_weights) -> None:
+    """Held-out frames (t % N == 0) are never a target nor a reference; some references are
+    the frame itself (Ref = target), the others lie within the gaps asked for."""
+    _write_cache(tmp_path / "cache", n=30)
+    build_triples(tmp_path / "cache", tmp_path / "run", pairs=2, min_gap=10, max_gap=30,
+                  self_share=0.3, exclude_mod=50, seed=2)
+    meta = json.loads((tmp_path / "run" / "triples.json").read_text())
+    jobs = [tuple(j) for j in meta["train_jobs"]] + [tuple(j[:3]) for j in meta["val_jobs"]]
+    assert all(10 * i % 50 != 0 and 10 * j % 50 != 0 for i, j, _ in jobs)
+    train_jobs = meta["train_jobs"]
+    selfs = [1 for i, j, _ in train_jobs if i == j]
+    assert 0.1 < len(selfs) / len(train_jobs) < 0.5
+    assert all(10 <= 10 * abs(i - j) <= 30 for i, j, _ in train_jobs if i != j)
+
+
+def test_training_on_several_scenes_logs_each_scene(tmp_path, converted_weights) -> None:
+    """Two triple caches trained together: the log has each scene's own columns and their
+    mean; the best checkpoint is a gated model."""
+    for name in ("scene_a", "scene_b"):
+        _write_cache(tmp_path / f"{name}_frames")
+        build_triples(tmp_path / f"{name}_frames", tmp_path / name, pairs=1)
+    gated = TrainSettings(**{**SMALL.__dict__, "gated": True, "render_aug": 0.5,
+                             "colour_aug": 0.5})
+    best = train(tmp_path / "both", max_minutes=0.03, settings=gated, resume=False,
+                 caches=[tmp_path / "scene_a", tmp_path / "scene_b"])
+    rows = _log(tmp_path / "both")
+    first = rows[0]
+    a, b = float(first["scene_a/val_mean"]), float(first["scene_b/val_mean"])
+    assert float(first["val_mean"]) == pytest.approx((a + b) / 2, abs=0.002)
+    # a new gated decoder is the matching-only base
+    assert float(first["scene_a/coloured_offset"]) == pytest.approx(
+        float(first["scene_a/coloured_offset_base"]), abs=1e-3)
+    assert int(rows[-1]["step"]) > 0
+    assert load_checkpoint(best).cfg.gated
+
+
+def test_render_reshading_changes_only_the_render() -> None:
+    from mariner_core.train_frozen import _reshade_render
+
+    rng = np.random.default_rng(0)
+    x = torch.rand(5, 3, 8, 8) * 0.8 + 0.1
+    prep = {"render": x.clone(), "warped": x.repeat(1, 4, 1, 1), "colour": x.clone()}
+    _reshade_render(prep, 1.0, rng)
+    assert (prep["render"] - x).abs().mean() > 0.01
+    assert torch.equal(prep["warped"], x.repeat(1, 4, 1, 1)) and torch.equal(prep["colour"], x)
+    same = {"render": x.clone()}
+    _reshade_render(same, 0.0, rng)
+    assert torch.equal(same["render"], x)
