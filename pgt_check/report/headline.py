@@ -207,6 +207,7 @@ def shared_error_lines(shared: Mapping[str, Any]) -> list[str]:
     # informational: printed as a finding, or when it could not be checked at all
     if texture.get("status") == "finding" or texture.get("reason") == "no_geometric_evidence":
         entries.append(texture)
+    entries.append(shared.get("frame_screen"))  # frames left out of the pooled fits, and why
     return [
         str(e["message"]) for e in entries
         if isinstance(e, dict) and (e.get("status") in ("failed", "inconclusive", "finding")

@@ -73,6 +73,7 @@ SHARED_ERROR_TITLES = {
     "calibration": "calibration",
     "calibration_change": "calibration change since the trusted run",
     "texture": "mesh colours vs geometry",
+    "frame_screen": "frames left out of the run-level fits",
 }
 SHARED_ERROR_NUMBERS = (
     ("angle_deg", "angle [deg]", ".3f"),

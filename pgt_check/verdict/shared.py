@@ -47,12 +47,14 @@ from pgt_check.verdict.shared_entries import (
     calibration_change_entry,
     calibration_entry,
     drift_entry,
+    frame_screen_entry,
     registration_entry,
     shared_or_not,
 )
 from pgt_check.verdict.shared_results import (
     CalibrationCheck,
     DriftCheck,
+    FrameScreenCheck,
     RegistrationCheck,
     TextureCheck,
 )
@@ -97,6 +99,8 @@ class SharedChecks:
     #: (``run_checks.removes_calibration``: this run's estimate, or a trusted run's); the
     #: absolute paths are judged, and the per-frame bounds fitted, with it removed
     removed_calibrations: dict[str, CameraCalibration] = field(default_factory=dict)
+    #: which frames the pooled fits left out and why (``frame_screen_entry``)
+    frame_screen: FrameScreenCheck | None = None
 
     @property
     def removes_calibration(self) -> bool:
@@ -126,6 +130,11 @@ class SharedChecks:
             "drift": self.drift.to_json(),
             "calibration": {cam: e.to_json() for cam, e in self.calibration.items()},
             **({"texture": self.texture.to_json()} if self.texture is not None else {}),
+            **(
+                {"frame_screen": self.frame_screen.to_json()}
+                if self.frame_screen is not None
+                else {}
+            ),
             **(
                 {"calibration_change": {cam: e.to_json() for cam, e in self.calibration_change.items()}}
                 if self.calibration_change
@@ -204,33 +213,6 @@ def frame_residuals(ev: Sequence[Any], est: Any) -> np.ndarray:
     return np.asarray(out)
 
 
-def consistent_frames(
-    ev: Sequence[Any], fit: Any, floor_px: float, ceiling_px: float, rounds: int = 3
-) -> tuple[list, list[str]]:
-    """The frames whose evidence agrees with one shared correction, and the ids of the others.
-
-    A frame with its own pose error (bad frames among good ones) keeps a large residual after
-    the correction that fits the others; pooling it would bias the shared estimate. A frame is
-    left out when its median residual exceeds the frames' median + 3 robust standard
-    deviations, clamped to [``floor_px``, ``ceiling_px``]; the correction is refitted on the
-    kept frames (``fit(frames) -> RegistrationEstimate``) and the test repeated."""
-    kept = list(ev)
-    for _ in range(rounds):
-        res = frame_residuals(ev, fit(kept))
-        finite = res[np.isfinite(res)]
-        if len(finite) < 3:
-            return list(ev), []
-        med = float(np.median(finite))
-        spread = 3.0 * 1.4826 * float(np.median(np.abs(finite - med)))
-        cut = min(max(med + spread, floor_px), max(ceiling_px, floor_px))
-        new = [e for e, r in zip(ev, res, strict=True) if r <= cut]
-        if len(new) < 3 or [e.frame_id for e in new] == [e.frame_id for e in kept]:
-            break
-        kept = new
-    ids = {e.frame_id for e in kept}
-    return kept, [e.frame_id for e in ev if e.frame_id not in ids]
-
-
 def _without(cals: Mapping[str, CameraCalibration], e: Any) -> Any:
     """The frame's evidence with its camera's calibration error removed (if one is known)."""
     return cals[e.camera_id].remove(e) if e.camera_id in cals else e
@@ -246,9 +228,17 @@ def _calibration_checks(
 
     v = config.run_checks
     settings = CalibrationSettings(calibration_translation=v.calibration_translation)
+    # --remove-calibration: the user asserts the registration, so the shared camera-frame
+    # error of this run IS the calibration, whatever the separability test says (a joint fit
+    # would hand part of it to a world correction, and the registration check would then fail
+    # on the calibration it was told to remove); the ambiguity is reported, never the estimate
+    # dropped. Otherwise registration and calibration are told apart where the views allow.
+    asserted = bool(v.remove_calibration and not v.calibration_from)
     calib, cals = {}, {}
-    for cam_id, est in estimate_calibration(ev, settings).items():
-        calib[cam_id] = calibration_entry(est, thr, frame_thr)
+    for cam_id, est in estimate_calibration(
+        ev, settings, registration="none" if asserted else "auto"
+    ).items():
+        calib[cam_id] = calibration_entry(est, thr, frame_thr, asserted=asserted)
         cal = CameraCalibration.from_estimate(est)
         if cal is not None:
             cals[cam_id] = cal
@@ -285,21 +275,21 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
         else thr
     )
     ev = frame_evidence(measurements)
-    own = OWN_ERROR_FRACTION * frame_thr  # a frame's residual above it: an error of its own
-    # frames with an error of their own are left out of the pooled fits
-    all_ev = ev
-    no_boot = se.FitSettings(n_bootstrap=0)
-    ev, left_out = consistent_frames(
-        ev, lambda fr: se.estimate_registration(fr, no_boot), own, own
-    )
-    if left_out:
-        logger.info(
-            "run-level checks: %d frames with their own error left out (%s)",
-            len(left_out),
-            ", ".join(left_out[:5]),
-        )
+    own = OWN_ERROR_FRACTION * frame_thr  # fallback where too few frames to test them
     v = config.run_checks
     trans = v.calibration_translation
+    # frames with an error of their own are left out of the pooled fits: a significance test
+    # of each frame's own correction against the null spread of all frames (screening.py)
+    all_ev = ev
+    screen = se.screen_frames(ev, se.FitSettings(n_bootstrap=0, calibration_translation=trans))
+    left_out = list(screen.left_out)
+    isolated = set(screen.isolated)
+    if left_out:
+        logger.info(
+            "run-level checks: %d of %d frames with their own error left out (%s)",
+            len(left_out), len(screen.frames), ", ".join(left_out[:5]),
+        )  # fmt: skip
+    ev = [e for e in ev if e.frame_id not in set(left_out)]
     intrinsics = {m.camera_id: m.intrinsics for m in measurements if m.intrinsics}
     calib, cals, change = _calibration_checks(ev, measurements, config, thr, frame_thr)
     mode = "auto"
@@ -317,21 +307,22 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
             registration_entry(
                 est := se.estimate_registration(ev, fit, similarity=s, calibration=mode), thr, kind
             ),
-            frame_residuals(ev, est),
-            own,
+            *((screen.agreement(), 1.0) if screen.tested else (frame_residuals(ev, est), own)),
         )
         for s, kind in ((False, "rigid"), (True, "similarity"))
     )
-    # drift looks at every frame: a drifting segment is what the consistent frames leave out;
+    # drift looks at every frame but those with an isolated error of their own: a drifting
+    # segment is what the consistent frames leave out (its neighbours share its error);
     # frames without evidence of their own are covered by the segment they lie in
     ids = [m.frame_id for m in measurements]
     drift_thr = DRIFT_THRESHOLD_FACTOR * thr
     drift_set = se.DriftSettings(calibration_translation=trans)
-    drift_est = se.estimate_drift(all_ev, drift_set, threshold_px=drift_thr, calibration=mode)
+    drift_ev = [e for e in all_ev if e.frame_id not in isolated]
+    drift_est = se.estimate_drift(drift_ev, drift_set, threshold_px=drift_thr, calibration=mode)
     drift, drift_px, flagged = drift_entry(drift_est, ids, drift_thr)
     reg, sim = (replace(e, frames_left_out=tuple(left_out)) for e in (reg, sim))
     return SharedChecks(
         thr, reg, sim, drift, calib, drift_px, flagged, homs, frozenset(left_out), frame_homs,
         drift_thr, texture_entry(measurements, thr), change,
-        cals if v.removes_calibration else {},
+        cals if v.removes_calibration else {}, frame_screen_entry(screen),
     )  # fmt: skip

@@ -19,6 +19,8 @@ from pgt_check.verdict.shared_results import (
     CalibrationCheck,
     DriftCheck,
     DriftFrame,
+    FrameScreenCheck,
+    LeftOutFrame,
     RegistrationCheck,
 )
 from pgt_check.verdict.status import FAILED, FINDING, INCONCLUSIVE, NOT_CHECKED, PASSED
@@ -30,6 +32,7 @@ __all__ = [
     "drift_entry",
     "finite_interval",
     "finite_or_none",
+    "frame_screen_entry",
     "registration_entry",
     "shared_or_not",
 ]
@@ -119,9 +122,14 @@ def registration_message(e: RegistrationCheck, threshold: float) -> str:
     return f"{what} {verdict}: correction {nums}{amb}"
 
 
-def calibration_entry(est: Any, shared_thr: float, frame_thr: float) -> CalibrationCheck:
+def calibration_entry(
+    est: Any, shared_thr: float, frame_thr: float, *, asserted: bool = False
+) -> CalibrationCheck:
     """The calibration check of one camera's ``CalibrationEstimate``: FAILED only above the
-    per-frame threshold ``frame_thr``, a FINDING between it and ``shared_thr``."""
+    per-frame threshold ``frame_thr``, a FINDING between it and ``shared_thr``. ``asserted``
+    (``--remove-calibration``): the user asserts the registration, so the estimate is the
+    calibration even where the views cannot tell it from a registration error; the message
+    says so (the ambiguity is reported, the estimate kept)."""
     status = check_status(est.success, est.effect_px_ci, est.effect_px, shared_thr)
     if status == FAILED:
         lo = (finite_interval(est.effect_px_ci) or [est.effect_px])[0]
@@ -163,6 +171,11 @@ def calibration_entry(est: Any, shared_thr: float, frame_thr: float) -> Calibrat
             else ""
         )
         + ("" if est.separable else "; not separable from registration with these views")
+        + (
+            ", taken as calibration (--remove-calibration asserts the registration)"
+            if asserted and not est.separable
+            else ""
+        )
     )
     return replace(check, message=message)
 
@@ -296,3 +309,47 @@ def shared_or_not(
         ),
         frames_agreeing=agree,
     )
+
+
+def frame_screen_entry(screen: Any) -> FrameScreenCheck:
+    """The summary entry of the frames the run-level fits left out (a ``FrameScreen`` of
+    ``geometry.shared_errors.screening``): how many, which, their own errors, and the rule's
+    numbers (the cut is a multiple of the null spread the frames themselves show)."""
+    if not screen.tested:
+        return FrameScreenCheck(
+            NOT_CHECKED, screen.reason,
+            f"frames with errors of their own not tested ({screen.reason}): every frame with "
+            "absolute evidence is pooled",
+        )  # fmt: skip
+    out = tuple(
+        LeftOutFrame(f.frame_id, round(f.effect_px, 3), round(f.statistic / screen.cut, 3),
+                     f.shared_with_neighbours)
+        for f in screen.frames if f.left_out
+    )  # fmt: skip
+    n = len(screen.frames)
+    rule = (
+        f"own pose correction significant at {screen.alpha:.0%} (Wald statistic above "
+        f"{screen.inflation:.2g} x the chi-square({screen.dof}) quantile {screen.chi2_quantile:.1f}; "
+        f"{screen.inflation:.2g}: the null spread estimated from the frames)"
+    )
+    if not out:
+        return FrameScreenCheck(
+            PASSED, "", f"run-level checks: all {n} frames with absolute evidence agree with "
+            f"the shared model (none with an {rule})",
+            n, 0, screen.inflation, screen.cut, screen.alpha, screen.dof, screen.rounds,
+        )  # fmt: skip
+    errs = np.array([f.own_error_px for f in out])
+    nb = sum(f.shared_with_neighbours for f in out)
+    message = (
+        f"run-level checks: {len(out)} of {n} frames left out of the pooled fits, their "
+        f"absolute evidence disagrees with the shared model ({rule}); their own errors "
+        f"{errs.min():.1f}-{errs.max():.1f} px (median {np.median(errs):.1f})"
+        + (f"; {nb} of them kept for the drift check (their neighbours share the error)"
+           if nb else "")
+        + ("; more than half disagreed: the half that agrees best was kept"
+           if screen.majority_kept else "")
+    )
+    return FrameScreenCheck(
+        FINDING, "", message, n, len(out), screen.inflation, screen.cut, screen.alpha,
+        screen.dof, screen.rounds, screen.majority_kept, out,
+    )  # fmt: skip

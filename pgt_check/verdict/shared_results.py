@@ -13,8 +13,8 @@ from typing import Any
 
 from pgt_check.verdict.status import NOT_CHECKED
 
-__all__ = ["CalibrationCheck", "DriftCheck", "DriftFrame", "RegistrationCheck", "Sensitivity",
-           "TextureCheck"]
+__all__ = ["CalibrationCheck", "DriftCheck", "DriftFrame", "FrameScreenCheck", "LeftOutFrame",
+           "RegistrationCheck", "Sensitivity", "TextureCheck"]
 
 
 @dataclass(frozen=True)
@@ -230,3 +230,55 @@ class TextureCheck:
                 "offset_px": list(self.offset_px), "effect_px": self.effect_px,
                 "effect_px_ci": list(self.effect_px_ci or ()), "n_frames": self.n_frames,
                 "message": self.message}
+
+
+@dataclass(frozen=True)
+class LeftOutFrame:
+    """One frame left out of the pooled fits (``shared_entries.frame_screen_entry``): the image
+    effect of its own correction (px), its test statistic over the cut (> 1: significant), and
+    whether its neighbours share the error (then it stays in the drift check's evidence)."""
+
+    frame_id: str
+    own_error_px: float
+    statistic_over_cut: float
+    shared_with_neighbours: bool
+
+
+@dataclass(frozen=True)
+class FrameScreenCheck:
+    """Which frames the run-level fits left out, and why (``shared_entries.frame_screen_entry``;
+    the rule: ``geometry.shared_errors.screening``). ``finding`` when frames were left out,
+    ``passed`` when every tested frame agrees with the shared model, ``not_checked`` when too
+    few frames carry evidence to test them."""
+
+    status: str
+    reason: str
+    message: str
+    n_tested: int = 0
+    n_left_out: int = 0
+    #: the null's scale estimated from the frames (variance inflation of the Wald statistic)
+    inflation: float | None = None
+    #: the cut on the Wald statistic: inflation x the chi-square quantile
+    cut: float | None = None
+    alpha: float | None = None
+    dof: int | None = None
+    rounds: int = 0
+    majority_kept: bool = False
+    left_out: tuple[LeftOutFrame, ...] = ()
+
+    def to_json(self) -> dict[str, Any]:
+        """The summary.json entry (``shared_errors.frame_screen``)."""
+        return {
+            "status": self.status,
+            "reason": self.reason,
+            "n_tested": self.n_tested,
+            "n_left_out": self.n_left_out,
+            "inflation": self.inflation,
+            "cut": self.cut,
+            "alpha": self.alpha,
+            "dof": self.dof,
+            "rounds": self.rounds,
+            "majority_kept": self.majority_kept,
+            "left_out": [asdict(f) for f in self.left_out],
+            "message": self.message,
+        }

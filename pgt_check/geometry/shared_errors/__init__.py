@@ -32,9 +32,14 @@ still caught) and the calibration estimate the calibration-only fit, both flagge
 Drift (``drift``): windows grown to enough inliers, compared with the reference by paired
 bootstrap, flagged on the lower bound, short runs rejected.
 
+Consensus (``screening``): before the fits pool the frames, each frame's own pose correction
+(what the shared model leaves of its evidence) is tested against the null spread of all
+frames' (Wald statistic, its scale estimated from the lower quartile, so it holds with up to
+half the frames wrong); significant frames are left out, iteratively.
+
 Modules: ``evidence`` (FrameEvidence + JSON), ``results`` (result types), ``settings`` (the
 estimators' settings dataclasses), ``model``, ``solver``, ``selection``, ``effects``,
-``registration``, ``calibration``, ``drift``.
+``registration``, ``calibration``, ``drift``, ``screening``.
 """
 
 from __future__ import annotations
@@ -43,6 +48,7 @@ from pgt_check.geometry.shared_errors.calibration import estimate_calibration
 from pgt_check.geometry.shared_errors.drift import estimate_drift
 from pgt_check.geometry.shared_errors.evidence import REASONS, FrameEvidence
 from pgt_check.geometry.shared_errors.registration import estimate_registration
+from pgt_check.geometry.shared_errors.screening import FrameScreen, screen_frames
 from pgt_check.geometry.shared_errors.results import (
     CalibrationEstimate,
     DriftEstimate,
@@ -64,8 +70,10 @@ __all__ = [
     "DriftWindow",
     "FitSettings",
     "FrameEvidence",
+    "FrameScreen",
     "RegistrationEstimate",
     "estimate_calibration",
     "estimate_drift",
     "estimate_registration",
+    "screen_frames",
 ]
