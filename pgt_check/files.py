@@ -38,6 +38,7 @@ __all__ = [
     "atomic_write_bytes",
     "atomic_write_text",
     "check_inputs_not_outputs",
+    "open_append",
     "load_json_limited",
     "read_bytes_limited",
     "read_text_limited",
@@ -175,6 +176,28 @@ def atomic_write_text(path: str | Path, text: str) -> None:
     name that reached the text unescaped) are written as ``\\udcff``-style escapes instead of
     failing (format-aware writers escape them first: ``safe_text``)."""
     atomic_write_bytes(path, text.encode("utf-8", errors="backslashreplace"))
+
+
+def open_append(path: str | Path) -> Any:
+    """``path`` opened for appending bytes (created if missing), never through a link: a
+    symlink at ``path`` is replaced by a new empty file (the file it points to is left as it
+    was; logged), and the open itself refuses to follow one (``O_NOFOLLOW``), so a link made
+    in between is not written through either. The one way an output is appended to (the
+    record store); ``atomic_write_bytes`` is the one way one is replaced."""
+    path = Path(path)
+    if path.is_symlink():
+        logger.warning("%s was a symbolic link (to %s); it is replaced by a new file and the "
+                       "file it pointed to is left unchanged", path, os.readlink(path))
+        path.unlink()
+    flags = os.O_WRONLY | os.O_APPEND | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0)
+    fd = os.open(path, flags | getattr(os, "O_CLOEXEC", 0), 0o666)
+    try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):
+            raise InputError(f"{path}: expected a regular file to append to")
+        return os.fdopen(fd, "ab")
+    except BaseException:
+        os.close(fd)
+        raise
 
 
 def _real(path: str | Path) -> str:

@@ -253,6 +253,7 @@ def _check_frames_locked(
 
 def _open_store(config: RunConfig, prepared: PreparedRun) -> Any:
     """The run's ``RecordStore`` context manager; an unusable ``--out`` is an InputError."""
+    from pgt_check.report.outputs import output_files
     from pgt_check.store import RecordStore
 
     out = Path(config.out)
@@ -267,6 +268,7 @@ def _open_store(config: RunConfig, prepared: PreparedRun) -> Any:
             overwrite=config.overwrite,
             settings=settings,
             frame_ids=prepared.ids,
+            outputs=output_files(),  # refused where one is a file pgt-check did not write
         )
     except OSError as err:
         raise InputError(

@@ -32,7 +32,12 @@ from typing import IO, Any
 
 from pgt_check import __version__
 from pgt_check.errors import FormatError, InputError
-from pgt_check.files import MAX_SMALL_JSON_BYTES, atomic_write_text, load_json_limited
+from pgt_check.files import (
+    MAX_SMALL_JSON_BYTES,
+    atomic_write_text,
+    load_json_limited,
+    open_append,
+)
 
 logger = logging.getLogger(__name__)
 
@@ -96,6 +101,59 @@ def mesh_content_hash(path: str | Path, side_files: Iterable[str] = ()) -> str:
             key, digest = os.path.relpath(name, folder), content_hash(name)
         h.update(f"{key}={digest};".encode())
     return "mesh+side:" + h.hexdigest()[:32]
+
+
+#: written last by ``report.outputs.write_outputs``: the output files and their sha256. Its
+#: absence means the output set is incomplete (a run or ``pgt-check report`` is writing, or was
+#: killed midway). It also says which files of the folder pgt-check wrote (``owned_outputs``)
+COMPLETION_MARKER = "outputs.complete.json"
+#: run.json's key of the output names a run claims while its outputs are incomplete
+OUTPUTS_KEY = "outputs"
+
+
+def owned_outputs(out_dir: str | Path) -> set[str]:
+    """The output files of ``out_dir`` that pgt-check wrote, which a run may replace or remove:
+    those the completion marker lists; while the outputs are incomplete (no marker: a run or
+    ``pgt-check report`` was stopped midway), the names run.json claims (a run claims every
+    output name once it found none of them foreign). Nothing in a folder without either."""
+    out = Path(out_dir)
+    marker = out / COMPLETION_MARKER
+    if marker.is_file():
+        try:
+            files = load_json_limited(marker, MAX_SMALL_JSON_BYTES, COMPLETION_MARKER)["files"]
+            if isinstance(files, dict):
+                return {str(k) for k in files}
+        except (InputError, KeyError, TypeError):
+            pass  # unreadable: what run.json claims
+    run = out / RUN_FILE
+    if run.is_file():
+        try:  # a special or oversized run.json is an InputError of its own
+            claimed = load_json_limited(run, MAX_SMALL_JSON_BYTES, RUN_FILE).get(OUTPUTS_KEY)
+        except (FormatError, AttributeError):  # not JSON, not an object: claims nothing
+            return set()
+        if isinstance(claimed, list):
+            return {str(k) for k in claimed}
+    return set()
+
+
+def check_outputs_owned(out_dir: str | Path, names: Iterable[str]) -> None:
+    """InputError naming the first of ``names`` (output files, relative to ``out_dir``) that
+    exists in ``out_dir`` but was not written there by pgt-check (``owned_outputs``): a run
+    would replace or remove a file of the user's (a ``calibrated/`` session of their own)."""
+    out = Path(out_dir)
+    owned = None
+    for name in names:
+        path = out / name
+        if not os.path.lexists(path):
+            continue
+        if owned is None:
+            owned = owned_outputs(out)
+        if name not in owned:
+            raise InputError(
+                f"{path}: this file was not written by pgt-check (no earlier run's "
+                f"{COMPLETION_MARKER} in {out} lists it) and a run would replace or remove it: "
+                "move it away or choose another --out"
+            )
 
 
 RECORDS_FILE = "records.jsonl"
@@ -256,22 +314,29 @@ class RecordStore:
         overwrite: bool = False,
         settings: Mapping[str, Any] | None = None,
         frame_ids: Iterable[str] | None = None,
+        outputs: Iterable[str] = (),
         **kwargs: Any,
     ) -> RecordStore:
         """Open the store of ``out_dir`` for a run with ``fingerprint``.
 
-        Raises InputError if ``out_dir`` holds records of other settings and neither ``resume``
+        ``outputs``: the output files the run may write or remove (relative names); each one
+        that exists must have been written by pgt-check (``check_outputs_owned``), and run.json
+        claims them all for this run. Raises InputError if ``out_dir`` holds a file of such a
+        name that pgt-check did not write, records of other settings and neither ``resume``
         nor ``overwrite`` is set, or if another run is writing to it.
         """
         if resume and overwrite:
             raise InputError("--resume and --overwrite exclude each other: pick one")
         store = cls(out_dir, fingerprint, **kwargs)
+        outputs = sorted(set(outputs))
+        check_outputs_owned(store.out_dir, outputs)  # before anything is written
         store.out_dir.mkdir(parents=True, exist_ok=True)
         store._open_file()
         try:
+            check_outputs_owned(store.out_dir, outputs)  # again, under the lock
             store._apply_policy(
                 resume=resume, overwrite=overwrite, settings=settings,
-                frame_ids=None if frame_ids is None else list(frame_ids),
+                frame_ids=None if frame_ids is None else list(frame_ids), outputs=outputs,
             )
         except BaseException:
             store.close()
@@ -279,7 +344,7 @@ class RecordStore:
         return store
 
     def _open_file(self) -> None:
-        self._file = open(self.path, "ab")  # noqa: SIM115 - closed in close()
+        self._file = open_append(self.path)  # a symlink is replaced, never written through
         try:
             import fcntl
         except ImportError:  # pragma: no cover - not POSIX: no lock
@@ -313,7 +378,7 @@ class RecordStore:
 
     def _apply_policy(
         self, *, resume: bool, overwrite: bool, settings: Mapping[str, Any] | None,
-        frame_ids: list[str] | None = None,
+        frame_ids: list[str] | None = None, outputs: list[str] | None = None,
     ) -> None:
         assert self._file is not None
         has_records = self.path.stat().st_size > 0
@@ -345,10 +410,11 @@ class RecordStore:
                     info.get("version"),
                     __version__,
                 )
-        self._write_run_info(settings, frame_ids)
+        self._write_run_info(settings, frame_ids, outputs)
 
     def _write_run_info(
-        self, settings: Mapping[str, Any] | None, frame_ids: list[str] | None = None
+        self, settings: Mapping[str, Any] | None, frame_ids: list[str] | None = None,
+        outputs: list[str] | None = None,
     ) -> None:
         info = {
             "tool": "pgt-check",
@@ -358,6 +424,8 @@ class RecordStore:
             "settings": dict(settings) if settings is not None else None,
             # the run's frames in trajectory order (records are appended as frames finish)
             "frame_ids": frame_ids,
+            # the output names this run may write (``owned_outputs`` while no marker lists them)
+            OUTPUTS_KEY: list(outputs or ()),
         }
         atomic_write_text(self.run_path, json.dumps(info, indent=2, default=str) + "\n")
 

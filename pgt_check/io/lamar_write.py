@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from pgt_check.errors import InputError
+from pgt_check.files import atomic_write_text
 from pgt_check.geometry.transforms import rotmat_to_quat
 from pgt_check.io.camera import opencv_to_colmap_params
 from pgt_check.io.lamar import POSE_LAYOUT
@@ -71,7 +72,7 @@ def write_lamar(
             for c, (_, r) in rigs.items() if c in camera_ids
         ]))
     for kind, rows in texts:
-        out[kind].write_text("\n".join(rows) + "\n", encoding="utf-8")
+        atomic_write_text(out[kind], "\n".join(rows) + "\n")  # a link replaced, not followed
     return out
 
 

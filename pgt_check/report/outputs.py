@@ -22,6 +22,7 @@ from pgt_check.correct.pose import CORRECTION_COLUMNS
 from pgt_check.files import safe_text
 from pgt_check.measure.columns import MEASUREMENT_COLUMNS, TIMING_COLUMNS
 from pgt_check.report.files import atomic_write_text
+from pgt_check.store import COMPLETION_MARKER, check_outputs_owned
 from pgt_check.verdict.frame_bounds import ACCURACY_COLUMNS
 from pgt_check.verdict.result import VERDICT_COLUMNS, RunResult
 
@@ -173,12 +174,33 @@ def build_summary(
     return _clean(summary)
 
 
-#: written last by ``write_outputs``: the output files and their sha256. Its absence means the
-#: output set is incomplete (a run or ``pgt-check report`` is writing, or was killed midway)
-COMPLETION_MARKER = "outputs.complete.json"
-#: the files the marker lists (when present)
+#: the files ``write_outputs`` writes (or removes: calibrated_sensors.txt, older plots)
 OUTPUT_FILES = ("frames.csv", "config.json", "summary.json", "report.html", "junit.xml",
                 "assets/index.json", "calibrated_sensors.txt")
+
+
+def report_files() -> tuple[str, ...]:
+    """Every file ``write_outputs`` (a run's last step and ``pgt-check report``) may write or
+    remove, relative to the output folder: ``OUTPUT_FILES`` and the plots of either format."""
+    from pgt_check.report.plots import PLOT_NAMES
+
+    plots = [f"assets/plot_{n}.{ext}" for n in PLOT_NAMES for ext in ("svg", "png")]
+    return (*OUTPUT_FILES, *plots)
+
+
+def output_files() -> tuple[str, ...]:
+    """Every file of fixed name a run may write or remove in its output folder (relative
+    names; the record store and the report panels, named by frame hashes, aside): those of
+    ``report_files`` and of the correction stage. The completion marker lists those present;
+    a run refuses to start where one exists that no marker lists (``store.check_outputs_owned``:
+    it is not the tool's to replace)."""
+    from pgt_check.correct.calibration import CALIBRATED_DIR, CALIBRATED_FILES
+    from pgt_check.correct.frames import BAD_FRAMES_NAME, CORRECTED_NAME
+    from pgt_check.correct.pose import CORRECTIONS_FILE
+    from pgt_check.correct.registration import REFINED_FILE, REGISTERED_NAME
+
+    return (*report_files(), CORRECTIONS_FILE, CORRECTED_NAME, BAD_FRAMES_NAME, REFINED_FILE,
+            REGISTERED_NAME, *(f"{CALIBRATED_DIR}/{n}" for n in CALIBRATED_FILES))
 
 
 def remove_completion_marker(out: Path) -> None:
@@ -194,9 +216,9 @@ def write_completion_marker(out: Path) -> None:
 
     out = Path(out)
     files = {}
-    for name in OUTPUT_FILES:
+    for name in output_files():
         p = out / name
-        if p.is_file():
+        if p.is_file() and not p.is_symlink():
             files[name] = hashlib.sha256(p.read_bytes()).hexdigest()
     text = json.dumps({"tool": "pgt-check", "version": __version__, "files": files}, indent=2)
     atomic_write_text(out / COMPLETION_MARKER, text + "\n")
@@ -238,6 +260,7 @@ def write_outputs(
     ``write_frame_assets``) become the detail images, None keeps whatever
     ``assets/index.json`` already lists."""
     out = Path(out)
+    check_outputs_owned(out, report_files())  # nothing of the user's is replaced or removed
     out.mkdir(parents=True, exist_ok=True)
     remove_completion_marker(out)
     atomic_write_text(out / "frames.csv", frames_csv_text(records))

@@ -14,6 +14,7 @@ from typing import Any
 
 import numpy as np
 
+from pgt_check.files import atomic_write_text
 from pgt_check.report.svg_chart import Axis, Chart, hstack
 
 logger = logging.getLogger(__name__)
@@ -48,7 +49,7 @@ def _save(svg: str, out_dir: Path, name: str) -> str:
     rel = f"assets/plot_{name}.svg"
     path = out_dir / rel
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(svg, encoding="utf-8")
+    atomic_write_text(path, svg)  # a symlink there is replaced, never written through
     return rel
 
 
