@@ -328,9 +328,9 @@ def frame_screen_entry(screen: Any) -> FrameScreenCheck:
     )  # fmt: skip
     n = len(screen.frames)
     rule = (
-        f"own pose correction significant at {screen.alpha:.0%} (Wald statistic above "
-        f"{screen.inflation:.2g} x the chi-square({screen.dof}) quantile {screen.chi2_quantile:.1f}; "
-        f"{screen.inflation:.2g}: the null spread estimated from the frames)"
+        f"own pose correction significant at {screen.alpha:.0%}: Wald statistic above "
+        f"{screen.cut:.3g} = {screen.inflation:.3g} x the 99 % quantile of chi-square"
+        f"({screen.dof:.1f}), the null fitted to the lower half of the frames' statistics"
     )
     if not out:
         return FrameScreenCheck(

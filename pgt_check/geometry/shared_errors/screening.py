@@ -17,13 +17,14 @@ The test is a significance test against a null estimated from the run itself:
    after its own correction (median of ``|r|^2`` / (2 ln 2), a 2D Gaussian's);
 3. its Wald statistic ``W = delta^T H delta / s^2`` is chi-square with 6 degrees of freedom
    when the frame agrees with the shared model and its points' errors are independent. They
-   are not (neighbouring matches share texture, the mesh is not exact), which scales ``W`` by
-   an unknown factor ``lambda``, the same for every frame of the run ("genomic control"):
-   ``lambda`` is estimated from the frames, at first from the LOWER QUARTILE of all frames'
-   statistics (with up to half of the frames wrong, and their statistics larger, the lower
-   quartile is still a quantile of the null), then from the median of the kept frames (a null
-   truncated at the cut);
-4. a frame is left out when ``W > lambda * chi2_6^-1(1 - alpha)``; the model is refitted
+   are not (neighbouring matches share texture, the mesh is not exact): that scales ``W`` and
+   concentrates it in fewer directions (an offset every point of a frame shares is 2 of the 6),
+   a heavier tail. So the null is fitted to the run as ``lambda * chi2_k``: ``k`` (1-2, see
+   ``MAX_DOF``) from the
+   spread of the logarithms of the LOWER HALF of all frames' statistics, ``lambda`` from their
+   median (the null's quartile). With up to half of the frames wrong, and their statistics
+   larger, the lower half is still a sample of the null (conservative when some are wrong);
+4. a frame is left out when ``W > lambda * chi2_k^-1(1 - alpha)``; the model is refitted
    without it, until the set stops changing. A consensus needs a majority: when more than
    half of the frames would be left out, the half with the smallest statistics is kept
    (``majority_kept``).
@@ -35,7 +36,7 @@ evidence in the pooled fits.
 A frame left out whose own correction its neighbours in the trajectory share (``W`` of the
 difference to a prediction from up to two neighbours on each side within the same cut: their
 median, the mean of the adjacent two, or the line through two on one side, since a drift grows
-along its segment), or within a quarter of its own statistic, is not an isolated error but possibly a drifting segment: it is ``shared_with_neighbours``
+along its segment), or within a tenth of its own statistic, is not an isolated error but possibly a drifting segment: it is ``shared_with_neighbours``
 and stays in the drift check's evidence, which exists to find exactly that.
 """
 
@@ -55,15 +56,22 @@ from pgt_check.geometry.shared_errors.solver import _cauchy_weights, _solve
 OWN_DOF = 6
 #: per-frame false-alarm rate of the test on a frame that agrees with the shared model
 SCREEN_ALPHA = 0.01
-#: quantile of all frames' statistics that estimates the null scale in the first round (a
-#: quantile of the null with up to 1 - 2 * 0.25 = 50 % of the frames wrong)
-NULL_QUANTILE = 0.25
+#: the degrees of freedom of the fitted null (``_null``): between 1 and 2. With independent
+#: point errors a frame's statistic is chi2_6, but an error every point of a frame shares (its
+#: matches' texture, the mesh there) concentrates in 2 of the 6 directions, which the lower half
+#: of the statistics does not show (it is floored by the independent part) while their tail
+#: follows it: a 6-dof null fitted to 40 synthetic frames with 2 px of such error left out 9-17
+#: correct frames. Taking at most 2 is conservative (the cut is up to 3.3x the chi2_6 quantile
+#: in the statistic, 1.8x in pixels, on independent errors).
+MIN_DOF, MAX_DOF = 1.0, 2.0
 #: neighbours on each side a left-out frame's own correction is compared with
 NEIGHBOURS_PER_SIDE = 2
 #: a left-out frame's error is shared with its neighbours when what they leave of it is within
-#: the cut, or at most this fraction of its own statistic (half its size: a drift's curvature
-#: between neighbours is significant on precise evidence, and still small against the drift)
-NEIGHBOUR_SHARE = 0.25
+#: the cut, or at most this fraction of its own statistic (a third of its size: a drift's
+#: curvature between neighbours is significant on precise evidence, yet 0.01-0.06 of a
+#: drifting frame's statistic on the synthetic segments; two random neighbours of a random
+#: error predicted 0.22 of it)
+NEIGHBOUR_SHARE = 0.1
 
 
 @dataclass(frozen=True)
@@ -91,7 +99,7 @@ class FrameScreen:
     chi2_quantile: float = float("nan")
     cut: float = float("nan")
     alpha: float = SCREEN_ALPHA
-    dof: int = OWN_DOF
+    dof: float = OWN_DOF
     rounds: int = 0
     majority_kept: bool = False
     left_out: tuple[str, ...] = field(default=())
@@ -110,6 +118,35 @@ def _chi2_ppf(q: float, dof: int) -> float:
     from scipy.stats import chi2
 
     return float(chi2.ppf(q, dof))
+
+
+def _log_spread(dof: float) -> float:
+    """Standard deviation of log chi2_dof over its lower half (its quantiles 0-50 %)."""
+    from scipy.stats import chi2
+
+    p = (np.arange(64) + 0.5) / 128
+    return float(np.std(np.log(chi2.ppf(p, dof))))
+
+
+def _null(stat: np.ndarray) -> tuple[float, float]:
+    """(scale, degrees of freedom) of the null ``scale * chi2_dof`` fitted to the LOWER HALF of
+    the frames' statistics (a sample of the null with up to half of the frames wrong, theirs
+    larger): the degrees of freedom from the spread of their logarithms, clamped to
+    [``MIN_DOF``, ``MAX_DOF``]; the scale from their median, the null's quartile."""
+    low = np.sort(stat)[: max(3, (len(stat) + 1) // 2)]
+    spread = float(np.std(np.log(np.maximum(low, 1e-300))))
+    lo, hi = MIN_DOF, MAX_DOF
+    if spread >= _log_spread(lo):
+        dof = lo
+    elif spread <= _log_spread(hi):
+        dof = hi
+    else:  # the spread falls with the degrees of freedom: bisection
+        for _ in range(30):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if _log_spread(mid) > spread else (lo, mid)
+        dof = 0.5 * (lo + hi)
+    scale = float(np.median(low)) / _chi2_ppf(0.25, dof)
+    return max(scale, 1e-12), dof
 
 
 def _shared_fit(p: _Problem, fw: np.ndarray, loss_scale_px: float):
@@ -168,7 +205,7 @@ def _neighbour_predictions(p: _Problem, deltas: np.ndarray, f: int) -> list[np.n
     if left and right:
         out.append(0.5 * (deltas[left[-1]] + deltas[right[0]]))
     x = p.index.astype(np.float64)
-    for a, b in ((left[-2:], None), (right[:2], None)):
+    for a in (left[-2:], right[:2]):
         if len(a) == 2 and x[a[1]] != x[a[0]]:
             slope = (deltas[a[1]] - deltas[a[0]]) / (x[a[1]] - x[a[0]])
             out.append(deltas[a[0]] + slope * (x[f] - x[a[0]]))
@@ -200,22 +237,16 @@ def screen_frames(
     if isinstance(p, str):
         return FrameScreen(False, p)
     nf = p.n_frames
-    q_null = _chi2_ppf(1.0 - alpha, OWN_DOF)
     kept = np.ones(nf, bool)
-    lam, majority, rounds = float("nan"), False, 0
+    lam, dof, q_null, majority, rounds = float("nan"), float(OWN_DOF), float("nan"), False, 0
     stat = eff = nbs = None
     for rounds in range(1, max_rounds + 1):
         fit = _shared_fit(p, kept.astype(np.float64), s.loss_scale_px)
         if fit is None:
             return FrameScreen(False, "ill_conditioned")
         deltas, hs, s2, stat, eff = _own_corrections(p, fit.state, s.loss_scale_px)
-        if rounds == 1:
-            lam = float(np.quantile(stat, NULL_QUANTILE)) / _chi2_ppf(NULL_QUANTILE, OWN_DOF)
-        else:
-            # the kept frames: the null truncated at the cut (its median is the
-            # 0.5 (1 - alpha) quantile)
-            lam = float(np.median(stat[kept])) / _chi2_ppf(0.5 * (1.0 - alpha), OWN_DOF)
-        lam = max(lam, 1e-12)
+        lam, dof = _null(stat)
+        q_null = _chi2_ppf(1.0 - alpha, dof)
         new = stat <= lam * q_null
         majority = int(new.sum()) < (nf + 1) // 2
         if majority:
@@ -236,6 +267,6 @@ def screen_frames(
         for f, fid in enumerate(p.frame_ids)
     )
     return FrameScreen(
-        True, "", frames, lam, q_null, cut, alpha, OWN_DOF, rounds, majority,
+        True, "", frames, lam, q_null, cut, alpha, dof, rounds, majority,
         tuple(f.frame_id for f in frames if f.left_out),
     )
