@@ -199,15 +199,15 @@ def images_outside_dataset(config: RunConfig, frames: Sequence[Frame]) -> list[s
 
 
 def frame_input_keys(
-    frames: Sequence[Frame], references: Any = None
+    frames: Sequence[Frame], references: Any = None, hashes: dict[str, str] | None = None
 ) -> dict[str, str]:
     """Per-frame key of what the measurement reads besides the settings: the frame's pose,
     camera, image path and image content hash (``store.content_hash``), and the same of its
     reference frames. A stored record whose key differs is measured again (a pose edited in
-    place, a replaced photo)."""
+    place, a replaced photo). ``hashes``: filled with each image file's content hash."""
     import numpy as np
 
-    cache: dict[str, str] = {}
+    cache: dict[str, str] = {} if hashes is None else hashes
 
     def part(f: Frame) -> dict[str, Any]:
         image = "none"
@@ -241,3 +241,33 @@ def measurement_fingerprint(config: RunConfig, inputs: dict[str, str] | None = N
     if not inputs:
         return config.measurement_fingerprint(schema=SCHEMA_VERSION)
     return config.measurement_fingerprint(schema=SCHEMA_VERSION, inputs=inputs)
+
+
+def input_file_hashes(
+    config: RunConfig, side_files: Sequence[str] = (), image_hashes: dict[str, str] | None = None,
+    metadata: Any = None,
+) -> dict[str, str]:
+    """Absolute path -> ``store.content_hash`` of every file the run's measurements read: the
+    trajectory (a COLMAP model folder hashes by its files), sensors file, dataparser transforms,
+    the files the reader found beside the trajectory (``metadata``, ``Trajectory.metadata``: a
+    LaMAR session's sensors, images and rigs, hloc's intrinsics), the mesh and the side files
+    its loader read (materials, textures, buffers), and the images (``image_hashes``: as
+    ``frame_input_keys`` hashed them). run.json keeps them so that ``pgt-check report`` can
+    tell which input changed since (``store.changed_inputs``)."""
+    inp = config.input
+    named = [inp.trajectory, inp.sensors, inp.dataparser_transforms, inp.mesh]
+    for key, value in dict(metadata or {}).items():
+        if (key.endswith("_file") or key in ("intrinsics", "dataparser_transforms")) \
+                and isinstance(value, str) and os.path.isfile(value):
+            named.append(value)
+    named += [f for f in side_files if not str(f).startswith("missing:")]
+    out: dict[str, str] = {}
+    for path in named:
+        if path:
+            key = os.path.abspath(path)
+            if key not in out:
+                out[key] = content_hash(path)
+    for path, digest in (image_hashes or {}).items():
+        if digest != "missing":
+            out.setdefault(os.path.abspath(path), digest)
+    return out

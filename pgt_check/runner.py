@@ -15,7 +15,7 @@ import functools
 import logging
 import time
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +26,7 @@ from pgt_check.inputs import (  # re-exported: tests and callers patch / import 
     content_hash,
     frame_input_keys,
     images_outside_dataset,
+    input_file_hashes,
     load_trajectory,
     measurement_fingerprint,
     preflight,
@@ -92,11 +93,15 @@ def _run_trajectory(traj: Trajectory, config: RunConfig, t0: float | None) -> di
     try:
         t_hash = time.perf_counter()
         inputs = {"mesh": mesh_content_hash(config.input.mesh, _side_files(checker))}
+        image_hashes: dict[str, str] = {}
+        keys = frame_input_keys(frames, references, image_hashes)
         prepared = PreparedRun.of(
-            frames, config, input_keys=frame_input_keys(frames, references), inputs=inputs,
+            frames, config, input_keys=keys, inputs=inputs,
             trajectory=traj, trajectory_format=traj.format or "in-memory",
             outside_dataset=images_outside_dataset(config, frames) if config.input.trajectory
             else (),
+            input_files=input_file_hashes(config, _side_files(checker), image_hashes,
+                                          traj.metadata),
         )
         logger.info("hashed the inputs in %.2f s", time.perf_counter() - t_hash)
         sink = panel_writer(config, prepared.fingerprint)
@@ -179,18 +184,22 @@ class PreparedRun:
     fingerprint: str
     trajectory_format: str = "in-memory"
     outside_dataset: tuple[str, ...] = ()
+    #: absolute path -> content hash of every input file (``inputs.input_file_hashes``: run.json
+    #: keeps them for ``pgt-check report``, which says which input changed since)
+    input_files: Mapping[str, str] = field(default_factory=dict)
 
     @classmethod
     def of(cls, frames: Sequence[Frame], config: RunConfig, *, input_keys: Mapping[str, str],
            inputs: Mapping[str, str], trajectory: Trajectory | None = None,
            trajectory_format: str = "in-memory",
-           outside_dataset: Sequence[str] = ()) -> PreparedRun:
+           outside_dataset: Sequence[str] = (),
+           input_files: Mapping[str, str] | None = None) -> PreparedRun:
         """Both ``input_keys`` and ``inputs`` are required: a stored measurement is reused
         only on matching content."""
         frames = tuple(frames)
         return cls(frames, trajectory if trajectory is not None else Trajectory(frames),
                    dict(input_keys), dict(inputs), measurement_fingerprint(config, dict(inputs)),
-                   trajectory_format, tuple(outside_dataset))
+                   trajectory_format, tuple(outside_dataset), dict(input_files or {}))
 
     @property
     def ids(self) -> list[str]:
@@ -269,6 +278,7 @@ def _open_store(config: RunConfig, prepared: PreparedRun) -> Any:
             settings=settings,
             frame_ids=prepared.ids,
             outputs=output_files(),  # refused where one is a file pgt-check did not write
+            input_files=prepared.input_files,
         )
     except OSError as err:
         raise InputError(

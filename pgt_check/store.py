@@ -156,6 +156,39 @@ def check_outputs_owned(out_dir: str | Path, names: Iterable[str]) -> None:
             )
 
 
+#: run.json's key of the input files' content hashes (absolute path -> ``content_hash``)
+INPUT_FILES_KEY = "input_files"
+
+
+def changed_inputs(run_info: Mapping[str, Any], config_input: Mapping[str, Any] | None = None
+                   ) -> tuple[list[str], list[str]]:
+    """(changed, unreadable): the input files of a run (run.json, ``INPUT_FILES_KEY``) whose
+    content differs now from when they were measured, and those that cannot be read any more
+    (moved or deleted: not checked). A run.json of an older version without that key: its mesh
+    alone (``settings.inputs.mesh`` against ``config_input["mesh"]``, where the hash covers the
+    mesh file alone)."""
+    files = run_info.get(INPUT_FILES_KEY)
+    if not isinstance(files, Mapping):
+        settings = run_info.get("settings")
+        stored = (settings or {}).get("inputs", {}).get("mesh") if isinstance(settings, Mapping) \
+            else None
+        mesh = (config_input or {}).get("mesh")
+        if not isinstance(stored, str) or not mesh or stored.startswith("mesh+side:"):
+            return [], []
+        files = {os.path.abspath(str(mesh)): stored}
+    changed, unreadable = [], []
+    for path, digest in files.items():
+        try:
+            now = content_hash(path)
+        except OSError:
+            now = "missing"
+        if now == "missing":
+            unreadable.append(str(path))
+        elif now != digest:
+            changed.append(str(path))
+    return changed, unreadable
+
+
 RECORDS_FILE = "records.jsonl"
 #: longest line of records.jsonl read (a record is ~15 KB; a longer line is a corrupt record)
 MAX_RECORD_LINE_BYTES = 16 * 1024**2
@@ -315,13 +348,15 @@ class RecordStore:
         settings: Mapping[str, Any] | None = None,
         frame_ids: Iterable[str] | None = None,
         outputs: Iterable[str] = (),
+        input_files: Mapping[str, str] | None = None,
         **kwargs: Any,
     ) -> RecordStore:
         """Open the store of ``out_dir`` for a run with ``fingerprint``.
 
         ``outputs``: the output files the run may write or remove (relative names); each one
         that exists must have been written by pgt-check (``check_outputs_owned``), and run.json
-        claims them all for this run. Raises InputError if ``out_dir`` holds a file of such a
+        claims them all for this run. ``input_files``: path -> content hash of each input file
+        (kept in run.json for ``changed_inputs``). Raises InputError if ``out_dir`` holds a file of such a
         name that pgt-check did not write, records of other settings and neither ``resume``
         nor ``overwrite`` is set, or if another run is writing to it.
         """
@@ -337,6 +372,7 @@ class RecordStore:
             store._apply_policy(
                 resume=resume, overwrite=overwrite, settings=settings,
                 frame_ids=None if frame_ids is None else list(frame_ids), outputs=outputs,
+                input_files=input_files,
             )
         except BaseException:
             store.close()
@@ -379,6 +415,7 @@ class RecordStore:
     def _apply_policy(
         self, *, resume: bool, overwrite: bool, settings: Mapping[str, Any] | None,
         frame_ids: list[str] | None = None, outputs: list[str] | None = None,
+        input_files: Mapping[str, str] | None = None,
     ) -> None:
         assert self._file is not None
         has_records = self.path.stat().st_size > 0
@@ -410,11 +447,11 @@ class RecordStore:
                     info.get("version"),
                     __version__,
                 )
-        self._write_run_info(settings, frame_ids, outputs)
+        self._write_run_info(settings, frame_ids, outputs, input_files)
 
     def _write_run_info(
         self, settings: Mapping[str, Any] | None, frame_ids: list[str] | None = None,
-        outputs: list[str] | None = None,
+        outputs: list[str] | None = None, input_files: Mapping[str, str] | None = None,
     ) -> None:
         info = {
             "tool": "pgt-check",
@@ -426,6 +463,8 @@ class RecordStore:
             "frame_ids": frame_ids,
             # the output names this run may write (``owned_outputs`` while no marker lists them)
             OUTPUTS_KEY: list(outputs or ()),
+            # what the measurements read (``changed_inputs``: what changed since)
+            INPUT_FILES_KEY: dict(input_files or {}),
         }
         atomic_write_text(self.run_path, json.dumps(info, indent=2, default=str) + "\n")
 

@@ -130,6 +130,12 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("out_dir")
     add_verdict_flags(p)
     p.add_argument(
+        "--rejudge-stale", action="store_true",
+        help="judge the stored measurements as they are although an input they were measured "
+        "on changed since (mesh, trajectory, sensors, images: run.json's content hashes); "
+        "without it the gate fails when one changed",
+    )
+    p.add_argument(
         "--absolute-paths",
         action="store_true",
         default=None,
@@ -151,6 +157,37 @@ def main(argv: Sequence[str]) -> int:
         return 130
 
 
+def _inputs_changed(out: Path, cfg: dict, rejudge: bool) -> dict | None:
+    """summary.json's ``inputs_changed``: the input files (run.json's content hashes) that
+    changed since they were measured, said on stderr; None when none did. Without ``rejudge``
+    its explanation is the gate's (``build_summary`` fails the gate on it)."""
+    from pgt_check.store import RUN_FILE, changed_inputs
+
+    info = load_json_limited(out / RUN_FILE, MAX_SMALL_JSON_BYTES, "run.json")
+    inp = cfg.get("input") if isinstance(cfg, dict) else None
+    changed, unreadable = changed_inputs(info if isinstance(info, dict) else {},
+                                         inp if isinstance(inp, dict) else None)
+    if unreadable:
+        print(f"pgt-check report: note: {len(unreadable)} input files of the measurements "
+              f"cannot be read any more and were not checked for changes (e.g. "
+              f"{safe_text(unreadable[0])})", file=sys.stderr)
+    if not changed:
+        return None
+    names = ", ".join(safe_text(p) for p in changed[:3]) + (
+        f" and {len(changed) - 3} more" if len(changed) > 3 else "")
+    what = f"{len(changed)} input file(s) changed since they were measured: {names}"
+    if rejudge:
+        print(f"pgt-check report: warning: {what}; --rejudge-stale: the stored measurements "
+              "are judged as they are", file=sys.stderr)
+    else:
+        print(f"pgt-check report: {what}; the stored measurements are not of these "
+              "inputs, so the gate fails: measure again (pgt-check ... --resume), or pass "
+              "--rejudge-stale to judge the stored measurements as they are", file=sys.stderr)
+    return {"files": changed, "unreadable": unreadable, "rejudged": rejudge,
+            "explanation": f"{what}: measure again with --resume (or pgt-check report "
+                           "--rejudge-stale judges the stored measurements as they are)"}
+
+
 def _report(args: argparse.Namespace) -> int:
     from pgt_check.correct.registration import REFINED_FILE
     from pgt_check.correct.result import stored_corrections
@@ -170,6 +207,7 @@ def _report(args: argparse.Namespace) -> int:
             print(f"pgt-check report: note: the output set in {out} was incomplete ({why}); "
                   "rebuilding all of it", file=sys.stderr)
         old = _old_summary(out / "summary.json")
+        stale = _inputs_changed(out, cfg, args.rejudge_stale)
         extra = {
             k: old[k]
             for k in ("trajectory_format", "shading", "setup_s", "wall_time_s",
@@ -177,6 +215,8 @@ def _report(args: argparse.Namespace) -> int:
                       "self_test")
             if k in old
         }
+        if stale is not None:
+            extra["inputs_changed"] = stale
         try:
             judged = judge_run(records, config)
         except (KeyError, ValueError, TypeError, AttributeError, IndexError) as err:

@@ -154,6 +154,10 @@ def build_summary(
         passed, why = False, accuracy.gate_explanation
     elif passed and accuracy.gate_passed:
         why = f"{why}; {accuracy.gate_explanation}"
+    changed = (extra or {}).get("inputs_changed")
+    if isinstance(changed, Mapping) and changed.get("files") and not changed.get("rejudged"):
+        # ``pgt-check report`` on measurements whose inputs changed since: fail closed
+        passed, why = False, str(changed.get("explanation") or "inputs changed")
     summary = {
         "tool": "pgt-check",
         "version": __version__,

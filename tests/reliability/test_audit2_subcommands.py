@@ -137,10 +137,16 @@ def test_outputs_replace_symlinks_not_follow(scene, tmp_path, cli, base_args, ca
     victim.write_text("keep me")
     for name in ("frames.csv", "summary.json", "report.html", "frames.csv.tmp"):
         (out / name).symlink_to(victim)
-    rc, _, _ = cli(*base_args(out=out))
+    rc, _, err = cli(*base_args(out=out))
+    # #39: a link no run of the tool wrote is the user's: refused (exit 2 naming it), kept
     case("symlinks at OUT/frames.csv, summary.json, report.html, frames.csv.tmp",
-         "replaced, target untouched", f"{rc}: target {victim.read_text()!r}, frames.csv "
-         f"{'a link' if (out / 'frames.csv').is_symlink() else 'a regular file'}")
+         "2 (not pgt-check's), target untouched", f"{rc}: target {victim.read_text()!r}, "
+         f"frames.csv {'a link' if (out / 'frames.csv').is_symlink() else 'a regular file'}")
+    assert rc == 2 and "not written by pgt-check" in err and victim.read_text() == "keep me"
+    assert (out / "frames.csv").is_symlink()
+    for name in ("frames.csv", "summary.json", "report.html"):
+        (out / name).unlink()
+    rc, _, _ = cli(*base_args(out=out))  # links at names a run wrote: test_audit3_files
     assert rc == 0 and victim.read_text() == "keep me"
     assert not (out / "frames.csv").is_symlink() and "frame_id" in (out / "frames.csv").read_text()
 
