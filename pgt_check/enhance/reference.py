@@ -51,9 +51,13 @@ def select_references(
     frames: list[Frame] | tuple[Frame, ...],
     config: ReferenceConfig = ReferenceConfig(),
     only: Iterable[str] | None = None,
+    eligible: Iterable[str] | None = None,
 ) -> dict[str, ReferenceChoice]:
     """Pick a reference for every frame (or for the frame ids in ``only``: the checked ones;
-    any frame of ``frames`` may serve); returns frame_id -> ReferenceChoice.
+    any frame of ``frames`` may serve, or only those in ``eligible``: e.g. the frames whose
+    own absolute evidence passed, so that a wrong neighbour's photo, painted onto the wrong
+    surfaces, never decides a correct frame); returns frame_id -> ReferenceChoice. Trajectory
+    positions (``min_frame_gap``) are those in ``frames`` either way.
 
     Near-linear: each frame scores only its nearest frames in a KD-tree over
     ``(c / translation_scale, q * 360 / (pi * rotation_scale_deg))`` (q the unit quaternion,
@@ -73,7 +77,7 @@ def select_references(
         return {f.frame_id: ReferenceChoice((f.frame_id,), "", 0.0, 0.0) for _, f in todo}
     if n == 0:
         return out
-    ix = _pose_index(frames, config)
+    ix = _pose_index(frames, config, None if eligible is None else set(eligible))
     count = max(1, config.count)
     gap = max(1, config.min_frame_gap)
     for i, f in todo:
@@ -102,14 +106,19 @@ class _PoseIndex:
     tree: Any  # cKDTree over ``embedded`` and its flipped quaternions (2N points)
 
 
-def _pose_index(frames: Sequence[Frame], config: ReferenceConfig) -> _PoseIndex:
-    """The KD-tree and pose arrays of ``frames`` (at least one)."""
+def _pose_index(
+    frames: Sequence[Frame], config: ReferenceConfig, eligible: set[str] | None = None
+) -> _PoseIndex:
+    """The KD-tree and pose arrays of ``frames`` (at least one); a frame outside ``eligible``
+    (when given) counts as one without a photo: it cannot serve."""
     from scipy.spatial import cKDTree
 
     n = len(frames)
     centres = np.array([f.world_from_cam[:3, 3] for f in frames])
     rotations = np.array([f.world_from_cam[:3, :3] for f in frames])
-    has_image = np.array([f.image_file is not None for f in frames])
+    has_image = np.array([
+        f.image_file is not None and (eligible is None or f.frame_id in eligible) for f in frames
+    ])
     stamps = np.array([np.nan if f.timestamp is None else float(f.timestamp) for f in frames])
     t_scale = config.translation_scale
     if t_scale is None:

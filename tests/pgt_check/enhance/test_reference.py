@@ -46,6 +46,22 @@ def test_frames_without_image_are_not_references():
     assert select_references(frames)["0"].frame_id == "2"
 
 
+def test_only_eligible_frames_serve_and_positions_keep_their_gap():
+    """References among the frames whose own absolute evidence passed (issue 38): a nearer
+    frame outside ``eligible`` never serves; the gap counts positions in the whole trajectory,
+    and a frame with no eligible one within the limits says so."""
+    frames = [_frame(i, 0.01 * i) for i in range(12)]
+    eligible = {"0", "1", "2", "9", "10", "11"}
+    refs = select_references(frames, ReferenceConfig(count=2, min_frame_gap=2),
+                             eligible=eligible)
+    assert refs["5"].frame_ids == ("2", "9")  # 3 and 7 are nearer, not eligible
+    assert refs["1"].frame_ids == ("9", "10")  # 0 and 2 eligible but within the gap (2)
+    assert set(refs["2"].frame_ids) <= eligible
+    assert select_references(frames, ReferenceConfig(max_translation=0.02),
+                             eligible=eligible)["5"].reason == "no_reference_within_limits"
+    assert select_references(frames)["5"].frame_id in {"4", "6"}  # default: every frame
+
+
 def test_min_frame_gap_skips_adjacent_frames():
     frames = [_frame(i, 0.01 * i) for i in range(30)]
     refs = select_references(frames, ReferenceConfig(min_frame_gap=10))
