@@ -336,7 +336,8 @@ def frame_screen_entry(screen: Any) -> FrameScreenCheck:
         return FrameScreenCheck(
             PASSED, "", f"run-level checks: all {n} frames with absolute evidence agree with "
             f"the shared model (none with an {rule})",
-            n, 0, screen.inflation, screen.cut, screen.alpha, screen.dof, screen.rounds,
+            n, 0, screen.inflation, screen.cut, screen.alpha, screen.dof, screen.chi2_quantile,
+            screen.rounds,
         )  # fmt: skip
     errs = np.array([f.own_error_px for f in out])
     nb = sum(f.shared_with_neighbours for f in out)
@@ -351,5 +352,5 @@ def frame_screen_entry(screen: Any) -> FrameScreenCheck:
     )
     return FrameScreenCheck(
         FINDING, "", message, n, len(out), screen.inflation, screen.cut, screen.alpha,
-        screen.dof, screen.rounds, screen.majority_kept, out,
+        screen.dof, screen.chi2_quantile, screen.rounds, screen.majority_kept, out,
     )  # fmt: skip

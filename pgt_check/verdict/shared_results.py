@@ -258,10 +258,12 @@ class FrameScreenCheck:
     n_left_out: int = 0
     #: the null's scale estimated from the frames (variance inflation of the Wald statistic)
     inflation: float | None = None
-    #: the cut on the Wald statistic: inflation x the chi-square quantile
+    #: the cut on the Wald statistic: inflation x ``chi2_quantile``
     cut: float | None = None
     alpha: float | None = None
-    dof: int | None = None
+    #: degrees of freedom of the null fitted to the frames, and its 1 - alpha quantile
+    dof: float | None = None
+    chi2_quantile: float | None = None
     rounds: int = 0
     majority_kept: bool = False
     left_out: tuple[LeftOutFrame, ...] = ()
@@ -277,6 +279,7 @@ class FrameScreenCheck:
             "cut": self.cut,
             "alpha": self.alpha,
             "dof": self.dof,
+            "chi2_quantile": self.chi2_quantile,
             "rounds": self.rounds,
             "majority_kept": self.majority_kept,
             "left_out": [asdict(f) for f in self.left_out],
