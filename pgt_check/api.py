@@ -168,6 +168,7 @@ def _rows(out: Path, cfg: RunConfig) -> list[dict[str, Any]]:
     from pgt_check.correct.result import stored_corrections
     from pgt_check.report.stored import load_run
     from pgt_check.verdict import judge_run
+    from pgt_check.verdict.separation import load_probes
 
     records, _ = load_run(out)
-    return stored_corrections(judge_run(records, cfg), out)[0].rows()
+    return stored_corrections(judge_run(records, cfg, load_probes(out)), out)[0].rows()

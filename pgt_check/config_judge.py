@@ -39,6 +39,10 @@ class VerdictConfig:
     #: a FAIL of any path with at least this many homography inliers is a FAIL, whichever path
     #: has more inliers (a confident FAIL is never overruled)
     confident_inliers: int = 40
+    #: frames per evidence path measured again at poses moved by a known amount, to check that
+    #: the path tells right from wrong on this run; a path that does not decides no frame
+    #: (``path_cannot_separate``, ``verdict/separation.py``); 0 = off
+    separation_frames: int = 8
 
     def __post_init__(self) -> None:
         _check_range("verdict.threshold_px", self.threshold_px, 0, lo_open=True)
@@ -47,6 +51,7 @@ class VerdictConfig:
         _check_range("verdict.min_inliers", self.min_inliers, 0)
         _check_range("verdict.min_inlier_ratio", self.min_inlier_ratio, 0, 1)
         _check_range("verdict.confident_inliers", self.confident_inliers, 0)
+        _check_range("verdict.separation_frames", self.separation_frames, 0, 10_000)
 
     def threshold_for(self, width: int, height: int) -> float:
         """The PASS threshold in original photo pixels for an image of this size."""

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import functools
 import logging
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import replace
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -28,7 +28,7 @@ if TYPE_CHECKING:
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["PlainMeasure", "correct_stage", "self_test_stage"]
+__all__ = ["PlainMeasure", "correct_stage", "self_test_stage", "separation_stage"]
 
 
 def correct_stage(
@@ -47,7 +47,7 @@ def correct_stage(
     shared = judged.shared
     if shared is not None:  # a failed registration check: its estimate refined
         shared = _refined(traj, measurements, shared, config, out)
-    rig = _calibrated_rig(traj, judged.shared, config, out)
+    rig = _calibrated_rig(traj, judged.shared, config, out, measurements)
     corrections, summary = {}, None
     if config.correct.frames != "none":  # corrected poses (pgt_check.correct.frames)
         from pgt_check.correct.frames import correct_run
@@ -80,13 +80,15 @@ def _refined(traj: Trajectory, measurements: list[FrameMeasurement], shared: Sha
 
 
 def _calibrated_rig(traj: Trajectory, shared: SharedChecks | None, config: RunConfig,
-                    out: Path) -> CalibratedRig | None:
-    """A significant calibration estimate written exactly, as a rig (``correct.calibration``);
-    None when there is none or it cannot be written (logged; raised with ``fail_fast``)."""
+                    out: Path, measurements: Sequence[FrameMeasurement] = ()
+                    ) -> CalibratedRig | None:
+    """A significant calibration estimate written exactly, as a rig (``correct.calibration``:
+    the measurements' evidence picks the form); None when there is none or it cannot be
+    written (logged; raised with ``fail_fast``)."""
     from pgt_check.correct.calibration import write_calibrated_rig
 
     try:
-        return write_calibrated_rig(traj, shared, out)
+        return write_calibrated_rig(traj, shared, out, measurements)
     except (OSError, ValueError, InputError) as err:  # the verdicts stand without it
         if config.fail_fast:
             raise
@@ -111,21 +113,80 @@ def self_test_stage(traj: Trajectory, result: CorrectedRun, config: RunConfig) -
     return replace(result, self_test=st)
 
 
+def separation_stage(traj: Trajectory, measurements: Sequence[FrameMeasurement],
+                     config: RunConfig, fingerprint: str = "") -> list[Any]:
+    """Frames moved by a known amount and measured again through each path that decides
+    frames (``verdict.separation``): the probes ``judge_run`` tests each path's separating
+    power with. Stored in the run folder (``SEPARATION_FILE``, for ``pgt-check report``);
+    probes stored under the same ``fingerprint`` for the same moves are reused (``--resume``).
+    [] when ``verdict.separation_frames`` is 0 or no path has enough frames (a stale file is
+    removed)."""
+    import numpy as np
+
+    from pgt_check.verdict.self_test import ROTATION, moved_frame
+    from pgt_check.verdict.separation import (
+        SEPARATION_FILE,
+        Probe,
+        load_probes,
+        probe_plan,
+        save_probes,
+    )
+
+    out = Path(config.out)
+    jobs = probe_plan(measurements, config.verdict, config.verdict.separation_frames)
+    if not jobs:
+        (out / SEPARATION_FILE).unlink(missing_ok=True)
+        return []
+    try:
+        stored = {p.job.key: p for p in load_probes(out, fingerprint)}
+    except (OSError, ValueError, KeyError, TypeError, InputError):
+        stored = {}
+    if all(j.key in stored and stored[j.key].job == j for j in jobs):
+        return [stored[j.key] for j in jobs]
+    by_id = traj.by_id()
+    frames, refs = [], {}
+    for j in jobs:
+        moved = moved_frame(by_id[j.frame_id], ROTATION, j.angle_deg, np.asarray(j.axis))
+        frames.append(replace(moved, frame_id=j.key))
+        if j.reference_id and j.reference_id in by_id:
+            refs[j.key] = (by_id[j.reference_id],)
+    paths = {p for j in jobs for p in j.paths}
+    cfg = replace(
+        config, report_details=0,
+        enhance=replace(config.enhance, mode="always" if "enhanced" in paths else "never"),
+        edges=replace(config.edges, mode="always" if "edges" in paths else config.edges.mode),
+    )
+    logger.info("separation check: %d frames measured again at poses moved by a known "
+                "amount (paths: %s)", len(frames), ", ".join(sorted(paths)))
+    measure = PlainMeasure("pgt-check separation", refs)
+    try:
+        got = {m.frame_id: m for m in measure(frames, cfg)}
+    finally:
+        measure.close()
+    probes = [Probe(j, replace(got[j.key], frame_id=j.frame_id)) for j in jobs if j.key in got]
+    save_probes(out, probes, fingerprint)
+    return probes
+
+
 class PlainMeasure:
-    """``measure(frames, config)`` for the registration refinement's rounds and the
-    self-test: the absolute paths only (no store, no references), with ``config``'s executor,
+    """``measure(frames, config)`` for the registration refinement's rounds, the self-test and
+    the separation check: no store; references only where given (frame id -> its reference
+    frames, the separation check's), with ``config``'s executor,
     in any order. In serial mode one checker is kept over all rounds (the mesh and renderer
     are built once); call ``close`` at the end. Raises RunInterrupted after a Ctrl-C / SIGTERM
     (the main pass's frames stay stored)."""
 
-    def __init__(self, desc: str = "pgt-check registration") -> None:
+    def __init__(self, desc: str = "pgt-check registration",
+                 references: Mapping[str, tuple[Frame, ...]] | None = None) -> None:
         self._checker: Any = None
         self._desc = desc
+        self._refs = dict(references or {})
 
     def __call__(self, frames: Sequence[Frame], config: RunConfig) -> list[FrameMeasurement]:
         from pgt_check.executor import iter_results, stop_on_sigint
 
-        factory: Callable[[], Any] = functools.partial(build_frame_checker, config, None)
+        factory: Callable[[], Any] = functools.partial(build_frame_checker, config,
+                                                       self._refs or None)
         if config.executor == "serial":
             if self._checker is None:
                 self._checker = factory()

@@ -39,7 +39,7 @@ from pgt_check.measure import (
     pick_references,
 )
 from pgt_check.progress import frame_progress, log_progress
-from pgt_check.remeasure import PlainMeasure, correct_stage, self_test_stage
+from pgt_check.remeasure import PlainMeasure, correct_stage, self_test_stage, separation_stage
 from pgt_check.store import mesh_content_hash
 from pgt_check.threads import run_threads
 from pgt_check.types import Frame, Trajectory
@@ -241,8 +241,11 @@ def _check_frames_locked(
     out = Path(config.out)
     stats = ExecutorStats()
     measurements, n_reused = _measure_into_store(store, prepared, config, checker_factory, stats)
-    judged = judge_run(measurements, config)
+    measurements = _reference_pass(store, prepared, config, measurements)
     traj = prepared.trajectory
+    # each path's separating power on this run: frames moved by a known amount, measured again
+    probes = separation_stage(traj, measurements, config, prepared.fingerprint)
+    judged = judge_run(measurements, config, probes)
     result = correct_stage(traj, measurements, judged, config, checker_factory)
     if config.self_test > 0:  # the stated detection limits tested (``verdict.self_test``)
         result = self_test_stage(traj, result, config)
@@ -258,6 +261,40 @@ def _check_frames_locked(
         wall_time_s=time.perf_counter() - t0,
     )
     return write_run(out, result, config, facts, assets=assets)
+
+
+def _reference_pass(
+    store: Any, prepared: PreparedRun, config: RunConfig, measurements: list[FrameMeasurement]
+) -> list[FrameMeasurement]:
+    """Frames whose enhanced path leaned on a reference whose own absolute evidence did not
+    pass are measured again with references among the frames whose evidence did
+    (``enhance_refs.verified_references``, on a first judgement of the main pass): a wrong
+    neighbour must not decide, or starve, a correct frame. Their records are appended to the
+    store (the latest one counts, so ``pgt-check report`` judges them too; ``--resume``
+    measures them again from the first choice)."""
+    from pgt_check.enhance_refs import verified_references
+
+    if config.enhance.mode == "never" or not measurements:
+        return measurements
+    refs = verified_references(prepared.trajectory, judge_run(measurements, config), config)
+    if not refs:
+        return measurements
+    frames = [f for f in prepared.frames if f.frame_id in refs]
+    logger.info("%d frames leaned on a reference whose own absolute evidence did not pass: "
+                "measured again with references that passed (%d without one)", len(frames),
+                sum(not r for r in refs.values()))
+    measure = PlainMeasure("pgt-check references", refs)
+    try:
+        got = {m.frame_id: m for m in measure(frames, config)}
+    finally:
+        measure.close()
+    keys = frame_input_keys(frames, refs)
+    for f in frames:
+        if f.frame_id in got:
+            rec = got[f.frame_id].to_json()
+            rec["input_key"] = keys.get(f.frame_id, "")
+            store.append(rec)
+    return [got.get(m.frame_id, m) for m in measurements]
 
 
 def _open_store(config: RunConfig, prepared: PreparedRun) -> Any:

@@ -172,6 +172,11 @@ def _add_verdict_args(p: argparse.ArgumentParser) -> None:
                    "--max-fail-fraction of the frames, or of a shared error, exceeds DEG "
                    "degrees or UNITS scene units (summary.json accuracy; the px threshold "
                    "still decides PASS / FAIL)")
+    g.add_argument("--separation-frames", type=int, default=None, metavar="N",
+                   help="measure N frames per evidence path again at poses moved by 4x the "
+                   "threshold: a path whose error does not grow with the move cannot tell "
+                   "right from wrong on this run and decides no frame (path_cannot_separate; "
+                   "summary.json path_separation); default 8, 0 = off")
     g.add_argument("--self-test", type=int, default=None, metavar="N",
                    help="after the verdicts, measure N PASS frames again at poses moved by "
                    "0.5-2x the stated detection limits (and those frames moved together for "
@@ -274,6 +279,7 @@ def _override_table(args: argparse.Namespace) -> dict[tuple[str, ...], Any]:
         ("run_checks", "refine_rounds"): args.registration_rounds,
         ("report_details",): args.report_details,
         ("self_test",): args.self_test,
+        ("verdict", "separation_frames"): args.separation_frames,
         ("absolute_paths",): True if args.absolute_paths else None,
         # 0 = original size: MatchConfig turns it into None
         ("match", "resize_max"): args.resize_max,
@@ -345,6 +351,7 @@ _OPTION_OF = {
     "gate.require_accuracy_units": "--require-accuracy",
     "scheduler": "--scheduler",
     "self_test": "--self-test",
+    "verdict.separation_frames": "--separation-frames",
 }
 
 

@@ -193,6 +193,7 @@ def _report(args: argparse.Namespace) -> int:
     from pgt_check.correct.result import stored_corrections
     from pgt_check.report.outputs import RunFacts, outputs_complete, write_run
     from pgt_check.verdict import judge_run
+    from pgt_check.verdict.separation import load_probes
 
     try:
         out = Path(args.out_dir)
@@ -212,13 +213,13 @@ def _report(args: argparse.Namespace) -> int:
             k: old[k]
             for k in ("trajectory_format", "shading", "setup_s", "wall_time_s",
                       "images_outside_dataset", "warnings", "executor", "corrections",
-                      "self_test")
+                      "self_test", "calibrated_rig")  # calibrated/ is not rewritten here
             if k in old
         }
         if stale is not None:
             extra["inputs_changed"] = stale
         try:
-            judged = judge_run(records, config)
+            judged = judge_run(records, config, load_probes(out))
         except (KeyError, ValueError, TypeError, AttributeError, IndexError) as err:
             if isinstance(err, InputError):
                 raise

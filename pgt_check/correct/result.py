@@ -33,7 +33,7 @@ class CorrectedRun(RunResult):
     @classmethod
     def of(cls, result: RunResult, **found: Any) -> CorrectedRun:
         """``result`` with the correction stage's ``found`` fields."""
-        return cls(result.frames, result.shared, **found)
+        return cls(result.frames, result.shared, result.separation, **found)
 
     @property
     def shared_as_reported(self) -> SharedChecks | None:
@@ -49,6 +49,7 @@ class CorrectedRun(RunResult):
         """summary.json's sections of the run-level checks (as reported) and the corrections."""
         shared = self.shared_as_reported
         out: dict[str, Any] = {} if shared is None else {"shared_errors": shared.summary()}
+        out.update(self.separation_extra())
         if self.self_test is not None:
             out["self_test"] = self.self_test.to_json()
         if self.calibrated_rig is not None:

@@ -235,6 +235,8 @@ def summary_lines(summary: Mapping[str, Any], out: str | Path) -> list[str]:
     lines += [f"accuracy: {s}" for s in (summary.get("accuracy") or {}).get("sentences") or ()]
     if (summary.get("self_test") or {}).get("sentence"):
         lines.append(str(summary["self_test"]["sentence"]))
+    lines += [f"separation: {s}" for s in
+              (summary.get("path_separation") or {}).get("sentences") or ()]
     gate = summary["gate"]
     lines.append(f"gate {'PASSED' if gate['passed'] else 'FAILED'}: {gate['explanation']}")
     lines.append(f"report: {Path(out) / 'report.html'} (all outputs in {out})")

@@ -165,6 +165,7 @@ def page_context(
         **_comparison_context(records, summary),
         "shared_errors": shared_error_rows(summary),
         **_accuracy_context(summary),
+        **_separation_context(summary),
         **_verdict_context(summary, n, stats, err, absolute_paths),
         "run_info": _run_info_rows(summary),
         "plots": list(plots),
@@ -277,6 +278,28 @@ def _accuracy_context(summary: Mapping[str, Any]) -> dict[str, Any]:
                  g(lim.get("noise_units")), g(lim.get("noise_px"))))
     return {"accuracy_sentences": [str(x) for x in acc.get("sentences") or []],
             "accuracy_rows": rows, **_self_test_context(summary, g)}
+
+
+def _separation_context(summary: Mapping[str, Any]) -> dict[str, Any]:
+    """Each path's separating power on this run (``summary["path_separation"]``,
+    ``pgt_check.verdict.separation``): one row per probed path."""
+    sep = summary.get("path_separation")
+    if not isinstance(sep, Mapping) or not sep.get("paths"):
+        return {"separation_rows": [], "separation_how": "", "separation_barred": 0}
+
+    def g(v: Any) -> str:
+        return fmt(v, ".3g") if isinstance(v, (int, float)) else "-"
+
+    rows = []
+    for name, p in (sep.get("paths") or {}).items():
+        status = {"passed": "separates", "failed": "CANNOT SEPARATE: decides no frame",
+                  "not_tested": "not tested (too few frames)"}.get(str(p.get("status")),
+                                                                   str(p.get("status")))
+        rows.append((str(name), status, f"{p.get('n_higher')} / {p.get('n_frames')}",
+                     g(p.get("p_value")), g(p.get("move_px")), g(p.get("median_given_px")),
+                     g(p.get("median_moved_px"))))
+    return {"separation_rows": rows, "separation_how": str(sep.get("how") or ""),
+            "separation_barred": int(sep.get("frames_barred") or 0)}
 
 
 def _self_test_context(summary: Mapping[str, Any], g: Any) -> dict[str, Any]:

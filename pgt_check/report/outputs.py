@@ -195,16 +195,18 @@ def report_files() -> tuple[str, ...]:
 def output_files() -> tuple[str, ...]:
     """Every file of fixed name a run may write or remove in its output folder (relative
     names; the record store and the report panels, named by frame hashes, aside): those of
-    ``report_files`` and of the correction stage. The completion marker lists those present;
+    ``report_files``, of the correction stage and the separation check's probes. The completion marker lists those present;
     a run refuses to start where one exists that no marker lists (``store.check_outputs_owned``:
     it is not the tool's to replace)."""
     from pgt_check.correct.calibration import CALIBRATED_DIR, CALIBRATED_FILES
     from pgt_check.correct.frames import BAD_FRAMES_NAME, CORRECTED_NAME
     from pgt_check.correct.pose import CORRECTIONS_FILE
     from pgt_check.correct.registration import REFINED_FILE, REGISTERED_NAME
+    from pgt_check.verdict.separation import SEPARATION_FILE
 
     return (*report_files(), CORRECTIONS_FILE, CORRECTED_NAME, BAD_FRAMES_NAME, REFINED_FILE,
-            REGISTERED_NAME, *(f"{CALIBRATED_DIR}/{n}" for n in CALIBRATED_FILES))
+            REGISTERED_NAME, SEPARATION_FILE,
+            *(f"{CALIBRATED_DIR}/{n}" for n in CALIBRATED_FILES))
 
 
 def remove_completion_marker(out: Path) -> None:
@@ -273,7 +275,8 @@ def write_outputs(
     # a significant calibration estimate as intrinsics a re-run loads (``--sensors``)
     from pgt_check.report.calibrated_sensors import write_calibrated_sensors
 
-    calibrated = write_calibrated_sensors(out, records, summary.get("shared_errors"))
+    calibrated = write_calibrated_sensors(out, records, summary.get("shared_errors"),
+                                          summary.get("calibrated_rig"))
     if calibrated is not None:
         summary["calibrated_sensors"] = _clean(calibrated)
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")

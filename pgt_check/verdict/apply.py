@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Sequence
 from dataclasses import replace
 from typing import Any
 
@@ -11,6 +11,7 @@ from pgt_check.config import RunConfig
 from pgt_check.enhance.base import Evidence
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.verdict.decide import (
+    CANNOT_SEPARATE,
     Judgement,
     Verdict,
     judge,
@@ -26,15 +27,22 @@ from pgt_check.verdict.frame_bounds import (
 )
 from pgt_check.verdict.off_mesh import off_mesh_frames
 from pgt_check.verdict.result import FrameResult, RunResult
+from pgt_check.verdict.separation import Probe, path_separation
 from pgt_check.verdict.shared import run_shared_checks
 from pgt_check.verdict.shared_results import Sensitivity
 from pgt_check.verdict.status import NOT_CHECKED
 
 
-def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> RunResult:
+def judge_run(
+    measurements: Iterable[FrameMeasurement],
+    config: RunConfig,
+    probes: Sequence[Probe] | None = None,
+) -> RunResult:
     """Run-level checks on all measurements (trajectory order), then each frame's judgement;
     a frame below ``min_coverage`` whose neighbours see the mesh well FAILs ``off_mesh``
-    (``pgt_check.verdict.off_mesh``).
+    (``pgt_check.verdict.off_mesh``). ``probes``: frames moved by known amounts and measured
+    again (``verdict.separation``): a path that does not separate them from the given poses
+    decides no frame (``path_cannot_separate``).
 
     Measurements are not changed (records.jsonl stays as measured)."""
     ms = list(measurements)
@@ -44,7 +52,9 @@ def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> Ru
         sens = Sensitivity(*world_sensitivity(ms))
         shared = replace(shared, registration=replace(shared.registration, sensitivity=sens))
     v = config.verdict
-    outs = [path_outcomes(m, v, shared) for m in ms]
+    sep = path_separation(ms, probes or (), v)
+    barred = sep.barred
+    outs = [path_outcomes(m, v, shared, barred) for m in ms]
     own = own_outcomes(ms, v, shared, outs)
     judged = [judge(m, v, shared, own, out) for m, out in zip(ms, outs, strict=True)]
     # a render that shows (almost) nothing of a mesh its neighbours see well: a gross pose
@@ -62,7 +72,7 @@ def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> Ru
     for m, j, out in zip(ms, judged, outs, strict=True):
         m2 = vouched_reference(m, j, first, v)
         if m2 is not None:
-            out = path_outcomes(m2, v, shared)
+            out = path_outcomes(m2, v, shared, barred)
             m, j = m2, judge(m2, v, shared, own, out)
         final.append((m, j, out))
     # the pose accuracy each frame's absolute evidence supports (``verdict.frame_bounds``), after
@@ -77,7 +87,9 @@ def judge_run(measurements: Iterable[FrameMeasurement], config: RunConfig) -> Ru
         drift = None if shared is None else shared.drift_px.get(m.frame_id)
         frames.append(FrameResult(m, j, v.threshold_for(m.width, m.height), drift,
                                   bounds[m.frame_id]))
-    return RunResult(tuple(frames), shared)
+    n_barred = sum(f.reason.startswith(CANNOT_SEPARATE) for f in frames)
+    separation = replace(sep, barred_frames=n_barred) if sep.paths else None
+    return RunResult(tuple(frames), shared, separation)
 
 
 def apply_verdicts(

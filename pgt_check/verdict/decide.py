@@ -16,6 +16,10 @@ from pgt_check.enhance.base import Evidence
 from pgt_check.measure.record import FrameMeasurement, MeasureReason, PathMeasurement
 from pgt_check.verdict.status import FAILED, NOT_CHECKED, PASSED
 
+#: the reason prefix of a path that cannot tell right from wrong on this run
+#: (``verdict.separation.CANNOT_SEPARATE``)
+CANNOT_SEPARATE = "path_cannot_separate"
+
 
 class Verdict(str, Enum):
     PASS = "PASS"
@@ -127,13 +131,21 @@ def _calibrated(
 
 
 def path_outcomes(
-    m: FrameMeasurement, config: VerdictConfig, shared: Any = None
+    m: FrameMeasurement,
+    config: VerdictConfig,
+    shared: Any = None,
+    barred: Mapping[str, str] | None = None,
 ) -> dict[str, tuple[Verdict, str] | None]:
     """What each path (raw, enhanced, edges) alone says, after removing the camera's estimated
-    calibration error from absolute paths when the config asks for it."""
-    out = {}
+    calibration error from absolute paths when the config asks for it. ``barred``: path ->
+    reason, the paths that cannot tell right from wrong on this run
+    (``verdict.separation``): their outcome is UNVERIFIABLE with that reason."""
+    out: dict[str, tuple[Verdict, str] | None] = {}
     for name in ("raw", "enhanced", "edges"):
         p = getattr(m, name)
+        if p is not None and barred and name in barred:
+            out[name] = (Verdict.UNVERIFIABLE, barred[name])
+            continue
         h = _calibrated(m, p, config, shared)
         out[name] = None if p is None else path_outcome(m, p, config, h)
     return out
@@ -291,11 +303,20 @@ def _confident_fail(
 
 
 def _deciding_path(m: FrameMeasurement, out: _Outcomes, base: tuple[Verdict, str]) -> _Decision:
-    """What the deciding path says (``base`` when it has no outcome)."""
-    chosen = m.chosen
+    """What the deciding path says (``base`` when it has no outcome): the measurement's
+    ``verdict_path``, or the other feature path when that one cannot separate on this run
+    (``verdict.separation``) and the other gives a PASS or FAIL."""
+    name = m.verdict_path or ""
+    o = out.get(name)
+    if o is not None and o[1].startswith(CANNOT_SEPARATE):
+        other = {"raw": "enhanced", "enhanced": "raw"}.get(name, "")
+        oo = out.get(other)
+        if oo is not None and oo[0] is not Verdict.UNVERIFIABLE:
+            name = other
+    chosen = getattr(m, name, None) if name else None
     evidence = "none" if chosen is None else chosen.evidence.value
-    verdict, reason = out.get(m.verdict_path) or base
-    return verdict, reason, evidence, m.verdict_path or ""
+    verdict, reason = out.get(name) or base
+    return verdict, reason, evidence, name
 
 
 def _without_reference(

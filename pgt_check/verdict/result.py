@@ -13,6 +13,7 @@ from pgt_check.measure.columns import headline_values
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.verdict.decide import Judgement
 from pgt_check.verdict.frame_bounds import FrameBound
+from pgt_check.verdict.separation import Separation
 from pgt_check.verdict.shared import SharedChecks
 
 #: the verdict columns every row gets beside the measurement columns, with their meaning
@@ -88,6 +89,9 @@ class RunResult:
 
     frames: tuple[FrameResult, ...]
     shared: SharedChecks | None
+    #: each evidence path's separating power on this run (``verdict.separation``; None: not
+    #: checked)
+    separation: Separation | None = None
 
     def rows(self) -> list[dict[str, Any]]:
         """frames.csv rows (``row`` of each frame), for ``pgt_check.report`` and column-wise
@@ -104,5 +108,12 @@ class RunResult:
         return frame.row()
 
     def summary_extra(self) -> dict[str, Any]:
-        """summary.json's run-level section (``shared_errors``)."""
-        return {} if self.shared is None else {"shared_errors": self.shared.summary()}
+        """summary.json's run-level section (``shared_errors``) and ``path_separation``."""
+        out = {} if self.shared is None else {"shared_errors": self.shared.summary()}
+        return {**out, **self.separation_extra()}
+
+    def separation_extra(self) -> dict[str, Any]:
+        """summary.json -> ``path_separation`` where the paths were checked."""
+        if self.separation is None or not self.separation.paths:
+            return {}
+        return {"path_separation": self.separation.summary()}
