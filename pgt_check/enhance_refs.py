@@ -1,6 +1,15 @@
-"""Renders and their reference photos for ``pgt-check enhance``: find the renders, give each
-the pose of the model image it is named like (or of a ``--render-poses`` entry), and pick the
-nearest training photo by pose (never the render's own view unless asked)."""
+"""Reference photos chosen with what the run knows.
+
+For ``pgt-check enhance``: find the renders, give each the pose of the model image it is named
+like (or of a ``--render-poses`` entry), and pick the nearest training photo by pose (never the
+render's own view unless asked).
+
+For a check run (``verified_references``): after the main pass has judged every frame, the
+frames whose enhanced path leaned on a reference frame whose own absolute evidence did not pass
+get references among those whose evidence did (``absolute_passes``). A wrong neighbour's photo
+paints its texture onto the wrong surfaces: the enhanced path of a correct frame then finds too
+few matches or a large error, and with 40 % wrong frames most frames have a wrong neighbour
+(issue 38)."""
 
 from __future__ import annotations
 
@@ -8,6 +17,7 @@ import logging
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -135,3 +145,53 @@ def pose_renders(files: Sequence[Path], poses: Trajectory) -> list[RenderItem]:
             f"(render names: {', '.join(p.stem for p in files[:3])}; pose names: {examples})"
         )
     return items
+
+
+def absolute_passes(result: Any) -> set[str]:
+    """Frame ids whose own absolute evidence passed in a judged run (a ``RunResult``): the
+    verdict PASS rests on absolute evidence, or the raw path alone says PASS; never a frame the
+    run-level checks left out (its absolute evidence disagrees with the shared model)."""
+    left_out = result.shared.left_out if result.shared is not None else frozenset()
+    out = set()
+    for fr in result.frames:
+        j = fr.judgement
+        own = (j.verdict.value == "PASS" and j.evidence == "absolute") or j.raw_verdict == "PASS"
+        if own and fr.frame_id not in left_out:
+            out.add(fr.frame_id)
+    return out
+
+
+def verified_references(
+    trajectory: Trajectory, result: Any, config: Any
+) -> dict[str, tuple[Frame, ...]]:
+    """Frame id -> new references (best first; empty: none within the limits) for every frame
+    of the judged run ``result`` whose enhanced path ran on a reference outside
+    ``absolute_passes`` and which did not PASS on absolute evidence; the new ones are chosen
+    among ``absolute_passes`` (``select_references(eligible=...)``, the run's reference
+    settings). Frames whose choice does not change are left out; so is everything when the
+    enhanced path is off or its references are the frame's own photo."""
+    from pgt_check.enhance.reference import select_references
+
+    ref_cfg = config.enhance.reference
+    if config.enhance.mode == "never" or ref_cfg.mode != "nearest":
+        return {}
+    eligible = absolute_passes(result)
+    todo = []
+    for fr in result.frames:
+        m, j = fr.measurement, fr.judgement
+        if not m.enhance_ran or (j.verdict.value == "PASS" and j.evidence == "absolute"):
+            continue
+        used = {p.reference_id for p in (m.enhanced, *m.enhanced_alternatives)
+                if p is not None and p.reference_id}
+        if used - eligible:
+            todo.append(fr.frame_id)
+    if not todo:
+        return {}
+    by_id = trajectory.by_id()
+    before = select_references(trajectory.frames, ref_cfg, only=todo)
+    after = select_references(trajectory.frames, ref_cfg, only=todo, eligible=eligible)
+    return {
+        fid: tuple(by_id[i] for i in after[fid].frame_ids)
+        for fid in todo
+        if after[fid].frame_ids != before[fid].frame_ids
+    }
