@@ -73,12 +73,14 @@ def test_api_moved_mesh_is_not_reused(scene, tmp_path, case):
     moved = trimesh.load(str(mesh), process=False)
     moved.apply_translation([0.5, 0.0, 0.0])  # the whole mesh moves 0.5 m
     moved.export(str(mesh))
+    # #39: the API measures changed inputs again by default (the CLI's --resume);
+    # resume=False refuses as the CLI does without --resume
     with pytest.raises(InputError, match="inputs.mesh") as err:
-        check(traj, mesh, out=out, limit=2, **FAST)
-    df = check(traj, mesh, out=out, limit=2, resume=True, **FAST)
+        check(traj, mesh, out=out, limit=2, resume=False, **FAST)
+    df = check(traj, mesh, out=out, limit=2, **FAST)
     case("API: whole mesh moved 0.5 m, check() again into the same out",
-         "InputError naming inputs.mesh; with resume: measured again (FAIL)",
-         f"{str(err.value)[:90]}...; resume: {list(df['verdict'])}")
+         "measured again (FAIL); with resume=False: InputError naming inputs.mesh",
+         f"{list(df['verdict'])}; resume=False: {str(err.value)[:90]}...")
     assert "FAIL" in list(df["verdict"])
 
 
