@@ -17,11 +17,22 @@ finding): ``trajectories.txt`` (the given poses, now the rig's: ``rig_<camera>``
 --mesh MESH`` re-checks the run with the estimate applied; cameras without a significant
 estimate are written unchanged. A folder of an earlier run is removed when nothing is
 significant.
+
+Which form: the estimator models the error as a camera rotation, which moves the images like
+a principal-point shift near the centre but not at the edges (a rotation of 0.8 deg at 65 deg
+field of view differs from a 4 px shift by up to 1.4 px there), and the views rarely tell the
+two apart. Written as a rotation, a principal-point error was left as that pattern and its own
+re-check failed (#39). So, given the run's measurements, each camera is written in the form
+that fits the pooled evidence of its frames better (``choose_form``): ``rotation`` (the rig
+rotation, intrinsics as given but the focal length) or ``principal_point`` (the principal point
+shift fitted on the evidence and the focal length in ``sensors.txt``, the rig keeping only the
+roll and the translation).
 """
 
 from __future__ import annotations
 
 import logging
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -69,6 +80,98 @@ def rig_from_cam(entry: CalibrationCheck) -> np.ndarray:
     return invert_rigid(m)
 
 
+#: the written forms of a camera's calibration error (module docstring)
+FORMS = ("rotation", "principal_point")
+#: residuals above this many px are capped when the forms are compared (outliers, other errors)
+FORM_RESIDUAL_CAP_PX = 5.0
+
+
+def roll_only(rotation: np.ndarray) -> np.ndarray:
+    """(3, 3) the rotation about the optical axis (z) of ``rotation``: its roll."""
+    r = np.asarray(rotation, np.float64)
+    roll = np.arctan2(r[1, 0] - r[0, 1], r[0, 0] + r[1, 1])
+    c, s = np.cos(roll), np.sin(roll)
+    return np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+
+
+def _predict(k: np.ndarray, rotation: np.ndarray, t: np.ndarray, pts_cam: np.ndarray
+             ) -> np.ndarray:
+    """(N, 2) pixels of checked-camera points (N, 3) in a camera rotated and moved by
+    (rotation, t) (``true_cam_from_checked_cam``) with intrinsics ``k`` (3, 3)."""
+    x = pts_cam @ rotation.T + t
+    z = np.where(np.abs(x[:, 2:3]) < 1e-9, 1e-9, x[:, 2:3])
+    return (x[:, :2] / z) @ k[:2, :2].T + k[:2, 2]
+
+
+@dataclass(frozen=True)
+class WrittenForm:
+    """A camera's calibration estimate as it is written: the camera (intrinsics of the photos)
+    and ``rig_from_cam`` (4, 4); ``form`` one of ``FORMS``; ``residual_px`` the mean (capped)
+    displacement it leaves on the pooled evidence (None without evidence)."""
+
+    form: str
+    camera: Camera
+    rig_from_cam: np.ndarray
+    residual_px: float | None = None
+
+
+def _pooled_evidence(measurements: Sequence[Any], key: str) -> tuple[np.ndarray, np.ndarray]:
+    """(pts_cam (N, 3), pts2d (N, 2)) of the frames of camera ``key`` with absolute evidence."""
+    cams, pixels = [], []
+    for m in measurements:
+        ev = getattr(m, "evidence", None)
+        if ev is None or getattr(m, "camera_id", None) != key or not len(ev.pts2d):
+            continue
+        cams.append(np.asarray(ev.pts_cam, np.float64).reshape(-1, 3))
+        pixels.append(np.asarray(ev.pts2d, np.float64).reshape(-1, 2))
+    if not cams:
+        return np.zeros((0, 3)), np.zeros((0, 2))
+    return np.concatenate(cams), np.concatenate(pixels)
+
+
+def choose_form(camera: Camera, entry: CalibrationCheck,
+                measurements: Sequence[Any] | None = None) -> WrittenForm:
+    """``camera``'s significant calibration estimate ``entry`` in the form the pooled evidence
+    of its frames (``measurements``' absolute evidence) fits better (module docstring). Without
+    evidence: the rotation (the estimate as it is)."""
+    s = float(entry.focal_scale or 1.0)
+    rotation = np.asarray(entry.rotation, np.float64)
+    t = np.zeros(3) if entry.translation is None else \
+        np.asarray(entry.translation, np.float64).reshape(3)
+    scaled = with_focal_scale(camera, s)
+    rig = WrittenForm("rotation", scaled, rig_from_cam(entry))
+    pts_cam, pts2d = _pooled_evidence(measurements or (), camera_key(camera))
+    fx, fy = camera.focal
+    cx, cy = camera.principal_point
+    k = np.array([[fx * s, 0.0, cx], [0.0, fy * s, cy], [0.0, 0.0, 1.0]])
+    roll = roll_only(rotation)
+    if len(pts2d) < 8:  # no evidence to fit the shift on: where the rotation sends the axis
+        return rig
+    front = (pts_cam @ rotation.T + t)[:, 2] > 1e-6
+    pts_cam, pts2d = pts_cam[front], pts2d[front]
+    if len(pts2d) < 8:
+        return rig
+
+    def residual(kk: np.ndarray, r: np.ndarray) -> float:
+        d = np.linalg.norm(_predict(kk, r, t, pts_cam) - pts2d, axis=1)
+        return float(np.mean(np.minimum(d, FORM_RESIDUAL_CAP_PX)))
+
+    # the principal point shift that best explains the evidence with the roll and translation
+    # (the median offset of the points that are not outliers of the rotation form)
+    offset = pts2d - _predict(k, roll, t, pts_cam)
+    near = np.linalg.norm(pts2d - _predict(k, rotation, t, pts_cam), axis=1) \
+        < FORM_RESIDUAL_CAP_PX
+    shift = np.median(offset[near] if near.sum() >= 8 else offset, axis=0)
+    k_pp = k.copy()
+    k_pp[:2, 2] += shift
+    pp_camera = with_focal_scale(camera, s, (cx + float(shift[0]), cy + float(shift[1])))
+    m = np.eye(4)
+    m[:3, :3], m[:3, 3] = roll, t
+    pp = WrittenForm("principal_point", pp_camera, invert_rigid(m), residual(k_pp, roll))
+    rig = WrittenForm("rotation", scaled, rig.rig_from_cam, residual(k, rotation))
+    return pp if pp.residual_px < rig.residual_px else rig
+
+
 def significant_calibrations(shared: SharedChecks | None) -> dict[str, CalibrationCheck]:
     """Camera key -> its calibration check, for the cameras whose estimate is significant and
     complete (rotation and focal scale)."""
@@ -81,21 +184,25 @@ def significant_calibrations(shared: SharedChecks | None) -> dict[str, Calibrati
 
 
 def write_calibrated_rig(
-    trajectory: Trajectory, shared: SharedChecks | None, out: str | Path
+    trajectory: Trajectory, shared: SharedChecks | None, out: str | Path,
+    measurements: Sequence[Any] | None = None,
 ) -> CalibratedRig | None:
     """Write ``out/calibrated/`` (module docstring) and return what it holds; None (and an
-    earlier run's files removed) when no camera's calibration is significant."""
+    earlier run's files removed) when no camera's calibration is significant.
+    ``measurements``: the run's (their absolute evidence picks each camera's written form,
+    ``choose_form``; without them the rotation is written)."""
     from pgt_check.io.lamar_write import write_lamar
 
     folder = Path(out) / CALIBRATED_DIR
     cals = significant_calibrations(shared)
     cams = {f.camera for f in trajectory.frames}
     rigs: dict[Camera, tuple[Camera, np.ndarray]] = {}
+    forms: dict[Camera, WrittenForm] = {}
     for cam in cams:
         entry = cals.get(camera_key(cam))
         if entry is not None:
-            rigs[cam] = (with_focal_scale(cam, float(entry.focal_scale or 1.0)),
-                         rig_from_cam(entry))
+            forms[cam] = choose_form(cam, entry, measurements)
+            rigs[cam] = (forms[cam].camera, forms[cam].rig_from_cam)
     if not rigs:
         for name in CALIBRATED_FILES:
             (folder / name).unlink(missing_ok=True)
@@ -106,7 +213,8 @@ def write_calibrated_rig(
     logger.info("wrote %s (the calibration estimate as a rig, %d camera(s))", folder, len(rigs))
     return CalibratedRig(
         trajectory_file=f"{CALIBRATED_DIR}/{files['trajectories'].name}",
-        cameras={camera_key(c): RigCamera.of(e, r) for c, (e, r) in rigs.items()},
+        cameras={camera_key(c): RigCamera.of(e, r, forms[c].form, forms[c].residual_px)
+                 for c, (e, r) in rigs.items()},
     )
 
 
@@ -119,18 +227,22 @@ class RigCamera:
     rig_from_cam: np.ndarray  # (4, 4)
     rotation_deg: float
     translation: float
+    form: str = "rotation"  # one of ``FORMS``
+    residual_px: float | None = None  # what the form leaves on the evidence (``choose_form``)
 
     @classmethod
-    def of(cls, camera: Camera, rig: np.ndarray) -> RigCamera:
+    def of(cls, camera: Camera, rig: np.ndarray, form: str = "rotation",
+           residual_px: float | None = None) -> RigCamera:
         from pgt_check.geometry.transforms import rotation_angle_deg
 
         rig = np.asarray(rig, np.float64)
         return cls(camera_key(camera), rig, rotation_angle_deg(rig[:3, :3]),
-                   float(np.linalg.norm(rig[:3, 3])))
+                   float(np.linalg.norm(rig[:3, 3])), form, residual_px)
 
     def to_json(self) -> dict[str, Any]:
         return {"camera_written": self.camera_written, "rig_from_cam": self.rig_from_cam.tolist(),
-                "rotation_deg": self.rotation_deg, "translation": self.translation}
+                "rotation_deg": self.rotation_deg, "translation": self.translation,
+                "form": self.form, "residual_px": self.residual_px}
 
 
 @dataclass(frozen=True)

@@ -112,12 +112,27 @@ def _sensor_ids(frame_ids: Sequence[str], n: int) -> list[str]:
     return ids if ids else [f"cam{n}"]
 
 
+def _fitted_camera(rig: Mapping[str, Any] | None, cam_id: str) -> Camera | None:
+    """The camera the run wrote into ``calibrated/`` for ``cam_id`` when it wrote the error
+    as a principal-point shift fitted on the evidence (``correct.calibration.choose_form``:
+    the evidence fits it better than the rotation); None otherwise."""
+    entry = ((rig or {}).get("cameras") or {}).get(cam_id)
+    if not isinstance(entry, Mapping) or entry.get("form") != "principal_point":
+        return None
+    try:
+        return parse_camera_key(str(entry.get("camera_written")))
+    except ValueError:
+        return None
+
+
 def calibrated_sensors_text(
-    rows: Sequence[Mapping[str, Any]], shared: Mapping[str, Any] | None
+    rows: Sequence[Mapping[str, Any]], shared: Mapping[str, Any] | None,
+    rig: Mapping[str, Any] | None = None,
 ) -> tuple[str, dict[str, Any]] | None:
     """(file text, summary entry) for the cameras whose calibration is significant; None when
     none is. ``rows``: judged rows (``frame_id``, ``camera_id``); ``shared``: the summary's
-    ``shared_errors``."""
+    ``shared_errors``; ``rig``: its ``calibrated_rig`` (a camera written there as a fitted
+    principal-point shift is written so here too: the file and ``calibrated/`` agree)."""
     calib = (shared or {}).get("calibration") or {}
     lines = [
         "# calibrated_sensors.txt: written by pgt-check from the run-level calibration estimate",
@@ -125,7 +140,10 @@ def calibrated_sensors_text(
         "# sends the optical axis). Re-run with --sensors calibrated_sensors.txt.",
         "# sensor_id, name, sensor_type, [sensor_params]+",
     ]
-    entry: dict[str, Any] = {"file": CALIBRATED_SENSORS, "cameras": {}}
+    entry: dict[str, Any] = {"file": CALIBRATED_SENSORS, "cameras": {}, "not_written": {}}
+    # a camera whose intrinsics would leave more than this is not written: the file would not
+    # pass its own re-check (#39)
+    limit = (shared or {}).get("threshold_px")
     n = 0
     for cam_id, e in sorted(calib.items()):
         if not isinstance(e, Mapping) or e.get("status") not in SIGNIFICANT:
@@ -141,19 +159,36 @@ def calibrated_sensors_text(
         depth = _median_depth(rows, cam_id)
         cc = calibrated_camera(cam, np.asarray(e["rotation"], float), float(e["focal_scale"]),
                                e.get("translation"), depth)
+        fitted = _fitted_camera(rig, cam_id)
+        if fitted is not None:  # the fitted shift; what is left: the roll and translation
+            from pgt_check.correct.calibration import roll_only
+
+            left = calibrated_camera(fitted, roll_only(np.asarray(e["rotation"], float)), 1.0,
+                                     e.get("translation"), depth)
+            cc = CalibratedCamera(fitted, cc.roll_deg, cc.translation, left.residual_px,
+                                  cc.effect_px)
+        if isinstance(limit, (int, float)) and cc.residual_px > limit:
+            entry["not_written"][cam_id] = (
+                f"intrinsics cannot express this estimate: they would leave {cc.residual_px:.2f} "
+                f"px of its {cc.effect_px:.2f} px (roll, camera-to-sensor translation), above "
+                f"the {limit:.2f} px threshold; calibrated/ holds it exactly")
+            continue
         params = opencv_to_colmap_params(cc.camera.model, cc.camera.params)
         ptxt = ", ".join(f"{p:.10g}" for p in params)
         sids = _sensor_ids(frames, n)
         n += 1
         tx, ty, tz = cc.translation
+        left = (f"the file leaves {cc.residual_px:.2f} px of the estimate's {cc.effect_px:.2f} px "
+                f"(mean over the image at depth {depth:.3g})"
+                + ("" if fitted is None else "; the principal point is the shift fitted on the "
+                   "evidence, as in calibrated/"))
         lines.append(
             f"# {cam_id}: roll {cc.roll_deg:+.4f} deg and camera-to-sensor translation "
-            f"({tx:+.5g}, {ty:+.5g}, {tz:+.5g}) scene units are not expressible here; the "
-            f"file leaves {cc.residual_px:.2f} px of the estimate's {cc.effect_px:.2f} px "
-            f"(mean over the image at depth {depth:.3g})"
+            f"({tx:+.5g}, {ty:+.5g}, {tz:+.5g}) scene units are not expressible here; {left}"
         )
-        lines.append(f"# --camera {cc.camera.model},{cc.camera.width},{cc.camera.height},"
-                     + ",".join(f"{p:.10g}" for p in params))
+        camera_arg = f"{cc.camera.model},{cc.camera.width},{cc.camera.height}," + ",".join(
+            f"{p:.10g}" for p in params)
+        lines.append(f"# --camera {camera_arg}")
         for sid in sids:
             lines.append(f"{sid}, {sid}, camera, {cc.camera.model}, {cc.camera.width}, "
                          f"{cc.camera.height}, {ptxt}")
@@ -165,9 +200,17 @@ def calibrated_sensors_text(
             "translation": list(cc.translation),
             "residual_px": cc.residual_px,
             "effect_px": cc.effect_px,
+            # the same intrinsics for formats without a sensors file (TUM, ...): ``--camera``
+            "camera_arg": camera_arg,
+            "principal_point": "fitted" if fitted is not None else "rotation",
         }
     if not entry["cameras"]:
+        if entry["not_written"]:
+            logger.info("calibrated sensors not written: %s",
+                        "; ".join(entry["not_written"].values()))
         return None
+    if not entry["not_written"]:
+        del entry["not_written"]
     return "\n".join(lines) + "\n", entry
 
 
@@ -180,11 +223,12 @@ def _median_depth(rows: Sequence[Mapping[str, Any]], cam_id: str) -> float:
 
 
 def write_calibrated_sensors(
-    out: Path, rows: Sequence[Mapping[str, Any]], shared: Mapping[str, Any] | None
+    out: Path, rows: Sequence[Mapping[str, Any]], shared: Mapping[str, Any] | None,
+    rig: Mapping[str, Any] | None = None,
 ) -> dict[str, Any] | None:
     """Write (or remove a stale) ``calibrated_sensors.txt`` in ``out``; its summary entry."""
     path = Path(out) / CALIBRATED_SENSORS
-    made = calibrated_sensors_text(rows, shared)
+    made = calibrated_sensors_text(rows, shared, rig)
     if made is None:
         path.unlink(missing_ok=True)
         return None

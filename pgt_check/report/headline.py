@@ -55,7 +55,7 @@ def failure_headline(summary: Mapping[str, Any], out: str | Path) -> list[str]:
         return []
     settings = summary.get("settings") or {}
     inp = settings.get("input") or {}
-    traj, mesh = inp.get("trajectory") or "TRAJECTORY", inp.get("mesh") or "MESH"
+    traj, mesh = _InputCommand.of(inp, summary), inp.get("mesh") or "MESH"
     out = Path(out)
     cal_sig = {k: v for k, v in calib.items() if v.get("status") in ("failed", "finding")}
     texture = (shared.get("texture") or {}).get("status") == "finding"
@@ -67,6 +67,49 @@ def failure_headline(summary: Mapping[str, Any], out: str | Path) -> list[str]:
     if change_failed:
         return _calibration_change_lines(change_failed)
     return _drift_lines(summary, drift)
+
+
+#: trajectory formats that read a sensors file (``--sensors``); the others take ``--camera``
+SENSORS_FORMATS = ("lamar", "hloc")
+
+
+class _InputCommand:
+    """The trajectory part of a re-run command: the trajectory and the input options of the
+    run but its intrinsics (``--sensors`` / ``--camera``), and the intrinsics option that
+    loads a calibrated camera for its format: ``--sensors calibrated_sensors.txt`` where the
+    format reads one, ``--camera MODEL,w,h,...`` (the file's one camera) where it does not
+    (TUM, COLMAP, ...: ``--sensors`` is refused there)."""
+
+    def __init__(self, path: Any, options: str, fmt: Any, camera_args: list[str]) -> None:
+        self.path, self.options, self.fmt, self.camera_args = path, options, fmt, camera_args
+
+    @classmethod
+    def of(cls, inp: Mapping[str, Any], summary: Mapping[str, Any]) -> _InputCommand:
+        options = ""
+        fmt = inp.get("format")
+        if fmt and fmt != "auto":
+            options += f" --format {_q(fmt)}"
+        for key, flag in (("images", "--images"),
+                          ("dataparser_transforms", "--dataparser-transforms")):
+            if inp.get(key):
+                options += f" {flag} {_q(inp[key])}"
+        cams = ((summary.get("calibrated_sensors") or {}).get("cameras") or {}).values()
+        args = [str(c["camera_arg"]) for c in cams
+                if isinstance(c, Mapping) and c.get("camera_arg")]
+        return cls(inp.get("trajectory") or "TRAJECTORY", options,
+                   summary.get("trajectory_format") or fmt, args)
+
+    def __str__(self) -> str:
+        return str(self.path)
+
+    def intrinsics(self, sensors_file: Path) -> str | None:
+        """The option that loads the calibrated intrinsics; None where none can (several
+        cameras in a format without a sensors file)."""
+        if self.fmt in SENSORS_FORMATS or self.fmt is None:  # None: an older summary
+            return f"--sensors {_q(sensors_file)}"
+        if len(self.camera_args) == 1:
+            return f"--camera {_q(self.camera_args[0])}"
+        return None
 
 
 def _calibration_fixes(out: Path, traj: Any, mesh: Any, texture: bool = False) -> list[str]:
@@ -81,10 +124,13 @@ def _calibration_fixes(out: Path, traj: Any, mesh: Any, texture: bool = False) -
                      f"{_q(mesh)} --out {_q(str(out) + '-calibrated')}"
                      + (" --shading shaded" if texture else ""))
     sensors_file = out / CALIBRATED_SENSORS
-    if sensors_file.is_file():
+    cmd = traj if isinstance(traj, _InputCommand) else _InputCommand(traj, "", "lamar", [])
+    intrinsics = cmd.intrinsics(sensors_file) if sensors_file.is_file() else None
+    if intrinsics is not None:
         lines.append(
-            f"{'or, as intrinsics only' if rig.is_file() else 'fix'}: pgt-check {_q(traj)} "
-            f"--mesh {_q(mesh)} --sensors {_q(sensors_file)} --out {_q(str(out) + '-calibrated')}"
+            f"{'or, as intrinsics only' if rig.is_file() else 'fix'}: pgt-check {_q(cmd.path)}"
+            f"{cmd.options} --mesh {_q(mesh)} {intrinsics} --out "
+            f"{_q(str(out) + '-calibrated')}"
         )
     return lines
 

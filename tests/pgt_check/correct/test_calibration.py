@@ -118,3 +118,48 @@ def test_frames_without_an_image_keep_their_pose(tmp_path):
     entry = write_calibrated_rig(Trajectory(tuple(frames)), shared, tmp_path)
     back = read_trajectory(tmp_path / entry.trajectory_file)
     assert len(back) == 3 and [f.image_file is None for f in back] == [False, True, False]
+
+
+def _evidence(camera: Camera, project, n: int = 400):
+    """Measurements of ``camera`` whose evidence points (checked camera frame) are seen at
+    ``project(pts_cam) -> (N, 2)`` in the photos."""
+    rng = np.random.default_rng(5)
+    fx, fy = camera.focal
+    cx, cy = camera.principal_point
+    u = rng.uniform(0, camera.width - 1, n)
+    v = rng.uniform(0, camera.height - 1, n)
+    z = rng.uniform(2.0, 4.0, n)
+    pts = np.c_[(u - cx) / fx * z, (v - cy) / fy * z, z]
+    ev = SimpleNamespace(pts_cam=pts, pts2d=project(pts))
+    return [SimpleNamespace(evidence=ev, camera_id=camera_key(camera))]
+
+
+def _pinhole(k: np.ndarray, x: np.ndarray) -> np.ndarray:
+    return (x[:, :2] / x[:, 2:3]) @ k[:2, :2].T + k[:2, 2]
+
+
+@pytest.mark.parametrize("truth", ["principal_point", "rotation"])
+def test_the_written_form_is_the_one_the_evidence_fits(truth):
+    """#39: a principal point 4 px off, estimated as a rotation of about 0.9 deg, is written as
+    the shift fitted on the evidence (the rotation left up to 1.4 px at the image edges and its
+    re-check failed); a true rotation stays a rotation."""
+    from pgt_check.correct.calibration import choose_form
+
+    cam = Camera.pinhole(320, 240, 250.0, 250.0, 163.5, 119.5)  # the photos': cx 159.5
+    k_true = np.array([[250.0, 0, 159.5], [0, 250.0, 119.5], [0, 0, 1]])
+    r = axis_angle_to_rotmat(np.array([0.0, 1.0, 0.0]), -np.degrees(np.arctan(3.49 / 250)))
+    entry = CalibrationCheck(status="finding", reason="", rotation=r.tolist(), focal_scale=1.0)
+    k = np.array([[250.0, 0, 163.5], [0, 250.0, 119.5], [0, 0, 1]])
+    if truth == "principal_point":
+        ms = _evidence(cam, lambda x: _pinhole(k_true, x))
+    else:
+        ms = _evidence(cam, lambda x: _pinhole(k, x @ r.T))
+    form = choose_form(cam, entry, ms)
+    assert form.form == truth
+    assert form.residual_px < 0.05
+    if truth == "principal_point":
+        assert_allclose(form.camera.principal_point, (159.5, 119.5), atol=0.01)
+        assert_allclose(form.rig_from_cam, np.eye(4), atol=1e-9)
+    else:
+        assert form.camera.principal_point == cam.principal_point
+    assert choose_form(cam, entry).form == "rotation"  # no evidence: the estimate as it is
