@@ -21,6 +21,14 @@ class OneLineErrorParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {safe_text(message)} (see {self.prog} --help)\n")
 
 
+def path_arg(text: str) -> str:
+    """argparse type of a path option or argument: an empty or blank path is a usage error
+    (exit 2), never the current directory by accident."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(f"expected a path, got {text!r}")
+    return text
+
+
 def parse_args(parser: argparse.ArgumentParser, argv: Sequence[str]) -> argparse.Namespace | int:
     """``parser.parse_args`` without SystemExit: the namespace, or the exit code argparse chose
     (2 for a usage error, 0 after --help / --version) for the caller to return."""

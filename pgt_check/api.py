@@ -140,7 +140,8 @@ def check(
         inp["trajectory"] = trajectory.source
     settings = _plain_paths(settings)
     data = merge(merge(base, {"input": inp}), settings)
-    if "resume" not in settings and not data.get("overwrite"):
+    explicit = "resume" in settings or (not isinstance(config, RunConfig) and "resume" in base)
+    if not explicit and not data.get("overwrite"):
         data["resume"] = True  # changed inputs are measured again (module docstring)
     if "out" not in settings and "out" not in base:
         data["out"] = tempfile.mkdtemp(prefix="pgt-check-")

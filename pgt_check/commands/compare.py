@@ -18,6 +18,7 @@ from pgt_check._cli import (
     configure_logging,
     install_sigterm_handler,
     parse_args,
+    path_arg,
 )
 from pgt_check.compare import (
     check_compare_options,
@@ -57,7 +58,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--tie-px", type=float, default=0.5,
                    help="corner errors closer than this are a tie (default 0.5 px)")
     p.add_argument("--limit", type=int, default=None, help="compare only the first N frames")
-    p.add_argument("--out", default=".", help="folder for compare.csv and compare.json")
+    p.add_argument("--out", default=".", type=path_arg, help="folder for compare.csv and compare.json")
     p.add_argument("-q", "--quiet", action="store_true")
     return p
 

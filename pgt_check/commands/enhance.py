@@ -16,6 +16,7 @@ from pgt_check._cli import (
     configure_logging,
     install_sigterm_handler,
     parse_args,
+    path_arg,
 )
 from pgt_check.enhance_folder import enhance_folder, summary_lines
 from pgt_check.errors import InputError
@@ -35,7 +36,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("renders", help="folder of rendered images (.png/.jpg, top level)")
     p.add_argument("model", help="training images with poses: transforms.json, COLMAP model or "
                    "any pose file pgt-check reads")
-    p.add_argument("--out", required=True, help="output folder")
+    p.add_argument("--out", required=True, type=path_arg, help="output folder")
     p.add_argument("--format", default="auto", choices=["auto", *FORMATS],
                    help="format of MODEL")
     p.add_argument("--images", default=None, help="image folder of MODEL")

@@ -12,7 +12,7 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from pgt_check._cli import OneLineErrorParser, install_sigterm_handler, parse_args
+from pgt_check._cli import OneLineErrorParser, install_sigterm_handler, parse_args, path_arg
 from pgt_check.config import RunConfig, merge
 from pgt_check.errors import InputError
 from pgt_check.files import MAX_SMALL_JSON_BYTES, load_json_limited, safe_text
@@ -127,7 +127,7 @@ def build_parser() -> argparse.ArgumentParser:
     p = OneLineErrorParser(
         prog="pgt-check report", description="Rebuild outputs of a run from its stored records."
     )
-    p.add_argument("out_dir")
+    p.add_argument("out_dir", type=path_arg)
     add_verdict_flags(p)
     p.add_argument(
         "--rejudge-stale", action="store_true",

@@ -26,6 +26,18 @@ def test_empty_out_is_a_usage_error(out, scene, tmp_path, cli, base_args, case, 
     assert list(tmp_path.iterdir()) == [scene]  # nothing written
 
 
+@pytest.mark.parametrize("command", ["report", "compare", "enhance"])
+def test_subcommand_empty_out_is_a_usage_error(command, scene, tmp_path, cli, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    argv = {"report": ["report", " "],
+            "compare": ["compare", scene / "trajectories.txt", scene / "trajectories.txt",
+                        "--out", ""],
+            "enhance": ["enhance", scene / "images", "reproject", "--out", ""]}[command]
+    rc, _, err = cli(*argv)
+    assert rc == 2 and "expected a path" in _error_line(err)
+    assert list(tmp_path.iterdir()) == [scene]
+
+
 def test_api_empty_out_is_an_input_error(scene):
     from pgt_check.api import check
     from pgt_check.errors import InputError
