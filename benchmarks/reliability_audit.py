@@ -225,7 +225,10 @@ def main(argv: list[str] | None = None) -> int:
     if first and COMMAND_LINE not in first:  # the command at the top of the report
         title, _, rest = first.partition("\n")
         first = f"{title}\n\n{COMMAND_LINE}\n{rest}"
-    args.report.write_text((first + "\n\n" if first else "") + text, encoding="utf-8")
+    later = "\n## Third audit"  # sections after this one (issue #39) are kept
+    tail = later + old.split(later, 1)[1] if later in old else ""
+    args.report.write_text((first + "\n\n" if first else "") + text.rstrip("\n") + "\n" + tail,
+                           encoding="utf-8")
     print(f"wrote {args.report}")
     return 0
 
