@@ -13,6 +13,12 @@ rotation ``R``, a focal scale ``s`` and, with ``--calibration-translation``, a t
   leaves, measured over the image at the evidence's depth (``residual_px``), and the
   ``--camera`` value for formats without a sensors file (TUM, hloc).
 
+Where the run wrote the camera into ``calibrated/`` as a principal-point shift fitted on the
+evidence (``correct.calibration.choose_form``: the evidence fits it better than the rotation),
+that principal point is written here too. A camera whose estimate the file would leave above
+the run-level threshold (a camera-to-sensor translation, a large roll) is not written
+(``not_written``): the file would not pass its own re-check; ``calibrated/`` holds it.
+
 The file uses the LaMAR sensors format (``sensor_id, name, camera, MODEL, w, h, params``,
 COLMAP pixel convention); for LaMAR inputs the sensor ids are those of the frames.
 """
