@@ -393,3 +393,55 @@ def test_long_runs_pool_a_bounded_number_of_points(truth, monkeypatch):
     monkeypatch.setattr(shared, "MAX_POOLED_POINTS", 20 * 60)
     se = judge_run(ms, RunConfig()).shared.summary()
     assert se["registration"]["status"] == "failed", se["registration"]["message"]
+
+
+def _sweep(n: int, cam_rotation: np.ndarray | None = None) -> Trajectory:
+    """A 7-Scenes-like sweep: the camera walks 60 deg around the scene looking at its middle;
+    with ``cam_rotation`` the photos were taken by a camera turned by it against the given
+    poses (a calibration error every frame shares)."""
+    frames = []
+    for i in range(n):
+        a = np.radians(-30.0 + 60.0 * i / (n - 1))
+        eye = np.array([3.0 * np.sin(a), -3.0 * np.cos(a), 1.2 + 0.2 * np.sin(i)])
+        pose = _look_at(eye, [0.0, 0.0, 0.8])
+        if cam_rotation is not None:
+            pose[:3, :3] = pose[:3, :3] @ cam_rotation
+        frames.append(Frame(f"f{i:03d}", CAM, pose, timestamp=float(i)))
+    return Trajectory(tuple(frames), "synthetic", "lamar")
+
+
+@pytest.mark.parametrize("subset", ["spread", "first", "last"])
+def test_trusted_calibration_workflow_on_any_subset_of_a_sweep(subset, tmp_path):
+    """Issue 38 item 2: ``--remove-calibration`` on 20 frames of a sweep (spread along it, or
+    its first or last third; a quarter of them with errors of their own) keeps the
+    calibration estimate whatever the separability test says (the ambiguity reported), the
+    registration passes, and 30 other clean frames checked ``--calibration-from`` that run
+    PASS with the calibration unchanged."""
+    import json
+
+    from pgt_eval import perturb_trajectory
+    from pgt_check.geometry.transforms import axis_angle_to_rotmat
+
+    rot = axis_angle_to_rotmat(np.array([1.0, 0.6, 0.2]), 0.9).T
+    given, true = _sweep(90), _sweep(90, rot)
+    idx = {"spread": range(0, 90, 9), "first": range(0, 30, 3), "last": range(60, 90, 3)}[subset]
+    idx = sorted(set(idx) | {i + 1 for i in idx})[:20]
+    pick = lambda t, ii: Trajectory(tuple(t.frames[i] for i in ii), "s", "lamar")  # noqa: E731
+    wrong, _ = perturb_trajectory(pick(given, idx), 0.25, (0.5, 4.0), (0.03, 0.24), seed=1)
+    trusted = judge_run(measurements(pick(true, idx), wrong),
+                        RunConfig.from_dict({"run_checks": {"remove_calibration": True}}))
+    se = trusted.shared.summary()
+    (cal,) = se["calibration"].values()
+    assert cal["rotation"] is not None and cal["rotation_deg"] == pytest.approx(0.9, abs=0.15)
+    if not cal["separable_from_registration"]:
+        assert "taken as calibration" in cal["message"]
+    assert se["registration"]["status"] == "passed", se["registration"]["message"]
+    path = tmp_path / "summary.json"
+    path.write_text(json.dumps({"shared_errors": se}))
+    other = [i for i in range(0, 90, 3) if i not in idx][:30]
+    j = judge_run(measurements(pick(true, other), pick(given, other)),
+                  RunConfig.from_dict({"run_checks": {"calibration_from": str(path)}}))
+    se2 = j.shared.summary()
+    assert se2["registration"]["status"] == "passed", se2["registration"]["message"]
+    assert all(e["status"] == "passed" for e in se2["calibration_change"].values())
+    assert np.mean([r["verdict"] == "PASS" for r in j.rows()]) >= 0.9
