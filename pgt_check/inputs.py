@@ -243,6 +243,11 @@ def measurement_fingerprint(config: RunConfig, inputs: dict[str, str] | None = N
     return config.measurement_fingerprint(schema=SCHEMA_VERSION, inputs=inputs)
 
 
+#: at most this many images' content hashes are kept in run.json (about 6 MB of its 64 MiB
+#: bound); a bigger run keeps them per frame only (``frame_input_keys``)
+MAX_RECORDED_IMAGE_HASHES = 50_000
+
+
 def input_file_hashes(
     config: RunConfig, side_files: Sequence[str] = (), image_hashes: dict[str, str] | None = None,
     metadata: Any = None,
@@ -267,7 +272,11 @@ def input_file_hashes(
             key = os.path.abspath(path)
             if key not in out:
                 out[key] = content_hash(path)
-    for path, digest in (image_hashes or {}).items():
-        if digest != "missing":
-            out.setdefault(os.path.abspath(path), digest)
+    images = {p: d for p, d in (image_hashes or {}).items() if d != "missing"}
+    if len(images) > MAX_RECORDED_IMAGE_HASHES:  # run.json stays small enough to read back
+        logger.info("%d images: their content hashes are kept per frame only (input_key), "
+                    "pgt-check report checks the other inputs", len(images))
+        return out
+    for path, digest in images.items():
+        out.setdefault(os.path.abspath(path), digest)
     return out
