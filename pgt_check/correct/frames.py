@@ -3,7 +3,8 @@
 For the frames chosen by ``config.correct.frames`` ("fail": FAIL verdicts; "all": every frame)
 ``pgt_check.correct.pose.refine_pose`` iterates render -> raw match -> PnP from the
 measurement's PnP estimate (from the checked pose when there is none, or when the estimate's
-first round fails). Writes into the run directory:
+first round fails), each round's render also enhanced with a reference the run vouches for
+(``vouched_references``: a neighbour whose own verdict PASSed). Writes into the run directory:
 
 * ``corrected_trajectory.txt``: every frame of the trajectory in the input's own format (LaMAR
   -> LaMAR trajectories file, COLMAP -> images.txt, TUM -> TUM, others -> LaMAR trajectories
@@ -60,14 +61,17 @@ def chosen_frames(frames: Sequence[FrameResult], mode: str) -> list[str]:
 
 
 def correct_frame(checker: Any, frame: Frame, m: FrameMeasurement | None, config: RunConfig,
-                  threshold_px: float | None = None) -> Correction:
+                  threshold_px: float | None = None,
+                  references: Sequence[Frame] = ()) -> Correction:
     """One frame: start from the measurement's PnP estimate, else (or if that fails) the
-    checked pose."""
+    checked pose. ``references``: frames the run vouches for, whose photos enhance the rounds'
+    renders (``refine_pose``)."""
     c = config.correct
     start = kind = None
     if m is not None and m.pose is not None and m.pose.world_from_cam is not None:
         start, kind = np.asarray(m.pose.world_from_cam, float), f"pnp_{m.verdict_path or 'raw'}"
-    opts = {"rounds": c.rounds, "bootstrap": c.bootstrap, "threshold_px": threshold_px}
+    opts = {"rounds": c.rounds, "bootstrap": c.bootstrap, "threshold_px": threshold_px,
+            "references": tuple(references)}
     if start is not None:
         res = refine_pose(checker, frame, start, start_kind=kind, **opts)
         if res.success:
@@ -99,6 +103,45 @@ def _relative_fallback(frame: Frame, m: FrameMeasurement, failed: Correction) ->
         drot_deg=p.drot_deg, dt=p.dt, n_inliers=p.n_inliers, rounds=0, start="pnp_enhanced",
         applied=True,
     )
+
+
+#: vouched references whose photos enhance one frame's correction rounds (each costs an
+#: enhancement and a match per round)
+CORRECTION_REFERENCES = 2
+
+
+def vouched_references(
+    trajectory: Trajectory,
+    frames: Sequence[FrameResult],
+    measurements: Mapping[str, FrameMeasurement],
+    config: RunConfig,
+    ids: Sequence[str],
+) -> dict[str, tuple[Frame, ...]]:
+    """Frame id -> up to ``CORRECTION_REFERENCES`` reference frames for its correction: the
+    frame's own references (the one its enhanced path used first, then the run's picks), only
+    those the run vouches for (their own verdict PASSed: a wrong neighbour's photo would pull
+    the correction towards its own error), never the frame itself."""
+    from pgt_check.measure import pick_references
+
+    passed = {f.frame_id for f in frames if f.verdict == "PASS"}
+    by_id = trajectory.by_id()
+    chosen = [by_id[i] for i in ids if i in by_id]
+    picks = pick_references(trajectory, chosen, config) if chosen else {}
+    out: dict[str, tuple[Frame, ...]] = {}
+    for fid in ids:
+        m = measurements.get(fid)
+        order: list[str] = []
+        if m is not None and m.enhanced is not None and m.enhanced.reference_id:
+            order.append(m.enhanced.reference_id)
+        order += [r.frame_id for r in picks.get(fid, ())]
+        refs: list[Frame] = []
+        for rid in dict.fromkeys(order):
+            if rid != fid and rid in passed and rid in by_id:
+                refs.append(by_id[rid])
+            if len(refs) >= CORRECTION_REFERENCES:
+                break
+        out[fid] = tuple(refs)
+    return out
 
 
 def corrected_trajectory(trajectory: Trajectory, corrections: dict[str, Correction]) -> Trajectory:
@@ -145,8 +188,9 @@ def correct_run(
     m_by_id = {m.frame_id: m for m in measurements}
     thr = {f.frame_id: f.threshold_px for f in result.frames}
     budget = config.correct.budget * main_pass_seconds(measurements)
+    refs = vouched_references(trajectory, result.frames, m_by_id, config, ids)
     corrections, stopped = _correct_frames(
-        ids, by_id, m_by_id, thr, config, checker_factory, budget, clock
+        ids, by_id, m_by_id, thr, config, checker_factory, budget, clock, refs
     )
     save_corrections(out, corrections.values(), config.measurement_fingerprint())
     fmt = write_trajectory_file(corrected_trajectory(trajectory, corrections),
@@ -164,6 +208,7 @@ def _correct_frames(
     checker_factory: Callable[[], Any],
     budget: float,
     clock: Callable[[], float],
+    references: Mapping[str, Sequence[Frame]] | None = None,
 ) -> tuple[dict[str, Correction], str]:
     """The corrections of the frames ``ids`` within ``budget`` seconds (0: no limit), and why
     they stopped early ("" when they did not)."""
@@ -191,17 +236,19 @@ def _correct_frames(
                 corrections[fid] = Correction(fid, False, "time_limit")
                 continue
             corrections[fid] = _correct_one(checker, fid, by_id[fid], m_by_id.get(fid),
-                                            config, thr.get(fid))
+                                            config, thr.get(fid),
+                                            (references or {}).get(fid, ()))
     finally:
         checker.close()
     return corrections, stopped
 
 
 def _correct_one(checker: Any, fid: str, frame: Frame, m: FrameMeasurement | None,
-                 config: RunConfig, threshold_px: float | None) -> Correction:
+                 config: RunConfig, threshold_px: float | None,
+                 references: Sequence[Frame] = ()) -> Correction:
     """``correct_frame``, or on an error (unless ``fail_fast``) an ``internal_error`` one."""
     try:
-        return correct_frame(checker, frame, m, config, threshold_px)
+        return correct_frame(checker, frame, m, config, threshold_px, references)
     except Exception as err:  # one frame must not stop the outputs
         if config.fail_fast:
             raise

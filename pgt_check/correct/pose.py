@@ -4,12 +4,23 @@ The measurement's PnP pose (``FrameMeasurement.pose``) is computed once, from th
 which may be the enhanced one (a render painted with a *reference* photo, whose own pose error
 can bias it). ``refine_pose`` therefore uses it only as the starting point: every round renders
 the mesh at the current pose and matches the **raw** render against the photo, lifts the render
-keypoints with the render depth and solves PnP (pycolmap LO-RANSAC) for the next pose. So the
-result rests on absolute evidence (mesh vs photo) only.
+keypoints with the render depth (mesh points) and solves PnP (pycolmap LO-RANSAC) for the next
+pose. Where the run vouches for reference frames (``references``: frames whose own verdict
+PASSed), each round also matches the render enhanced with each of them (the reference photo
+placed on the mesh, ``checker.enhancer``): sharp photo texture where a scan's vertex colours
+are blurred.
+
+The final pose is one PnP on the correspondences of every round together (a lifted point is a
+mesh point whatever pose it was rendered at): on 7-Scenes the raw render gives 12-40 PnP
+inliers per round, and each round's own PnP jumped by 0.3-0.6 deg around its fixed point
+instead of converging, so the last round's pose was as far off as the first
+(reports/corrections.md, issue #38).
 
 Uncertainty (``sigma_rot_deg``, ``sigma_t``): the root sum of squares of (a) the bootstrap
-spread of the last round's PnP (correspondences resampled with replacement, RMS distance of the
-bootstrap poses to the final one) and (b) the last round's update (how far from converged).
+spread of the pooled PnP (correspondences resampled with replacement, RMS distance of the
+bootstrap poses to the final one) and (b) how far the final pose moved when the last round's
+correspondences joined the pool (how far from converged; the last round's own update when
+there was one round).
 """
 
 from __future__ import annotations
@@ -17,7 +28,7 @@ from __future__ import annotations
 import json
 import logging
 import math
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import asdict, dataclass, field, fields
 from pathlib import Path
 from typing import Any
@@ -143,14 +154,42 @@ def load_corrections(out_dir: str | Path) -> dict[str, Correction]:
 
 @dataclass(frozen=True, eq=False)
 class _Round:
+    """One round: the raw path's corner error, the round's own PnP pose (None on failure), and
+    its correspondences: mesh points (world) and their photo pixels (working camera)."""
+
     corner_error_px: float | None
     pose: np.ndarray | None  # PnP result (None on failure)
     reason: str
     n_inliers: int
-    kpts_render: np.ndarray
-    kpts_photo: np.ndarray
+    points: np.ndarray  # (N, 3) world
+    kpts_photo: np.ndarray  # (N, 2) working pixels
     depth: np.ndarray
     cam_w: Any
+
+
+def _references_views(frame: Frame, references: Sequence[Frame], cam_w: Any) -> list[Any]:
+    """The reference photos at the working scale of ``cam_w`` (unreadable ones left out)."""
+    from pgt_check.enhance.base import ReferenceView
+    from pgt_check.errors import InputError
+    from pgt_check.io import load_image
+    from pgt_check.io.images import resize_image
+    from pgt_check.io.photo import prepare_photo
+
+    out = []
+    sx = cam_w.width / frame.camera.width
+    for ref in references:
+        if ref.image_file is None or not Path(ref.image_file).is_file():
+            continue
+        try:
+            photo, cam = prepare_photo(load_image(ref.image_file), ref.camera)
+        except InputError as err:
+            logger.debug("reference %s left out of the correction: %s", ref.frame_id, err)
+            continue
+        size = (max(1, round(cam.width * sx)), max(1, round(cam.height * sx)))
+        out.append(ReferenceView(ref.frame_id, resize_image(photo, size),
+                                 cam.scaled(size[0] / cam.width, size[1] / cam.height),
+                                 ref.world_from_cam))
+    return out
 
 
 def _round(
@@ -160,63 +199,86 @@ def _round(
     photo_w: np.ndarray,
     camera: Any,
     size: tuple[int, int],
+    references: Sequence[Frame] = (),
 ) -> _Round:
-    """Render at ``pose``, match raw render vs photo, homography corner error, PnP."""
-    from pgt_check.geometry.pnp import estimate_pose_correction
+    """Render at ``pose``, match raw render (and the render enhanced with each reference) vs
+    photo, the raw homography's corner error, the lifted correspondences and their PnP."""
+    from pgt_check.enhance.base import View
+    from pgt_check.geometry.pnp import estimate_pose_from_points, lift_keypoints
     from pgt_check.measure.steps import Clock, match_path
 
     cfg = checker.config
     scale = (size[0] / camera.width, size[1] / camera.height)
     cam_w = camera.scaled(*scale)
     render = checker.renderer.render(cam_w, pose)
-    empty = np.zeros((0, 2))
+    empty3, empty2 = np.zeros((0, 3)), np.zeros((0, 2))
     if render.coverage_fraction < cfg.verdict.min_coverage:
-        return _Round(None, None, "low_coverage", 0, empty, empty, render.depth, cam_w)
+        return _Round(None, None, "low_coverage", 0, empty3, empty2, render.depth, cam_w)
     path = match_path(checker.matcher, cfg.homography, render.rgb, photo_w, render.coverage,
                       size, scale, camera, Clock())
-    corr = estimate_pose_correction(
-        path.kpts_render,
-        path.kpts_photo,
-        render.depth,
-        cam_w,
-        pose,
-        max_error_px=cfg.pose.max_error_px,
-        min_inliers=cfg.pose.min_inliers,
-    )
+    pairs = [(path.kpts_render, path.kpts_photo)]
+    if references:
+        view = View(render, cam_w, pose)
+        for ref in _references_views(frame, references, cam_w):
+            enh = checker.enhancer.enhance(view, ref, checker.renderer)
+            p = match_path(checker.matcher, cfg.homography, enh.image, photo_w,
+                           render.coverage, size, scale, camera, Clock(),
+                           checker.enhancer.detail_short_side)
+            pairs.append((p.kpts_render, p.kpts_photo))
+    pts, kp = [empty3], [empty2]
+    for kr, kph in pairs:
+        kr = np.asarray(kr, np.float64).reshape(-1, 2)
+        if len(kr) == 0:
+            continue
+        valid, world = lift_keypoints(kr, render.depth, cam_w, pose)
+        pts.append(world[valid])
+        kp.append(np.asarray(kph, np.float64).reshape(-1, 2)[valid])
+    points, kpts_photo = np.concatenate(pts), np.concatenate(kp)
+    corr = estimate_pose_from_points(points, kpts_photo, cam_w, pose,
+                                     max_error_px=cfg.pose.max_error_px,
+                                     min_inliers=cfg.pose.min_inliers)
     return _Round(
         path.corner_error_px,
         corr.world_from_cam if corr.success else None,
         "" if corr.success else corr.reason.value,
         corr.n_inliers,
-        np.asarray(path.kpts_render),
-        np.asarray(path.kpts_photo),
+        points,
+        kpts_photo,
         render.depth,
         cam_w,
     )
 
 
+def _pooled_pnp(rounds: Sequence[_Round], start: np.ndarray, cfg: Any) -> Any:
+    """One PnP on the correspondences of ``rounds`` together (``PoseCorrection``)."""
+    from pgt_check.geometry.pnp import estimate_pose_from_points
+
+    return estimate_pose_from_points(
+        np.concatenate([r.points for r in rounds]),
+        np.concatenate([r.kpts_photo for r in rounds]),
+        rounds[-1].cam_w, start, max_error_px=cfg.pose.max_error_px,
+        min_inliers=cfg.pose.min_inliers,
+    )
+
+
 def _bootstrap(
-    rnd: _Round, start: np.ndarray, final: np.ndarray, n: int, seed: int, cfg: Any
+    points: np.ndarray, kpts_photo: np.ndarray, cam_w: Any, start: np.ndarray,
+    final: np.ndarray, n: int, seed: int, cfg: Any
 ) -> tuple[float, float]:
     """RMS (rotation deg, centre distance) of PnP on resampled correspondences vs ``final``."""
-    from pgt_check.geometry.pnp import estimate_pose_correction
+    from pgt_check.geometry.pnp import estimate_pose_from_points
     from pgt_check.geometry.transforms import pose_difference
 
-    m = len(rnd.kpts_render)
+    m = len(points)
     if n <= 0 or m == 0:
         return 0.0, 0.0
     rng = np.random.default_rng(seed)
     rots, dts = [], []
     for _ in range(n):
         idx = rng.integers(0, m, size=m)
-        c = estimate_pose_correction(
-            rnd.kpts_render[idx],
-            rnd.kpts_photo[idx],
-            rnd.depth,
-            rnd.cam_w,
-            start,
-            max_error_px=cfg.pose.max_error_px,
-            min_inliers=cfg.pose.min_inliers,
+        c = estimate_pose_from_points(
+            points[idx], kpts_photo[idx], cam_w, start,
+            max_error_px=cfg.pose.max_error_px, min_inliers=cfg.pose.min_inliers,
         )
         if c.success:
             dt, dr = pose_difference(final, c.world_from_cam)
@@ -230,11 +292,12 @@ def _bootstrap(
 @dataclass(frozen=True, eq=False)
 class _Rounds:
     """What the rounds of ``refine_pose`` left: the first round, the last round whose PnP
-    succeeded (None when the first round's failed), its start and result poses, the steps
-    (deg, scene units) and the rounds counted."""
+    succeeded (None when the first round's failed), every round whose PnP succeeded, the pose
+    the rounds ended at, the steps (deg, scene units) and the rounds counted."""
 
     first: _Round
     last: _Round | None
+    done: tuple[_Round, ...]
     last_start: np.ndarray
     pose: np.ndarray
     steps: list[tuple[float, float]]
@@ -250,6 +313,7 @@ def _run_rounds(
     camera: Any,
     size: tuple[int, int],
     rounds: int,
+    references: Sequence[Frame] = (),
 ) -> _Rounds:
     """Up to ``rounds`` rounds from ``pose``; stops early when a round moves the pose by
     < 0.002 deg and < 1e-5 x the scene depth, or when a later round's PnP fails."""
@@ -262,8 +326,9 @@ def _run_rounds(
     depth_scale: float | None = None
     n_done = 0
     prev: _Round | None = None
+    done: list[_Round] = []
     for k in range(rounds):
-        rnd = _round(checker, frame, pose, photo_w, camera, size)
+        rnd = _round(checker, frame, pose, photo_w, camera, size, references)
         n_done = k + 1
         if k == 0:
             first = rnd
@@ -271,10 +336,11 @@ def _run_rounds(
             depth_scale = float(np.median(d)) if d.size else None
         if rnd.pose is None:
             if k == 0:
-                return _Rounds(rnd, None, last_start, pose, steps, n_done, depth_scale)
+                return _Rounds(rnd, None, (), last_start, pose, steps, n_done, depth_scale)
             rnd = prev  # keep the last round whose PnP succeeded
             n_done -= 1
             break
+        done.append(rnd)
         dt, dr = pose_difference(pose, rnd.pose)
         steps.append((dr, dt))
         last_start, pose = pose, rnd.pose
@@ -282,7 +348,7 @@ def _run_rounds(
         if dr < 2e-3 and dt < 1e-5 * (depth_scale or 1.0):
             break
     assert first is not None and rnd is not None and rnd.pose is not None
-    return _Rounds(first, rnd, last_start, pose, steps, n_done, depth_scale)
+    return _Rounds(first, rnd, tuple(done), last_start, pose, steps, n_done, depth_scale)
 
 
 def refine_pose(
@@ -295,11 +361,15 @@ def refine_pose(
     bootstrap: int = 12,
     threshold_px: float | None = None,
     seed: int = 0,
+    references: Sequence[Frame] = (),
 ) -> Correction:
     """Correct ``frame``'s pose by ``rounds`` of render -> raw match -> PnP from ``start``
-    (default: the checked pose). ``checker``: a ``FrameChecker`` (its renderer, matcher and
-    config are used). Stops early when a round moves the pose by < 0.002 deg and < 1e-5 x the
-    scene depth. Never raises for an unusable frame: ``success`` False with a ``reason``.
+    (default: the checked pose), the final pose a PnP on every round's correspondences.
+    ``checker``: a ``FrameChecker`` (its renderer, matcher, enhancer and config are used).
+    ``references``: frames the run vouches for (their own verdict PASSed), whose photos enhance
+    each round's render (more, sharper matches; empty: the raw render alone). Stops early when
+    a round moves the pose by < 0.002 deg and < 1e-5 x the scene depth. Never raises for an
+    unusable frame: ``success`` False with a ``reason``.
     """
     from pgt_check.io import load_image
     from pgt_check.io.images import resize_image
@@ -320,7 +390,7 @@ def refine_pose(
         if threshold_px is None
         else threshold_px
     )
-    done = _run_rounds(checker, frame, pose, photo_w, camera, size, rounds)
+    done = _run_rounds(checker, frame, pose, photo_w, camera, size, rounds, references)
     first_err = done.first.corner_error_px
     if done.last is None:
         return Correction(
@@ -334,6 +404,26 @@ def refine_pose(
             depth=done.depth_scale,
         )
     return _correction(checker, frame, checked, done, thr, bootstrap, seed, start_kind)
+
+
+def _pooled(done: _Rounds, cfg: Any) -> tuple[np.ndarray, int, tuple[float, float] | None]:
+    """The final pose: the PnP on every successful round's correspondences together (the
+    rounds' end pose where there was one round or the pooled PnP failed), its inliers, and how
+    far it moved when the last round joined the pool (deg, scene units; None with one round)."""
+    from pgt_check.geometry.transforms import pose_difference
+
+    assert done.last is not None
+    if len(done.done) < 2:
+        return done.pose, done.last.n_inliers, None
+    pooled = _pooled_pnp(done.done, done.pose, cfg)
+    if not pooled.success:
+        return done.pose, done.last.n_inliers, None
+    before = _pooled_pnp(done.done[:-1], done.pose, cfg)
+    moved = None
+    if before.success:
+        dt, dr = pose_difference(before.world_from_cam, pooled.world_from_cam)
+        moved = (dr, dt)
+    return pooled.world_from_cam, pooled.n_inliers, moved
 
 
 def _correction(
@@ -350,10 +440,16 @@ def _correction(
     verified (raw corner error within ``thr``) and applied (verified and certain)."""
     from pgt_check.geometry.transforms import pose_difference
 
-    rnd, final, steps = done.last, done.pose, done.steps
+    rnd, steps = done.last, done.steps
     assert rnd is not None
-    boot_r, boot_t = _bootstrap(rnd, done.last_start, final, bootstrap, seed, checker.config)
-    last_r, last_t = steps[-1] if steps else (0.0, 0.0)
+    cfg = checker.config
+    final, n_inliers, moved = _pooled(done, cfg)
+    pool = done.done if moved is not None else (rnd,)
+    points = np.concatenate([r.points for r in pool])
+    kpts = np.concatenate([r.kpts_photo for r in pool])
+    start = done.pose if moved is not None else done.last_start
+    boot_r, boot_t = _bootstrap(points, kpts, rnd.cam_w, start, final, bootstrap, seed, cfg)
+    last_r, last_t = moved if moved is not None else (steps[-1] if steps else (0.0, 0.0))
     sigma_r = math.hypot(boot_r, last_r)
     sigma_t = math.hypot(boot_t, last_t)
     dt, dr = pose_difference(checked, final)
@@ -373,7 +469,7 @@ def _correction(
         sigma_t,
         done.first.corner_error_px,
         err,
-        rnd.n_inliers,
+        n_inliers,
         done.n_done,
         start_kind,
         done.depth_scale,

@@ -80,16 +80,35 @@ def estimate_pose_correction(
     depth. Points are expressed relative to the checked camera centre before PnP (float64,
     so georeferenced coordinates lose nothing).
     """
-    import pycolmap
-
     kpts_render = np.asarray(kpts_render, np.float64).reshape(-1, 2)
     kpts_photo = np.asarray(kpts_photo, np.float64).reshape(-1, 2)
     check_shape("kpts_photo", kpts_photo, (len(kpts_render), 2))
     valid, pts = lift_keypoints(kpts_render, depth, camera, world_from_cam)
-    if valid.sum() < max(4, min_inliers):
+    return estimate_pose_from_points(
+        pts[valid], kpts_photo[valid], camera, world_from_cam, max_error_px, min_inliers
+    )
+
+
+def estimate_pose_from_points(
+    points_world: np.ndarray,
+    kpts_photo: np.ndarray,
+    camera: Camera,
+    world_from_cam: np.ndarray,
+    max_error_px: float = 4.0,
+    min_inliers: int = 12,
+) -> PoseCorrection:
+    """PnP + LO-RANSAC (pycolmap) of the photo's pose from (N, 3) world points and their (N, 2)
+    photo pixels (pixels of ``camera``). ``world_from_cam``: the pose the correction is
+    reported against; the points are expressed relative to its centre before PnP."""
+    import pycolmap
+
+    pts = np.asarray(points_world, np.float64).reshape(-1, 3)
+    kpts_photo = np.asarray(kpts_photo, np.float64).reshape(-1, 2)
+    check_shape("kpts_photo", kpts_photo, (len(pts), 2))
+    if len(pts) < max(4, min_inliers):
         return PoseCorrection(False, PoseReason.TOO_FEW_3D_POINTS, n_inliers=0)
     origin = np.asarray(world_from_cam, np.float64)[:3, 3]
-    local = pts[valid] - origin
+    local = pts - origin
     # COLMAP pixel convention: add 0.5 to OpenCV pixel coordinates and principal point
     fx, fy = camera.focal
     cx, cy = camera.principal_point
@@ -101,7 +120,7 @@ def estimate_pose_correction(
     opts.ransac.max_error = max_error_px
     opts.ransac.random_seed = 0  # deterministic: the same frame gives the same estimate anywhere
     try:
-        res = pycolmap.estimate_and_refine_absolute_pose(kpts_photo[valid] + 0.5, local, cam, opts)
+        res = pycolmap.estimate_and_refine_absolute_pose(kpts_photo + 0.5, local, cam, opts)
     except Exception as err:  # pycolmap raises plain RuntimeError/ValueError on degenerate input
         logger.debug("PnP failed: %s", err)
         res = None

@@ -155,7 +155,7 @@ def test_corrections_stop_at_their_time_budget(tmp_path, monkeypatch):
         for m in ms), None)
     now = [0.0]
 
-    def fake_correct(checker, frame, m, config, threshold_px=None):
+    def fake_correct(checker, frame, m, config, threshold_px=None, references=()):
         now[0] += 4.0  # each correction takes 4 s
         return Correction(frame.frame_id, True, "", rounds=1)
 
@@ -179,3 +179,86 @@ def test_corrections_stop_at_their_time_budget(tmp_path, monkeypatch):
     _, summary = frames_mod.correct_run(traj, ms, result, config, Checker, tmp_path,
                                         clock=lambda: now[0])
     assert summary.attempted == 10 and summary.stopped is None
+
+
+def _blurred_copy(mesh_glb, out, sigma):
+    """The sample mesh with its textures blurred (Gaussian, ``sigma`` texture px): a scan's
+    vertex colours, averaged over views, are blurred where the photos are sharp."""
+    import trimesh
+    from PIL import ImageFilter
+
+    scene = trimesh.load(mesh_glb)
+    for g in scene.geometry.values():
+        mat = g.visual.material
+        mat.baseColorTexture = mat.baseColorTexture.filter(ImageFilter.GaussianBlur(sigma))
+    path = out / "blurred.glb"
+    scene.export(path)
+    return path
+
+
+def _sample_truth(sample_scene):
+    """The sample trajectory with its documented perturbations (perturbed.txt) undone."""
+    from pgt_check.geometry.transforms import invert_rigid
+    from pgt_check.types import Trajectory
+
+    traj = read_trajectory(sample_scene / "trajectories.txt")
+    offsets = {}
+    for line in (sample_scene / "perturbed.txt").read_text().splitlines():
+        if line.startswith("#") or not line.strip():
+            continue
+        f = [x.strip() for x in line.split(",")]
+        rot = axis_angle_to_rotmat(np.array(list(map(float, f[2:5]))), float(f[1]))
+        offsets[f[0]] = make_rigid(rot, np.array(list(map(float, f[5:8]))))
+    return Trajectory(tuple(fr.with_pose(fr.world_from_cam @ invert_rigid(offsets[fr.frame_id]))
+                            if fr.frame_id in offsets else fr for fr in traj),
+                      traj.source, traj.format)
+
+
+def test_corrections_on_a_blurred_scan_come_within_30_percent(tmp_path, sample_scene):
+    """Issue #38 item 4 on generated data: a mesh whose colours are blurred (as a TSDF scan's:
+    7-Scenes) gives the raw render few matches, and each round's PnP on them jumped around its
+    fixed point (before: 1 of 4 frames within 30 % of its 2.5 deg / 12 cm error, 0.4-1.4 deg
+    left, yet applied). The rounds' correspondences pooled into one PnP, and the render also
+    enhanced with a neighbour the run vouches for, bring every wrong frame back to within 30 %
+    of its error; a wrong neighbour (frames 9 and 10 both wrong) never serves as a reference."""
+    from pgt_check.config import RunConfig
+    from pgt_check.correct.frames import correct_run, vouched_references
+    from pgt_check.measure import FrameChecker, build_frame_checker, pick_references
+    from pgt_check.types import Trajectory
+    from pgt_check.verdict import judge_run
+    from pgt_eval import perturb_pose
+
+    mesh = _blurred_copy(sample_scene / "mesh.glb", tmp_path, 4.0)
+    truth = _sample_truth(sample_scene)
+    rng = np.random.default_rng(0)
+    frames = list(truth.frames)
+    injected = {}
+    for i in (3, 9, 10, 15, 21):
+        f = frames[i]
+        frames[i] = f.with_pose(perturb_pose(f.world_from_cam, 2.5, 0.12, rng))
+        injected[f.frame_id] = (2.5, 0.12)  # 3 % of the ~4 m scene depth
+    traj = Trajectory(tuple(frames), truth.source, truth.format)
+    cfg = RunConfig.from_dict({"input": {"mesh": str(mesh)}, "out": str(tmp_path),
+                               "correct": {"frames": "fail", "budget": 0}})
+    checker = FrameChecker(cfg, pick_references(traj, traj.frames, cfg))
+    try:
+        ms = [checker.measure(f) for f in traj.frames]
+    finally:
+        checker.close()
+    result = judge_run(ms, cfg)
+    verdicts = {f.frame_id: f.verdict for f in result.frames}
+    assert all(verdicts[fid] == "FAIL" for fid in injected)
+    refs = vouched_references(traj, result.frames, {m.frame_id: m for m in ms}, cfg,
+                              list(injected))
+    for fid, rs in refs.items():
+        assert rs and all(verdicts[r.frame_id] == "PASS" for r in rs), fid
+    corr, _ = correct_run(traj, ms, result, cfg, lambda: build_frame_checker(cfg, None),
+                          tmp_path)
+    given = truth.by_id()
+    for fid, (rot, t) in injected.items():
+        c = corr[fid]
+        assert c.success, (fid, c.reason)
+        dt, dr = pose_difference(given[fid].world_from_cam, c.pose)
+        assert dr <= 0.3 * rot and dt <= 0.3 * t, (fid, dr, dt, c, [r.frame_id for r in refs[fid]])
+        if c.applied:  # an applied correction's stated uncertainty covers its error
+            assert dr <= 3 * max(c.sigma_rot_deg, 0.05), (fid, dr, c.sigma_rot_deg)
