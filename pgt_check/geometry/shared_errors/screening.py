@@ -252,7 +252,7 @@ def screen_frames(
         if majority:
             new = np.zeros(nf, bool)
             new[np.argsort(stat, kind="stable")[: (nf + 1) // 2]] = True
-        if np.array_equal(new, kept) and rounds > 1:
+        if np.array_equal(new, kept):  # round 1: none left out, the fit used them all
             break
         kept = new
     nbs = _neighbour_statistic(p, deltas, hs, s2)
