@@ -14,6 +14,7 @@ from pgt_check.verdict.decide import (
     CANNOT_SEPARATE,
     Judgement,
     Verdict,
+    bounded_pass,
     judge,
     own_outcomes,
     path_outcomes,
@@ -85,8 +86,10 @@ def judge_run(
     frames = []
     for m, j, _ in final:
         drift = None if shared is None else shared.drift_px.get(m.frame_id)
-        frames.append(FrameResult(m, j, v.threshold_for(m.width, m.height), drift,
-                                  bounds[m.frame_id]))
+        b, thr = bounds[m.frame_id], v.threshold_for(m.width, m.height)
+        # a PASS and its 95 % bound agree, or the frame is UNVERIFIABLE
+        j = bounded_pass(j, b.accuracy.effect_bound_px if b.bounded else None, thr)
+        frames.append(FrameResult(m, j, thr, drift, b))
     n_barred = sum(f.reason.startswith(CANNOT_SEPARATE) for f in frames)
     separation = replace(sep, barred_frames=n_barred) if sep.paths else None
     return RunResult(tuple(frames), shared, separation)

@@ -132,3 +132,47 @@ def test_a_frame_without_agreeing_absolute_evidence_has_no_bound():
     assert agreeing_paths(outs, "raw") == ("raw",)
     assert agreeing_paths(outs, "") is None
     assert agreeing_paths({**outs, "raw": (Verdict.UNVERIFIABLE, "y")}, "raw") is None
+
+
+def test_a_pass_whose_own_bound_exceeds_the_threshold_is_unverifiable():
+    """A PASS and its 95 % bound must agree: a homography of a few noisy matches can land
+    within the threshold (here 2 px against 8 px) while the same points bound the error only
+    to tens of px (colourless 7-Scenes with MaRINeR: PASS frames with bounds of 17-110 px
+    against 16 px). Such a frame is UNVERIFIABLE (bound_above_threshold); the same frame with
+    precise points stays PASS."""
+    from dataclasses import replace
+
+    from pgt_check.config import RunConfig
+    from pgt_check.enhance.base import Evidence
+    from pgt_check.measure import FrameMeasurement, PathMeasurement
+    from pgt_check.measure.record import AbsoluteEvidence
+    from pgt_check.verdict import judge_run
+
+    w, h, f = 320, 240, 288.0
+    k = np.array([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]])
+
+    def frame(fid: str, noise_px: float, n: int, seed: int) -> FrameMeasurement:
+        rng = np.random.default_rng(seed)
+        pts = np.c_[rng.uniform(-1.5, 1.5, (n, 2)), rng.uniform(3.0, 5.0, n)]
+        p2 = (pts @ k.T)[:, :2] / pts[:, 2:3] + rng.normal(0, noise_px, (n, 2))
+        ev = AbsoluteEvidence(("raw",), tuple(map(tuple, p2)), tuple(map(tuple, pts)), (n,))
+        raw = PathMeasurement(
+            kind="raw", method="render", evidence=Evidence.ABSOLUTE, n_kpts_render=500,
+            n_kpts_photo=500, n_matches=2 * n, n_inliers=n, inlier_ratio=0.5, reason="",
+            photo_from_render=tuple(map(tuple, np.eye(3))), corner_error_px=2.0)
+        return FrameMeasurement(
+            frame_id=fid, timestamp=0, image_path=f"{fid}.png", width=w, height=h,
+            center=(0.0, 0.0, 0.0), coverage=0.8, camera_id="cam0",
+            world_from_cam=tuple(map(tuple, np.eye(4))),
+            intrinsics=(f, f, (w - 1) / 2, (h - 1) / 2), raw=raw, evidence=ev,
+            verdict_path="raw")
+
+    cfg = RunConfig()
+    cfg = replace(cfg, run_checks=replace(cfg.run_checks, enabled=False))
+    res = judge_run([frame("noisy", 3.0, 30, 0), frame("precise", 0.5, 30, 1)], cfg)
+    noisy, precise = res.frames
+    assert noisy.bound.accuracy.effect_bound_px > noisy.threshold_px
+    assert noisy.verdict == "UNVERIFIABLE"
+    assert noisy.reason.startswith("bound_above_threshold"), noisy.reason
+    assert precise.verdict == "PASS"
+    assert precise.bound.accuracy.effect_bound_px <= precise.threshold_px
