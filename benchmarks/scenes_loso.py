@@ -39,9 +39,7 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import tempfile
 import time
-from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -126,19 +124,24 @@ def _cfg(mesh: Path, cfgd: dict, **over) -> RunConfig:
 
 
 def corrected(traj: Trajectory, ms, cfg: RunConfig, ids: set[str]) -> dict:
-    """``--correct all`` (no time budget) on the frames ``ids``: frame id -> Correction."""
-    from pgt_check.correct.frames import correct_run
+    """What ``--correct all`` (no time budget) gives the frames ``ids``: frame id ->
+    Correction, each with the references the judged run vouches for (``correct_run``'s steps,
+    without its files)."""
+    from pgt_check.correct.frames import correct_frame, vouched_references
     from pgt_check.measure import build_frame_checker
 
-    cfg = replace(cfg, correct=replace(cfg.correct, frames="all", budget=0.0))
     judged = judge_run(ms, cfg)
-    keep = [f for f in judged.frames if f.frame_id in ids]
-    judged = replace(judged, frames=keep)
-    with tempfile.TemporaryDirectory() as tmp:
-        cfg = replace(cfg, out=tmp)
-        corr, _ = correct_run(traj, [m for m in ms if m.frame_id in ids], judged, cfg,
-                              lambda: build_frame_checker(cfg, None), tmp)
-    return corr
+    m_by_id = {m.frame_id: m for m in ms}
+    thr = {f.frame_id: f.threshold_px for f in judged.frames}
+    order = [f.frame_id for f in traj.frames if f.frame_id in ids]
+    refs = vouched_references(traj, judged.frames, m_by_id, cfg, order)
+    by_id = traj.by_id()
+    checker = build_frame_checker(cfg, None)
+    try:
+        return {fid: correct_frame(checker, by_id[fid], m_by_id.get(fid), cfg, thr.get(fid),
+                                   refs.get(fid, ())) for fid in order}
+    finally:
+        checker.close()
 
 
 def score_corrections(given: Trajectory, injected: dict, corr: dict, clean: dict) -> dict:

@@ -105,9 +105,11 @@ def _relative_fallback(frame: Frame, m: FrameMeasurement, failed: Correction) ->
     )
 
 
-#: vouched references whose photos enhance one frame's correction rounds (each costs an
-#: enhancement and a match per round)
+#: vouched references whose photos enhance one frame's correction rounds (they take turns, one
+#: enhancement and match per round)
 CORRECTION_REFERENCES = 2
+#: frames on each side along the trajectory tried as references after the run's own picks
+NEIGHBOUR_SPAN = 3
 
 
 def vouched_references(
@@ -118,14 +120,17 @@ def vouched_references(
     ids: Sequence[str],
 ) -> dict[str, tuple[Frame, ...]]:
     """Frame id -> up to ``CORRECTION_REFERENCES`` reference frames for its correction: the
-    frame's own references (the one its enhanced path used first, then the run's picks), only
-    those the run vouches for (their own verdict PASSed: a wrong neighbour's photo would pull
-    the correction towards its own error), never the frame itself."""
+    frame's own references (the one its enhanced path used first, then the run's picks, then
+    the ``NEIGHBOUR_SPAN`` nearest frames on each side along the trajectory), only those the
+    run vouches for (their own verdict PASSed: a wrong neighbour's photo would pull the
+    correction towards its own error), never the frame itself; none where none passed."""
     from pgt_check.measure import pick_references
 
     passed = {f.frame_id for f in frames if f.verdict == "PASS"}
     by_id = trajectory.by_id()
     chosen = [by_id[i] for i in ids if i in by_id]
+    ids_in_order = [f.frame_id for f in trajectory.frames]
+    index = {fid: i for i, fid in enumerate(ids_in_order)}
     picks = pick_references(trajectory, chosen, config) if chosen else {}
     out: dict[str, tuple[Frame, ...]] = {}
     for fid in ids:
@@ -134,6 +139,11 @@ def vouched_references(
         if m is not None and m.enhanced is not None and m.enhanced.reference_id:
             order.append(m.enhanced.reference_id)
         order += [r.frame_id for r in picks.get(fid, ())]
+        # then the nearest frames along the trajectory (where the picks did not pass)
+        i = index.get(fid)
+        if i is not None:
+            order += [ids_in_order[j] for d in range(1, NEIGHBOUR_SPAN + 1)
+                      for j in (i - d, i + d) if 0 <= j < len(ids_in_order)]
         refs: list[Frame] = []
         for rid in dict.fromkeys(order):
             if rid != fid and rid in passed and rid in by_id:

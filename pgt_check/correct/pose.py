@@ -6,9 +6,9 @@ can bias it). ``refine_pose`` therefore uses it only as the starting point: ever
 the mesh at the current pose and matches the **raw** render against the photo, lifts the render
 keypoints with the render depth (mesh points) and solves PnP (pycolmap LO-RANSAC) for the next
 pose. Where the run vouches for reference frames (``references``: frames whose own verdict
-PASSed), each round also matches the render enhanced with each of them (the reference photo
-placed on the mesh, ``checker.enhancer``): sharp photo texture where a scan's vertex colours
-are blurred.
+PASSed), each round also matches the render enhanced with one of them, in turn (the reference
+photo placed on the mesh, ``checker.enhancer``): sharp photo texture where a scan's vertex
+colours are blurred.
 
 The final pose is one PnP on the correspondences of every round together (a lifted point is a
 mesh point whatever pose it was rendered at): on 7-Scenes the raw render gives 12-40 PnP
@@ -328,7 +328,10 @@ def _run_rounds(
     prev: _Round | None = None
     done: list[_Round] = []
     for k in range(rounds):
-        rnd = _round(checker, frame, pose, photo_w, camera, size, references)
+        # the references take turns (one enhancement per round): the pool holds each one's
+        # correspondences, so no single reference's own bias decides
+        refs = (references[k % len(references)],) if references else ()
+        rnd = _round(checker, frame, pose, photo_w, camera, size, refs)
         n_done = k + 1
         if k == 0:
             first = rnd
