@@ -20,9 +20,8 @@ The test is a significance test against a null estimated from the run itself:
    are not (neighbouring matches share texture, the mesh is not exact): that scales ``W`` and
    concentrates it in fewer directions (an offset every point of a frame shares is 2 of the 6),
    a heavier tail. So the null is fitted to the run as ``lambda * chi2_k``: ``k`` (1-2, see
-   ``MAX_DOF``) from the
-   spread of the logarithms of the LOWER HALF of all frames' statistics, ``lambda`` from their
-   median (the null's quartile). With up to half of the frames wrong, and their statistics
+   ``MAX_DOF``) from the spread of the logarithms of the LOWER HALF of all frames'
+   statistics, ``lambda`` from their median (the null's quartile). With up to half of the frames wrong, and their statistics
    larger, the lower half is still a sample of the null (conservative when some are wrong);
 4. a frame is left out when ``W > lambda * chi2_k^-1(1 - alpha)``; the model is refitted
    without it, until the set stops changing. A consensus needs a majority: when more than
@@ -30,14 +29,16 @@ The test is a significance test against a null estimated from the run itself:
    (``majority_kept``).
 
 So the cut adapts to the run: it is a multiple of the frames' own null spread, never a pixel
-constant; on a clean run about ``alpha`` of the frames are left out, at no cost but their
+constant; on a clean run at most about ``alpha`` of the frames are left out (fewer where the
+points' errors are independent: the 2-dof shape is conservative), at no cost but their
 evidence in the pooled fits.
 
 A frame left out whose own correction its neighbours in the trajectory share (``W`` of the
 difference to a prediction from up to two neighbours on each side within the same cut: their
 median, the mean of the adjacent two, or the line through two on one side, since a drift grows
-along its segment), or within a tenth of its own statistic, is not an isolated error but possibly a drifting segment: it is ``shared_with_neighbours``
-and stays in the drift check's evidence, which exists to find exactly that.
+along its segment), or within a tenth of its own statistic, is not an isolated error but
+possibly a drifting segment: it is ``shared_with_neighbours`` and stays in the drift check's
+evidence, which exists to find exactly that.
 """
 
 from __future__ import annotations
