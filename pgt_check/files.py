@@ -19,6 +19,7 @@ import os
 import re
 import stat
 import tempfile
+import threading
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
@@ -38,6 +39,8 @@ __all__ = [
     "atomic_write_bytes",
     "atomic_write_text",
     "check_inputs_not_outputs",
+    "current_umask",
+    "first_unsafe_char",
     "open_append",
     "load_json_limited",
     "read_bytes_limited",
@@ -143,6 +146,14 @@ def _escape(match: re.Match[str]) -> str:
     )
 
 
+def first_unsafe_char(text: str) -> str | None:
+    """The first character of ``text`` that ``safe_text`` would escape (a line break, another
+    control character but tab, a lone surrogate), or None: a name without one is written
+    verbatim on one line of every text output."""
+    match = _UNSAFE.search(text)
+    return match.group(0) if match else None
+
+
 def safe_text(value: Any) -> str:
     """``str(value)`` that fits on one line of any UTF-8 text output: control characters (but
     tab) become ``\\n``, ``\\x07``..., undecodable file-name bytes ``\\xff``, other lone
@@ -151,15 +162,38 @@ def safe_text(value: Any) -> str:
     return _UNSAFE.sub(_escape, text)
 
 
+_UMASK_LOCK = threading.Lock()
+
+
+def current_umask() -> int:
+    """The process's umask, read without changing it where the system tells it
+    (``/proc/self/status``); elsewhere set and restored under a lock."""
+    try:
+        with open("/proc/self/status", encoding="ascii", errors="replace") as fh:
+            for line in fh:
+                if line.startswith("Umask:"):
+                    return int(line.split()[1], 8)
+    except (OSError, ValueError, IndexError):
+        pass
+    with _UMASK_LOCK:
+        mask = os.umask(0o022)
+        os.umask(mask)
+    return mask
+
+
 def atomic_write_bytes(path: str | Path, data: bytes) -> None:
     """Write ``data`` to ``path`` through a new temporary file beside it, then rename.
 
     The temporary file is created exclusively (an existing file or symlink is never opened), a
     symlink at ``path`` is replaced (never written through), and on any failure the
-    temporary file is removed."""
+    temporary file is removed. The file gets the mode a plain ``open`` would give it (0666
+    less the umask; ``mkstemp`` alone made every output 0600, unreadable to a CI artifact
+    uploader running as another user: issue #39 item 12)."""
     path = Path(path)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name[:80]}.", suffix=".tmp", dir=path.parent)
     try:
+        if hasattr(os, "fchmod"):
+            os.fchmod(fd, 0o666 & ~current_umask())
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
         os.replace(tmp, path)

@@ -31,6 +31,7 @@ from pgt_check.inputs import (  # re-exported: tests and callers patch / import 
     measurement_fingerprint,
     preflight,
 )
+from pgt_check.io import check_frame_ids
 from pgt_check.measure import (
     FrameImages,
     FrameMeasurement,
@@ -82,6 +83,7 @@ def run_trajectory(
 
 def _run_trajectory(traj: Trajectory, config: RunConfig, t0: float | None) -> dict[str, Any]:
     t0 = time.perf_counter() if t0 is None else t0
+    check_frame_ids(traj.frames, traj.source)  # in-memory trajectories of the API too
     frames = list(traj.frames)
     if config.limit is not None:
         frames = frames[: config.limit]

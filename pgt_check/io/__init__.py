@@ -7,6 +7,7 @@ pycolmap, OpenCV and Pillow are imported by the functions that use them.
 
 from __future__ import annotations
 
+from pgt_check.io._text import check_frame_ids
 from pgt_check.io.camera import parse_camera_spec
 from pgt_check.io.formats import FORMATS, detect_format, read_trajectory
 from pgt_check.io.images import image_size, load_image
@@ -14,6 +15,7 @@ from pgt_check.io.lamar_write import write_lamar
 
 __all__ = [
     "FORMATS",
+    "check_frame_ids",
     "detect_format",
     "image_size",
     "load_image",

@@ -6,11 +6,12 @@ import logging
 import math
 from collections.abc import Hashable, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
 from pgt_check.errors import FormatError
-from pgt_check.files import MAX_INPUT_TEXT_BYTES, read_text_limited
+from pgt_check.files import MAX_INPUT_TEXT_BYTES, first_unsafe_char, read_text_limited
 from pgt_check.geometry.transforms import QuaternionError, make_rigid, quat_to_rotmat
 
 logger = logging.getLogger(__name__)
@@ -80,6 +81,36 @@ def parse_timestamp(path: Path, line: int, token: str) -> float:
         if is_integer_token(token)
         else parse_float(path, line, token, "timestamp")
     )
+
+
+def check_frame_id(
+    path: Path | str, line: int | None, frame_id: str, where: str | None = None,
+    what: str = "frame id",
+) -> None:
+    """Refuse (FormatError naming the file and line, or ``where`` in a file without lines) a
+    frame id with a line break, another control character (but tab) or an undecodable byte.
+
+    Frame ids are written verbatim, one per line, in ``bad_frames.txt`` and in the trajectory
+    files a run writes, where a consumer looks them up: an escaped id would not match, a raw
+    one would split into several lines (issue #39 item 9). No pose format produces one from
+    ordinary file names, so such an id is refused at read time rather than escaped."""
+    ch = first_unsafe_char(frame_id)
+    if ch is None:
+        return
+    prefix = f"{where}: " if where else ""
+    raise FormatError(
+        path, line,
+        f"{prefix}expected a {what} without line breaks or other control characters (frame ids "
+        f"are written one per line in bad_frames.txt and the trajectory files); got "
+        f"{frame_id!r} (character U+{ord(ch):04X})",
+    )
+
+
+def check_frame_ids(frames: Sequence[Any], source: str | Path | None) -> None:
+    """``check_frame_id`` of every frame (for readers without lines, and in-memory
+    trajectories): the first bad id is a FormatError naming ``source`` and its position."""
+    for i, frame in enumerate(frames):
+        check_frame_id(source or "trajectory", None, frame.frame_id, where=f"frame {i + 1}")
 
 
 class QuaternionCounter:

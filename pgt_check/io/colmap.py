@@ -17,7 +17,7 @@ import numpy as np
 from pgt_check.errors import FormatError, InputError
 from pgt_check.files import regular_file_size
 from pgt_check.geometry.transforms import invert_rigid
-from pgt_check.io._text import QuaternionCounter
+from pgt_check.io._text import QuaternionCounter, check_frame_id
 from pgt_check.io.camera import camera_from_colmap
 from pgt_check.types import Camera, Frame, Trajectory
 
@@ -235,6 +235,8 @@ def read_colmap(path: str | Path, *, images: str | Path | None = None) -> Trajec
     )
     quats = QuaternionCounter(images_file)
     for image in _images(reconstruction, model_dir):
+        check_frame_id(images_file, None, image.name, where=f"image id {image.image_id}",
+                       what="image name")
         if not getattr(image, "has_pose", True):
             unposed.append(image.name)
             continue

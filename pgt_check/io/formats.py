@@ -8,7 +8,7 @@ from pathlib import Path
 
 from pgt_check.errors import InputError
 from pgt_check.files import MAX_INPUT_TEXT_BYTES, load_json_limited
-from pgt_check.io._text import read_text
+from pgt_check.io._text import check_frame_ids, read_text
 from pgt_check.io.colmap import colmap_model_dir, read_colmap
 from pgt_check.io.hloc import read_hloc
 from pgt_check.io.lamar import read_lamar
@@ -156,4 +156,6 @@ def read_trajectory(
         ),
         "hloc": lambda: read_hloc(path, camera=camera, sensors=sensors, images=images),
     }
-    return readers[fmt]()
+    traj = readers[fmt]()
+    check_frame_ids(traj.frames, traj.source or path)  # COLMAP (names read by pycolmap)
+    return traj

@@ -21,6 +21,7 @@ from pgt_check.geometry.transforms import invert_rigid
 from pgt_check.io._text import (
     QuaternionCounter,
     UniqueKeys,
+    check_frame_id,
     data_lines,
     parse_float,
     split_row,
@@ -102,6 +103,7 @@ def read_hloc(
     for line, text in data_lines(path):
         fields = split_row(path, line, text, count=8, sep=None, layout=LAYOUT)
         name = fields[0]
+        check_frame_id(path, line, name, what="image name")
         seen.add(name, repr(name), line)
         v = [
             parse_float(path, line, f, n)

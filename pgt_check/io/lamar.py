@@ -29,6 +29,7 @@ from pgt_check.errors import FormatError, InputError
 from pgt_check.io._text import (
     QuaternionCounter,
     UniqueKeys,
+    check_frame_id,
     data_lines,
     parse_float,
     parse_timestamp,
@@ -113,6 +114,7 @@ def read_sensors(path: Path) -> tuple[dict[str, Camera], set[str]]:
         sensor_id, _name, sensor_type = fields[:3]
         if not sensor_id:
             raise FormatError(path, line, "expected a sensor id; got an empty field")
+        check_frame_id(path, line, sensor_id, what="sensor id")
         seen.add(sensor_id, repr(sensor_id), line)
         if sensor_type != "camera":
             continue
@@ -284,6 +286,7 @@ def _imaged_frames(
             files, line, text, cameras, sensor_ids
         )
         frame_id = f"{stamp_text}/{sensor_id}"
+        check_frame_id(files.images, line, frame_id)
         seen.add(frame_id, frame_id, line)
         world_from_cam = _camera_pose(poses, rigs, rigs_of.get(sensor_id, ()), timestamp, sensor_id)
         if world_from_cam is None:

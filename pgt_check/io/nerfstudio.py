@@ -27,7 +27,7 @@ import numpy as np
 
 from pgt_check.errors import FormatError, InputError
 from pgt_check.files import MAX_INPUT_TEXT_BYTES, load_json_limited
-from pgt_check.io._text import UniqueKeys
+from pgt_check.io._text import UniqueKeys, check_frame_id
 from pgt_check.io.camera import COLMAP_PIXEL_OFFSET
 from pgt_check.io.images import image_size
 from pgt_check.types import Camera, Frame, Trajectory
@@ -268,6 +268,7 @@ def _frame(
     file_path = entry.get("file_path")
     if not isinstance(file_path, str) or not file_path:
         raise FormatError(path, None, f"{where}: expected a 'file_path' string; got {file_path!r}")
+    check_frame_id(path, None, file_path, where=where, what="'file_path'")
     image = _resolve_image(root, file_path)
     camera = _camera(path, where, {**shared, **entry}, image)
     matrix = _transform_matrix(path, where, entry)

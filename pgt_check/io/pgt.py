@@ -16,7 +16,14 @@ import numpy as np
 
 from pgt_check.errors import FormatError, InputError
 from pgt_check.geometry.transforms import invert_rigid
-from pgt_check.io._text import QuaternionCounter, UniqueKeys, data_lines, parse_float, split_row
+from pgt_check.io._text import (
+    QuaternionCounter,
+    UniqueKeys,
+    check_frame_id,
+    data_lines,
+    parse_float,
+    split_row,
+)
 from pgt_check.io.images import image_size
 from pgt_check.types import Camera, Frame, Trajectory
 
@@ -54,6 +61,7 @@ def _pose_rows(path: Path) -> list[tuple[int, str, float, np.ndarray]]:
     for line, text in data_lines(path):
         fields = split_row(path, line, text, count=9, sep=None, layout=LAYOUT)
         name = fields[0]
+        check_frame_id(path, line, name, what="image name")
         seen.add(name, repr(name), line)
         v = [
             parse_float(path, line, f, n)

@@ -83,7 +83,9 @@ def _transforms(path, names, turned=()):
 
 
 def test_compare_outputs(tmp_path, cli, case):
-    names = ["=HYPERLINK(1).png", "b\nc.png", "d.png", "e.png"]
+    # a frame id with a line break is refused at read time (#39 item 9:
+    # test_audit3_low::test_compare_frame_id_with_a_newline_exits_2); a comma and a tab stay
+    names = ["=HYPERLINK(1).png", "b,\tc.png", "d.png", "e.png"]
     a = _transforms(tmp_path / "a.json", names)
     b = _transforms(tmp_path / "b.json", names, turned={"d.png"})
     out = tmp_path / "out"
@@ -97,7 +99,7 @@ def test_compare_outputs(tmp_path, cli, case):
     text = (out / "compare.csv").read_text(encoding="utf-8")
     rows = list(csv.DictReader(text.splitlines()))
     assert len(text.strip().splitlines()) == 5
-    assert rows[0]["frame_id"] == "'=HYPERLINK(1).png" and rows[1]["frame_id"] == "b\\nc.png"
+    assert rows[0]["frame_id"] == "'=HYPERLINK(1).png" and rows[1]["frame_id"] == "b,\tc.png"
     summary = json.loads((out / "compare.json").read_text())
     case("compare: a frame turned by 180 deg", "in the max", stdout.splitlines()[1][-60:])
     assert summary["drot_deg"]["max"] == pytest.approx(180.0)
