@@ -147,6 +147,24 @@ def worker_crashed(task: Task, how: str) -> FrameMeasurement:
     )
 
 
+def quiet_sigterm() -> None:
+    """Give SIGTERM back to Python in this process (its main thread): pycolmap's import
+    installs glog's crash handler for SIGTERM too, so a worker the pool terminates after
+    another one died, or a CI cancel of the process group, printed a native stack dump
+    ("*** SIGTERM received ... stack trace", issue #39 item 10). pycolmap is imported here
+    first (where installed: a later import installs nothing), then SIGTERM gets Python's own
+    handler again (in a worker: the default, which ends it quietly). The real crash signals
+    (SIGSEGV, SIGABRT, ...) keep their dump."""
+    try:
+        import pycolmap  # noqa: F401
+    except ImportError:
+        pass
+    try:
+        signal.signal(signal.SIGTERM, signal.getsignal(signal.SIGTERM) or signal.SIG_DFL)
+    except ValueError:  # not the main thread
+        pass
+
+
 def build_checker(checker_factory: CheckerFactory) -> Checker:
     try:
         return checker_factory()

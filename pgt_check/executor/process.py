@@ -30,6 +30,7 @@ from pgt_check.executor.common import (
     fill,
     internal_error,
     note_stop,
+    quiet_sigterm,
     worker_crashed,
 )
 from pgt_check.measure.record import FrameMeasurement
@@ -58,7 +59,9 @@ def _watch_parent() -> None:
 
 
 def _init_worker(checker_factory: CheckerFactory) -> None:
-    """Pool initializer: ignore Ctrl-C (the parent handles it), build the checker once."""
+    """Pool initializer: ignore Ctrl-C (the parent handles it), build the checker once. SIGTERM
+    (the pool stopping the survivors after a worker died, a CI cancel of the process group)
+    ends the worker quietly, without a native library's crash dump (``quiet_sigterm``)."""
     global _WORKER_CHECKER, _WORKER_SETUP_ERROR
     from multiprocessing.util import Finalize
 
@@ -69,6 +72,8 @@ def _init_worker(checker_factory: CheckerFactory) -> None:
     except Exception as err:  # reported by the first task, which ends the run
         _WORKER_SETUP_ERROR = checker_setup_error(err)
         return
+    finally:
+        quiet_sigterm()  # after the factory, which may have imported pycolmap
     Finalize(None, close_checker, args=(_WORKER_CHECKER,), exitpriority=10)
 
 
