@@ -252,7 +252,8 @@ def detection_limits(
     calibration_removed: bool = False,
 ) -> DetectionLimits:
     """This run's detection limits from its own noise (module docstring). With
-    ``calibration_removed`` no shared limit is stated (``NOT_SEPARABLE``): on 7-Scenes the
+    ``calibration_removed`` (a calibration estimated on this run's frames removed; not a
+    trusted one) no shared limit is stated (``NOT_SEPARABLE``): on 7-Scenes the
     self-test found a shared translation of twice the limit the registration check alone
     supports absorbed by the removal (reports/accuracy.md)."""
     noise_px = _median([r.get("acc_noise_px") for r in rows])
@@ -336,7 +337,11 @@ def run_accuracy(
         1 for a, b in zip(rot, tra, strict=True)
         if (x is None or a <= x) and (y is None or b <= y)
     )  # fmt: skip
-    limits = detection_limits(rows, threshold_px, shared, config.run_checks.remove_calibration)
+    # a trusted calibration (--calibration-from, which wins over --remove-calibration) is not
+    # estimated on these frames: it absorbs nothing of their shared error (#39 item 11)
+    rc = config.run_checks
+    limits = detection_limits(rows, threshold_px, shared,
+                              rc.remove_calibration and not rc.calibration_from)
     sizes = shared_sizes(shared, limits.points_px_per_deg, limits.points_px_per_unit)
     acc = RunAccuracy(
         len(rows), len(bounded), x, y, src, n_within if bounded else 0,
