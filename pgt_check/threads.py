@@ -12,26 +12,57 @@ processes (``--executor process``), one thread each.
 Python API runs in the caller's process); ``limit_threads(n)`` applies them where libraries
 were loaded since (a BLAS library counts from its loading: trimesh loads scipy's with the mesh),
 through the enclosing block, or for the rest of the process in a worker.
+
+At most ``MAX_THREADS_PER_CORE`` x the usable cores are applied (``capped``): ``--threads 4096``
+made a 3-frame run 13x slower (issue #39 item 13). The setting itself is kept as given (a
+config file replayed on a bigger machine keeps its meaning); the run warns once. The number of
+threads never changes a result, only the speed.
 """
 
 from __future__ import annotations
 
 import contextlib
 import logging
+import os
 from collections.abc import Iterator
 from typing import Any
 
 logger = logging.getLogger(__name__)
 
+#: threads applied at most per usable core (more only wait on each other)
+MAX_THREADS_PER_CORE = 4
+
+
+def usable_cores() -> int:
+    """The cores this process may run on (its CPU affinity), at least 1."""
+    try:
+        return max(1, len(os.sched_getaffinity(0)))
+    except AttributeError:  # pragma: no cover - not Linux
+        return max(1, os.cpu_count() or 1)
+
+
+def capped(n: int | None, warn: bool = False) -> int | None:
+    """``n`` threads, at most ``MAX_THREADS_PER_CORE`` x ``usable_cores()`` (None stays None);
+    with ``warn`` a WARNING says when it was capped."""
+    if n is None:
+        return None
+    cap = MAX_THREADS_PER_CORE * usable_cores()
+    if n > cap and warn:
+        logger.warning("threads %d is more than %d x the %d usable core(s): using %d (more "
+                       "threads only wait on each other; the results are the same)",
+                       n, MAX_THREADS_PER_CORE, usable_cores(), cap)
+    return min(n, cap)
+
 
 class ThreadLimits:
-    """``n`` threads (None: the libraries' defaults, left alone) for OpenCV and every BLAS
-    library loaded when ``apply`` is called; ``restore`` undoes every ``apply``."""
+    """``n`` threads (None: the libraries' defaults, left alone; capped: ``capped``) for OpenCV
+    and every BLAS library loaded when ``apply`` is called; ``restore`` undoes every
+    ``apply``."""
 
-    def __init__(self, n: int | None) -> None:
+    def __init__(self, n: int | None, warn: bool = False) -> None:
         if n is not None and n < 1:
             raise ValueError(f"threads must be >= 1 or None, got {n}")
-        self.n = n
+        self.n = capped(n, warn)
         self._cv_before: int | None = None
         self._blas: list[Any] = []  # threadpoolctl limiters, in the order applied
 
@@ -69,8 +100,9 @@ _ACTIVE: list[ThreadLimits] = []
 @contextlib.contextmanager
 def run_threads(n: int | None) -> Iterator[ThreadLimits]:
     """OpenCV and BLAS at ``n`` threads inside the block; the settings before it come back
-    after it, also for libraries first limited inside it (``limit_threads``)."""
-    limits = ThreadLimits(n)
+    after it, also for libraries first limited inside it (``limit_threads``). Warns when ``n``
+    is capped (in the outermost block only)."""
+    limits = ThreadLimits(n, warn=not _ACTIVE)
     _ACTIVE.append(limits)
     try:
         limits.apply()
