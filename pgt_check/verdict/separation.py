@@ -13,18 +13,20 @@ constant fitted to a scene:
   ``remeasure.separation_stage``, with the path forced on and, for a reference path, the same
   reference).
 * **the statistic**: per frame the rank r of e0, the path's corner error at the given pose,
-  among (e0, e+, e-), its errors at the given and the two moved poses (1 = smallest; frames
-  where a moved copy does not align are left out). A path that measures the pose gives r = 1 on
-  a correct frame and r <= 2 on a wrong one: |e + m|^2 + |e - m|^2 = 2 |e|^2 + 2 |m|^2, so at
-  most one of the two moves can bring a wrong frame's error down (a single random move could
+  among (e0, e+, e-), its errors at the given and the two moved poses (1 = smallest; a moved
+  copy the path cannot align ranks above any error). A path that measures the pose gives r = 1
+  on a correct frame and r <= 2 on a wrong one: |e + m|^2 + |e - m|^2 = 2 |e|^2 + 2 |m|^2, so
+  at most one of the two moves can bring a wrong frame closer (a single random move could
   cancel it as often as not). For a path whose error does not follow the pose the three are
-  exchangeable and r is 1, 2 or 3 with equal chance.
-* **the test**: the rank sum T = sum r against its exact null (a sum of independent uniform
-  {1, 2, 3}: the frames' own values permuted, nothing fitted to a scene), one-sided at
-  ``ALPHA``. Not significant: the path cannot separate on this run (``failed``): it decides no
-  frame (its outcome is UNVERIFIABLE ``path_cannot_separate``; another path that separates may
-  decide). Fewer than ``MIN_PAIRS`` usable frames: ``not_tested`` (the path keeps deciding; the
-  summary says so).
+  exchangeable: r is 1, 2 or 3 with equal chance where all three align, and a copy that does
+  not align is as likely at any pose (``rank_probabilities``, with the path's failure rate on
+  this run's given poses, ``failure_rate``).
+* **the test**: the rank sum T = sum r against its exact null (independent ranks with those
+  probabilities: the run's own values and failure rate, nothing fitted to a scene),
+  one-sided at ``ALPHA``. Not significant: the path cannot separate on this run (``failed``):
+  it decides no frame (its outcome is UNVERIFIABLE ``path_cannot_separate``; another path that
+  separates may decide). Fewer than ``MIN_PAIRS`` usable frames: ``not_tested`` (the path keeps
+  deciding; the summary says so).
 
 The probe measurements are stored (``SEPARATION_FILE``) so ``pgt-check report`` judges them
 again with its own settings.
@@ -121,6 +123,8 @@ class PathSeparation:
     frames: tuple[str, ...] = ()
     #: the sum of the given poses' ranks (module docstring)
     rank_sum: int = 0
+    #: the path's failure rate on the run's given poses (the null's, ``rank_probabilities``)
+    failure_rate: float = 0.0
 
     @property
     def reason(self) -> str:
@@ -135,6 +139,7 @@ class PathSeparation:
                 "n_higher": self.n_higher, "p_value": self.p_value, "move_px": self.move_px,
                 "median_given_px": self.median_given_px,
                 "median_moved_px": self.median_moved_px, "rank_sum": self.rank_sum,
+                "failure_rate": self.failure_rate,
                 "frames": list(self.frames)}
 
 
@@ -188,18 +193,38 @@ def _g(x: float | None) -> str:
     return "-" if x is None or not math.isfinite(x) else f"{x:.3g}"
 
 
-def rank_sum_p(rank_sum: int, n: int) -> float:
-    """P(T <= rank_sum) for T the sum of ``n`` independent uniform {1, 2, 3} (exact)."""
+def rank_probabilities(q: float = 0.0) -> tuple[float, float, float]:
+    """P(r = 1, 2, 3) of the given pose's rank under the null (the path does not see the pose)
+    when it fails to align any pose with probability ``q`` (its failure rate on this run's
+    given poses) and the given pose aligned: both moved copies align (1 - q)^2: r uniform; one
+    fails 2 q (1 - q): r = 1 or 2; both fail q^2: r = 1 (a failure ranks above any error)."""
+    q = min(max(float(q), 0.0), 1.0)
+    both = (1.0 - q) ** 2 / 3.0
+    return both + q * (1.0 - q) + q * q, both + q * (1.0 - q), both
+
+
+def rank_sum_p(rank_sum: int, n: int, q: float = 0.0) -> float:
+    """P(T <= rank_sum) for T the sum of ``n`` independent ranks with the null probabilities
+    ``rank_probabilities(q)`` (exact; q = 0: uniform {1, 2, 3})."""
     if n <= 0:
         return 1.0
+    probs = rank_probabilities(q)
     dist = np.zeros(2 * n + 1)  # of T - n
     dist[0] = 1.0
     for _ in range(n):
         nxt = np.zeros_like(dist)
         for k in range(3):
-            nxt[k:] += dist[: len(dist) - k]
-        dist = nxt / 3.0
+            nxt[k:] += probs[k] * dist[: len(dist) - k]
+        dist = nxt
     return float(min(1.0, dist[: max(0, rank_sum - n) + 1].sum()))
+
+
+def failure_rate(measurements: Sequence[FrameMeasurement], name: str,
+                 config: VerdictConfig) -> float:
+    """The share of the frames the path ran on where it did not align (no usable homography):
+    the null's failure probability (``rank_probabilities``), from the run's own measurements."""
+    errs = [e for m in measurements if (e := _error(m, name, config)) is not None]
+    return float(np.mean([math.isinf(e) for e in errs])) if errs else 0.0
 
 
 def _path_ok(m: FrameMeasurement, name: str) -> bool:
@@ -299,10 +324,9 @@ def path_separation(
             e0 = _error(m, name, config)
             ep = [_error(moved[(fid, s)].measurement if (fid, s) in moved else None, name, config)
                   for s in (1, -1)]
-            # all three aligned: conditioned on that the three are exchangeable under the null
-            # (counting a moved copy that does not align as far off would favour a blind path
-            # that often fails to align: the given pose was chosen where it aligned)
-            if e0 is None or not all(e is not None and math.isfinite(e) for e in (e0, *ep)):
+            # a moved copy the path cannot align ranks above any error; the null accounts for
+            # the path failing as often at any pose (``failure_rate``)
+            if e0 is None or not math.isfinite(e0) or any(e is None for e in ep):
                 continue
             ranks.append(1 + sum(e <= e0 for e in ep))  # a tie counts against the path
             given.append(e0)
@@ -312,18 +336,19 @@ def path_separation(
             if f:
                 move.append(f * math.tan(math.radians(abs(moved[(fid, 1)].job.angle_deg))))
         n = len(ranks)
-        p_value = rank_sum_p(sum(ranks), n) if n else None
+        q = failure_rate(measurements, name, config)
+        p_value = rank_sum_p(sum(ranks), n, q) if n else None
         if n < MIN_PAIRS:
             status = NOT_TESTED
         else:
             status = PASSED if p_value is not None and p_value < ALPHA else FAILED
-        fin = moved_e
+        fin = [x for x in moved_e if math.isfinite(x)]
         out.append(PathSeparation(
             name, status, n, sum(r == 1 for r in ranks), p_value,
             float(np.median(move)) if move else None,
             float(np.median(given)) if given else None,
             float(np.median(fin)) if fin else None,
-            tuple(used), sum(ranks)))
+            tuple(used), sum(ranks), q))
     return Separation(tuple(out))
 
 
