@@ -156,6 +156,54 @@ def check_outputs_owned(out_dir: str | Path, names: Iterable[str]) -> None:
             )
 
 
+def _store_file_is_ours(path: Path) -> bool | None:
+    """Whether the store file ``path`` (run.json, records.jsonl or the completion marker) was
+    written by pgt-check, from its content: None when there is nothing to lose (missing,
+    empty, a symbolic link, which is replaced and its target left alone) or it cannot be
+    read as a regular file (refused where it is opened)."""
+    if path.is_symlink() or not path.is_file():
+        return None
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4096)
+    except OSError:
+        return None
+    if not head.strip():
+        return None
+    if path.name == RECORDS_FILE:  # JSON lines: the first one a frame's record
+        first = head.lstrip().split(b"\n", 1)[0]
+        return first.startswith(b"{") and (
+            b'"' + FINGERPRINT_KEY.encode() + b'"' in first or b'"frame_id"' in first)
+    try:
+        info = load_json_limited(path, MAX_SMALL_JSON_BYTES, path.name)
+    except InputError:
+        return False
+    return isinstance(info, dict) and (
+        info.get("tool") == "pgt-check" or (path.name == RUN_FILE and "fingerprint" in info)
+    )
+
+
+def check_store_files_owned(out_dir: str | Path) -> None:
+    """InputError naming run.json, records.jsonl or outputs.complete.json in ``out_dir`` when
+    it holds data pgt-check did not write there, and the folder is not one of pgt-check's
+    (none of the three is recognisably the tool's). A run replaces run.json and the marker,
+    and ``--overwrite`` empties records.jsonl: another tool's file of such a name is the
+    user's (the third audit: a ``run.json`` or ``records.jsonl`` of one's own in ``--out``
+    was replaced, with ``--overwrite`` even records.jsonl). A damaged file of a pgt-check
+    folder stays the run's to handle (unknown settings: ``--resume`` / ``--overwrite``)."""
+    out = Path(out_dir)
+    seen = {name: _store_file_is_ours(out / name)
+            for name in (RUN_FILE, RECORDS_FILE, COMPLETION_MARKER)}
+    if any(ours for ours in seen.values()):
+        return
+    for name, ours in seen.items():
+        if ours is False:
+            raise InputError(
+                f"{out / name}: this file was not written by pgt-check and a run would replace "
+                "it: move it away or choose another --out"
+            )
+
+
 #: run.json's key of the input files' content hashes (absolute path -> ``content_hash``)
 INPUT_FILES_KEY = "input_files"
 
@@ -365,10 +413,12 @@ class RecordStore:
         store = cls(out_dir, fingerprint, **kwargs)
         outputs = sorted(set(outputs))
         check_outputs_owned(store.out_dir, outputs)  # before anything is written
+        check_store_files_owned(store.out_dir)
         store.out_dir.mkdir(parents=True, exist_ok=True)
         store._open_file()
         try:
             check_outputs_owned(store.out_dir, outputs)  # again, under the lock
+            check_store_files_owned(store.out_dir)
             store._apply_policy(
                 resume=resume, overwrite=overwrite, settings=settings,
                 frame_ids=None if frame_ids is None else list(frame_ids), outputs=outputs,
