@@ -188,6 +188,25 @@ def _inputs_changed(out: Path, cfg: dict, rejudge: bool) -> dict | None:
                            "--rejudge-stale judges the stored measurements as they are)"}
 
 
+def _check_trusted_summary_not_ours(out: Path, calibration_from: str | None) -> None:
+    """InputError when ``--calibration-from`` is one of this folder's own outputs (its
+    summary.json): a run refuses that (``--out`` would overwrite it); ``report`` took the run's
+    own estimate as the trusted calibration and then rewrote the file it names (third audit,
+    #39)."""
+    from pgt_check.files import check_inputs_not_outputs
+    from pgt_check.inputs import run_output_paths
+
+    try:
+        check_inputs_not_outputs([("--calibration-from summary", calibration_from)],
+                                 run_output_paths(out), "OUT_DIR")
+    except InputError:
+        raise InputError(
+            f"--calibration-from {calibration_from}: is an output of {out} itself, which this "
+            "report rewrites (and the run's own estimate is not a trusted calibration): pass "
+            "the summary.json of another, trusted run"
+        ) from None
+
+
 def _report(args: argparse.Namespace) -> int:
     from pgt_check.correct.registration import REFINED_FILE
     from pgt_check.correct.result import stored_corrections
@@ -202,6 +221,7 @@ def _report(args: argparse.Namespace) -> int:
         if args.absolute_paths:
             override["absolute_paths"] = True
         config = RunConfig.from_dict(merge(cfg, override))
+        _check_trusted_summary_not_ours(out, config.run_checks.calibration_from)
         _warn_stale_auto_decisions(records, config)
         complete, why = outputs_complete(out)
         if not complete:

@@ -50,3 +50,22 @@ def test_the_tools_own_store_files_are_still_reused(tmp_path, cli, base_args):
     assert cli(*base_args(out=out))[0] == 0
     (out / "run.json").write_text("[1, 2]\n")
     assert cli(*base_args("--overwrite", out=out))[0] == 0
+
+
+def test_report_refuses_its_own_summary_as_the_trusted_calibration(tmp_path, cli, base_args,
+                                                                   case):
+    """``pgt-check report OUT --calibration-from OUT/summary.json`` took the run's own
+    estimate as the trusted calibration, passed the gate, and rewrote the file it names (a
+    run refuses the same: --out would overwrite its input)."""
+    out = tmp_path / "out"
+    assert cli(*base_args("--remove-calibration", "--limit", "3", out=out))[0] in (0, 1)
+    before = (out / "summary.json").read_bytes()
+    rc, _, err = cli("report", out, "--calibration-from", out / "summary.json")
+    line = _error_line(err)
+    case("report OUT --calibration-from OUT/summary.json", "2, the file kept",
+         f"{rc}: {line[-120:]}")
+    assert rc == 2 and "--calibration-from" in line and "trusted" in line
+    assert (out / "summary.json").read_bytes() == before
+    trusted = tmp_path / "trusted.json"
+    trusted.write_bytes(before)
+    assert cli("report", out, "--calibration-from", trusted)[0] in (0, 1)
