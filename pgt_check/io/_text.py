@@ -100,7 +100,7 @@ def check_frame_id(
     prefix = f"{where}: " if where else ""
     raise FormatError(
         path, line,
-        f"{prefix}expected a {what} without line breaks or other control characters (frame ids "
+        f"{prefix}expected the {what} without line breaks or other control characters (frame ids "
         f"are written one per line in bad_frames.txt and the trajectory files); got "
         f"{frame_id!r} (character U+{ord(ch):04X})",
     )

@@ -75,14 +75,14 @@ def test_line_file_names_with_control_characters_name_the_line(tmp_path):
 
     hloc = tmp_path / "results.txt"
     hloc.write_text("a.jpg 1 0 0 0 0 0 0\nb\x1b.jpg 1 0 0 0 0 0 0\n")
-    with pytest.raises(FormatError, match=r"results.txt:2: expected a image name without"):
+    with pytest.raises(FormatError, match=r"results.txt:2: expected the image name without"):
         read_trajectory(hloc, "hloc", camera="PINHOLE,64,48,50,50,32,24")
     d = tmp_path / "lamar"
     d.mkdir()
     (d / "sensors.txt").write_text("cam\x070, c, camera, PINHOLE, 64, 48, 50, 50, 32, 24\n")
     (d / "trajectories.txt").write_text("0, cam\x070, 1, 0, 0, 0, 0, 0, 0\n")
     (d / "images.txt").write_text("0, cam\x070, a.jpg\n")
-    with pytest.raises(FormatError, match=r"sensors.txt:1: expected a sensor id without"):
+    with pytest.raises(FormatError, match=r"sensors.txt:1: expected the sensor id without"):
         read_trajectory(d / "trajectories.txt", "lamar")
 
 
