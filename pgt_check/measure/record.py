@@ -16,7 +16,7 @@ places a reference photo through the reference's own pose (reprojection).
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Collection, Mapping
 from dataclasses import dataclass, field, fields, replace
 from enum import Enum
 from typing import Any
@@ -176,6 +176,12 @@ def _g6(x: float) -> float:
     return float(f"{float(x):.6g}")
 
 
+def source_path(source: str) -> str:
+    """The path an evidence source comes from: raw, edges, or enhanced (the source is then the
+    enhancer's name, e.g. mariner)."""
+    return source if source in ("raw", "edges") else "enhanced"
+
+
 @dataclass(frozen=True, eq=False)
 class AbsoluteEvidence:
     """2D-3D correspondences of one frame from absolute evidence only (the raw render, MaRINeR,
@@ -215,6 +221,23 @@ class AbsoluteEvidence:
             out[src] = (p2[start : start + n], p3[start : start + n])
             start += n
         return out
+
+    def points_of(self, paths: Collection[str]) -> tuple[Any, Any]:
+        """(pts2d (n, 2), pts_cam (n, 3)) of the sources whose path (``source_path``) is in
+        ``paths``; with the split unknown, all points when every source's path is among them,
+        else none."""
+        import numpy as np
+
+        split = self.by_source()
+        if not split:
+            if all(source_path(s) in paths for s in self.sources):
+                return (np.asarray(self.pts2d, np.float64).reshape(-1, 2),
+                        np.asarray(self.pts_cam, np.float64).reshape(-1, 3))
+            return np.zeros((0, 2)), np.zeros((0, 3))
+        kept = [v for k, v in split.items() if source_path(k) in paths]
+        if not kept:
+            return np.zeros((0, 2)), np.zeros((0, 3))
+        return np.concatenate([v[0] for v in kept]), np.concatenate([v[1] for v in kept])
 
     def __len__(self) -> int:
         return len(self.pts2d)

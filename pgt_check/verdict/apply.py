@@ -47,14 +47,17 @@ def judge_run(
 
     Measurements are not changed (records.jsonl stays as measured)."""
     ms = list(measurements)
-    shared = run_shared_checks(ms, config) if config.run_checks.enabled and ms else None
+    v = config.verdict
+    sep = path_separation(ms, probes or (), v)
+    barred = sep.barred
+    # a path that cannot tell right from wrong on this run gives no evidence to the pooled
+    # checks either (its points would pull the registration / calibration estimates)
+    shared = (run_shared_checks(ms, config, exclude_paths=tuple(barred))
+              if config.run_checks.enabled and ms else None)
     if shared is not None and shared.registration.status != NOT_CHECKED:
         # what a world rotation / translation does to the images (the shared detection limit)
         sens = Sensitivity(*world_sensitivity(ms))
         shared = replace(shared, registration=replace(shared.registration, sensitivity=sens))
-    v = config.verdict
-    sep = path_separation(ms, probes or (), v)
-    barred = sep.barred
     outs = [path_outcomes(m, v, shared, barred) for m in ms]
     own = own_outcomes(ms, v, shared, outs)
     judged = [judge(m, v, shared, own, out) for m, out in zip(ms, outs, strict=True)]

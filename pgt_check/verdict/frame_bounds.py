@@ -21,7 +21,7 @@ import numpy as np
 from pgt_check.config import RunChecksConfig
 from pgt_check.constants import FEATURE_ONLY_MIN_POINTS
 from pgt_check.geometry.frame_accuracy import FrameAccuracy, frame_accuracy
-from pgt_check.measure.record import FrameMeasurement
+from pgt_check.measure.record import FrameMeasurement, source_path
 from pgt_check.verdict.calibration import CameraCalibration, camera_matrix
 
 logger = logging.getLogger(__name__)
@@ -57,12 +57,6 @@ ACCURACY_COLUMNS: dict[str, str] = {
 
 _MAX_POINTS = 400  # per frame (evenly spaced): the fit's cost stays a few ms
 
-
-
-def source_path(source: str) -> str:
-    """The path an evidence source comes from: raw, edges, or enhanced (the source is then the
-    enhancer's name, e.g. mariner)."""
-    return source if source in ("raw", "edges") else "enhanced"
 
 
 def bound_points(

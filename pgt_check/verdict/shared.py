@@ -22,7 +22,7 @@ errors every frame shares matter more.
 from __future__ import annotations
 
 import logging
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Any
 
@@ -159,10 +159,14 @@ def shared_threshold(measurements: Sequence[FrameMeasurement], config: RunConfig
     return float(rc.threshold_rel * np.median(per_frame))
 
 
-def frame_evidence(measurements: Sequence[FrameMeasurement]) -> list[Any]:
+def frame_evidence(
+    measurements: Sequence[FrameMeasurement], exclude_paths: Collection[str] = (),
+) -> list[Any]:
     """The frames that carry absolute evidence, as ``FrameEvidence`` (index = trajectory order),
     each with at most ``MAX_FRAME_EVIDENCE_POINTS`` points (evenly spaced over its sources),
-    fewer when the frames together would exceed ``MAX_POOLED_POINTS``."""
+    fewer when the frames together would exceed ``MAX_POOLED_POINTS``. ``exclude_paths``: the
+    points of these paths (raw, enhanced, edges) are left out, e.g. a path that this run showed
+    cannot tell right from wrong (``verdict.separation``)."""
     from pgt_check.geometry.shared_errors import FrameEvidence
 
     usable = [
@@ -174,10 +178,17 @@ def frame_evidence(measurements: Sequence[FrameMeasurement]) -> list[Any]:
         min(MAX_FRAME_EVIDENCE_POINTS, MAX_POOLED_POINTS // max(1, len(usable))),
     )
     out = []
+    keep_paths = [p for p in ("raw", "enhanced", "edges") if p not in set(exclude_paths)]
     for i, m in usable:
         wfc = np.asarray(m.world_from_cam, np.float64)
-        pts_cam = np.asarray(m.evidence.pts_cam, np.float64).reshape(-1, 3)
-        pts2d = np.asarray(m.evidence.pts2d, np.float64).reshape(-1, 2)
+        if exclude_paths:
+            pts2d, pts_cam = m.evidence.points_of(keep_paths)
+            if not len(pts2d):
+                continue
+        else:
+            pts_cam, pts2d = m.evidence.pts_cam, m.evidence.pts2d
+        pts_cam = np.asarray(pts_cam, np.float64).reshape(-1, 3)
+        pts2d = np.asarray(pts2d, np.float64).reshape(-1, 2)
         if len(pts2d) > cap:
             keep = np.linspace(0, len(pts2d) - 1, cap).round().astype(int)
             pts_cam, pts2d = pts_cam[keep], pts2d[keep]
@@ -264,8 +275,12 @@ def _calibration_checks(
     return calib, cals, change
 
 
-def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfig) -> SharedChecks:
-    """All run-level checks on the measurements (in trajectory order)."""
+def run_shared_checks(
+    measurements: Sequence[FrameMeasurement], config: RunConfig,
+    exclude_paths: Collection[str] = (),
+) -> SharedChecks:
+    """All run-level checks on the measurements (in trajectory order); ``exclude_paths``: paths
+    whose points do not enter the pooled fits (``frame_evidence``)."""
     from pgt_check.geometry import shared_errors as se
 
     thr = shared_threshold(measurements, config)
@@ -274,7 +289,7 @@ def run_shared_checks(measurements: Sequence[FrameMeasurement], config: RunConfi
         if measurements
         else thr
     )
-    ev = frame_evidence(measurements)
+    ev = frame_evidence(measurements, exclude_paths)
     own = OWN_ERROR_FRACTION * frame_thr  # fallback where too few frames to test them
     v = config.run_checks
     trans = v.calibration_translation

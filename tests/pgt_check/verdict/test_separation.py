@@ -292,6 +292,9 @@ def test_end_to_end_a_blind_enhanced_path_is_barred_on_a_generated_scene(tmp_pat
     sep = summary["path_separation"]
     assert sep["paths"]["enhanced"]["status"] == FAILED, sep
     assert sep["paths"]["edges"]["status"] == PASSED, sep
+    # the blind path's points do not pull the run-level checks either: its random matches
+    # would read as a misregistered trajectory
+    assert summary["shared_errors"]["registration"]["status"] != "failed", summary
     import csv
 
     rows = list(csv.DictReader((out / "frames.csv").open()))

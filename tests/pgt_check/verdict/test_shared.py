@@ -445,3 +445,31 @@ def test_trusted_calibration_workflow_on_any_subset_of_a_sweep(subset, tmp_path)
     assert se2["registration"]["status"] == "passed", se2["registration"]["message"]
     assert all(e["status"] == "passed" for e in se2["calibration_change"].values())
     assert np.mean([r["verdict"] == "PASS" for r in j.rows()]) >= 0.9
+
+
+def test_a_barred_path_gives_no_points_to_the_pooled_checks() -> None:
+    """``frame_evidence(exclude_paths=...)``: the points of a path this run barred
+    (``verdict.separation``) are left out of the registration / calibration / drift fits; a
+    frame with no other path's points is left out entirely."""
+    import numpy as np
+
+    from pgt_check.measure.record import AbsoluteEvidence, FrameMeasurement
+    from pgt_check.verdict.shared import frame_evidence
+
+    rng = np.random.default_rng(0)
+    p2 = rng.uniform(0, 100, (30, 2))
+    pc = np.c_[rng.uniform(-1, 1, (30, 2)), rng.uniform(2, 4, 30)]
+    both = AbsoluteEvidence(("raw", "mariner"), tuple(map(tuple, p2)), tuple(map(tuple, pc)),
+                            (10, 20))
+    enh_only = AbsoluteEvidence(("mariner",), tuple(map(tuple, p2[:20])),
+                                tuple(map(tuple, pc[:20])), (20,))
+    ms = [FrameMeasurement(frame_id=f, timestamp=None, image_path=None, width=100, height=100,
+                           center=(0.0, 0.0, 0.0), camera_id="c",
+                           intrinsics=(100.0, 100.0, 50.0, 50.0),
+                           world_from_cam=tuple(map(tuple, np.eye(4))), evidence=e)
+          for f, e in (("a", both), ("b", enh_only))]
+    full = frame_evidence(ms)
+    assert [len(e.pts2d) for e in full] == [30, 20]
+    kept = frame_evidence(ms, exclude_paths=("enhanced",))
+    assert [e.frame_id for e in kept] == ["a"]
+    np.testing.assert_allclose(kept[0].pts2d, p2[:10])
