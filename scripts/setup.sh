@@ -19,7 +19,7 @@ echo "== python packages"
 # torch is pinned here (pyproject has a range): this wheel is the CPU build; any other spec
 # pulls GBs of CUDA wheels. The [enhance] range (torch>=2.1) then keeps it.
 $PY -m pip install -q torch==2.13.0
-$PY -m pip install -q -e ".[enhance,distributed,dev,train,pyrender,tsdf,bench]"
+$PY -m pip install -q -e ".[enhance,distributed,dev,train,pyrender,tsdf]"
 # [pyrender]: pyrender 0.1.45 pins PyOpenGL==3.1.0 (enough for EGL, lacks what OSMesa needs);
 # upgrade it in a SECOND command (pip warns about the pin and `pip check` reports it; asking for
 # both in one command makes pip fall back to pyrender 0.1.18, which does not import on 3.11).
