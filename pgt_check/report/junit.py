@@ -1,4 +1,7 @@
-"""junit.xml: one testcase per frame (FAIL = failure, UNVERIFIABLE = skipped with its reason).
+"""junit.xml: one testcase per frame (FAIL = failure, UNVERIFIABLE = skipped with its reason),
+then one testcase ``gate`` (classname ``<suite>.run``) that fails when the CI gate failed, so a
+CI that reads only junit.xml is red whenever the exit code is 1, also for run-level reasons
+(inputs changed, too many UNVERIFIABLE frames, ``--require-accuracy``) with no FAIL frame.
 
 Follows the common Jenkins / Surefire JUnit layout (testsuites > testsuite > properties,
 testcase > failure | skipped, system-out), which CI systems (GitLab, GitHub actions, Jenkins,
@@ -72,14 +75,22 @@ def junit_xml_text(
     ``display_path`` maps a record's image_path to what is shown (e.g. without absolute paths).
     """
     n = len(records)
-    counts = _suite_counts(records)
+    gate = summary.get("gate", {}) if isinstance(summary.get("gate"), Mapping) else {}
+    gate_failed = not gate.get("passed")
+    counts = _suite_counts(records, gate_failed)
     root = ET.Element("testsuites", {"name": suite_name, **counts})
     suite = ET.SubElement(root, "testsuite", {"name": suite_name, **counts})
-    gate = summary.get("gate", {}) if isinstance(summary.get("gate"), Mapping) else {}
     _add_properties(suite, summary, gate)
     classname = f"{suite_name}.frames"
     for rec in records:
         _add_testcase(suite, rec, classname, display_path)
+    case = ET.SubElement(suite, "testcase", {"name": "gate", "classname": f"{suite_name}.run",
+                                             "time": "0.000"})
+    if gate_failed:
+        el = ET.SubElement(case, "failure", {
+            "message": xml_text(f"gate FAILED: {gate.get('explanation', '') or 'no gate'}"),
+            "type": "GATE"})
+        el.text = xml_text(gate.get("explanation", ""))
     so = ET.SubElement(suite, "system-out")
     c = summary.get("counts", {})
     so.text = xml_text(
@@ -91,9 +102,10 @@ def junit_xml_text(
     return '<?xml version="1.0" encoding="UTF-8"?>\n' + ET.tostring(root, encoding="unicode") + "\n"
 
 
-def _suite_counts(records: Sequence[Mapping[str, Any]]) -> dict[str, str]:
-    """The tests / failures / errors / skipped / time attributes of the suite, as text."""
-    n_fail = sum(1 for r in records if r.get("verdict") == "FAIL")
+def _suite_counts(records: Sequence[Mapping[str, Any]], gate_failed: bool) -> dict[str, str]:
+    """The tests / failures / errors / skipped / time attributes of the suite, as text (the
+    frames and the gate's testcase)."""
+    n_fail = sum(1 for r in records if r.get("verdict") == "FAIL") + int(gate_failed)
     n_skip = sum(1 for r in records if r.get("verdict") == "UNVERIFIABLE")
     total_time = sum(
         float(r["time_s"])
@@ -101,7 +113,7 @@ def _suite_counts(records: Sequence[Mapping[str, Any]]) -> dict[str, str]:
         if isinstance(r.get("time_s"), (int, float)) and math.isfinite(r["time_s"])
     )
     return {
-        "tests": str(len(records)),
+        "tests": str(len(records) + 1),
         "failures": str(n_fail),
         "errors": "0",
         "skipped": str(n_skip),

@@ -23,11 +23,13 @@ def test_junit_one_case_per_frame_and_valid(config):
     validate(text)
     root = ET.fromstring(text)
     suite = root.find("testsuite")
-    cases = suite.findall("testcase")
+    cases = [c for c in suite.findall("testcase") if c.get("classname") == "pgt-check.frames"]
     assert [c.get("name") for c in cases] == [r["frame_id"] for r in records]
     counts = summary["counts"]
-    assert int(suite.get("tests")) == len(records)
-    assert int(suite.get("failures")) == counts["FAIL"] == len(suite.findall("testcase/failure"))
+    gate_failed = not summary["gate"]["passed"]
+    assert int(suite.get("tests")) == len(records) + 1  # the frames and the gate
+    assert (int(suite.get("failures")) == counts["FAIL"] + gate_failed
+            == len(suite.findall("testcase/failure")))
     assert (
         int(suite.get("skipped"))
         == counts["UNVERIFIABLE"]
@@ -66,3 +68,23 @@ def test_xml_text_removes_control_characters():
 def test_empty_run_is_valid():
     text = junit_xml_text([], {"counts": {}, "gate": {"passed": False, "explanation": "no frames"}})
     validate(text)
+
+
+@pytest.mark.parametrize("passed", [True, False])
+def test_the_gate_is_a_testcase_so_junit_alone_is_red_when_the_gate_fails(passed):
+    """A gate that fails for a run-level reason with no FAIL frame (inputs changed, too many
+    UNVERIFIABLE, --require-accuracy) still shows as a failure in junit.xml."""
+    summary = {"counts": {"PASS": 2},
+               "gate": {"passed": passed, "explanation": "inputs changed: mesh.glb"}}
+    text = junit_xml_text([{"frame_id": "a", "verdict": "PASS", "reason": ""},
+                           {"frame_id": "b", "verdict": "PASS", "reason": ""}], summary)
+    validate(text)
+    suite = ET.fromstring(text).find("testsuite")
+    gate = [c for c in suite.findall("testcase") if c.get("name") == "gate"]
+    assert len(gate) == 1 and gate[0].get("classname") == "pgt-check.run"
+    assert int(suite.get("tests")) == 3
+    if passed:
+        assert gate[0].find("failure") is None and suite.get("failures") == "0"
+    else:
+        assert "inputs changed: mesh.glb" in gate[0].find("failure").get("message")
+        assert suite.get("failures") == "1"
