@@ -51,6 +51,15 @@ def perturb_trajectory(
     n = len(trajectory)
     k = int(round(fraction * n))
     chosen = set(rng.choice(n, size=k, replace=False).tolist()) if k else set()
+    return _perturb_chosen(trajectory, chosen, rotation_deg, translation, rng)
+
+
+def _perturb_chosen(
+    trajectory: Trajectory, chosen: set[int], rotation_deg: tuple[float, float],
+    translation: tuple[float, float], rng: np.random.Generator,
+) -> tuple[Trajectory, list[Perturbation]]:
+    """The trajectory with each frame at a position in ``chosen`` moved by its own random
+    rotation and translation (drawn in trajectory order from ``rng``), and what was injected."""
     frames: list[Frame] = []
     injected: list[Perturbation] = []
     for i, f in enumerate(trajectory.frames):
@@ -96,20 +105,7 @@ def perturb_runs(
         if any(i in chosen for i in range(max(0, start - 1), min(n, start + length + 1))):
             continue
         chosen.update(span)
-    frames: list[Frame] = []
-    injected: list[Perturbation] = []
-    for i, f in enumerate(trajectory.frames):
-        if i in chosen:
-            r = float(rng.uniform(*rotation_deg))
-            t = float(rng.uniform(*translation))
-            frames.append(f.with_pose(perturb_pose(f.world_from_cam, r, t, rng)))
-            injected.append(Perturbation(f.frame_id, r, t))
-        else:
-            frames.append(f)
-    return (
-        Trajectory(tuple(frames), trajectory.source, trajectory.format, dict(trajectory.metadata)),
-        injected,
-    )
+    return _perturb_chosen(trajectory, chosen, rotation_deg, translation, rng)
 
 
 def roc_auc(scores: np.ndarray, labels: np.ndarray) -> float:
