@@ -53,7 +53,8 @@ def test_missing_panels_are_measured_again(tmp_path, sample_scene, monkeypatch):
     calls = _count_measures(monkeypatch)
     out = tmp_path / "out"
     main([str(sample_scene / "trajectories.txt"), "--mesh", str(sample_scene / "mesh.glb"),
-          "--out", str(out), "-q", "--enhance", "never", "--report-details", "3"])
+          "--out", str(out), "-q", "--enhance", "never", "--report-details", "3",
+          "--separation-frames", "0"])
     index = json.loads((out / ASSETS_DIR / "index.json").read_text())["frames"]
     n = json.loads((out / "summary.json").read_text())["n_frames"]
     assert len(index) == 3 and len(calls) == n + 3
