@@ -124,7 +124,7 @@ def verdict_rows(table: dict, scenes: list[str], model: str) -> list[list[object
         who = "left-out model" if f"{prefix} | left-out model (near)" in table else model
         if f"{prefix} | {who} (near)" not in table:
             continue
-        g = lambda row: table[f"{prefix} | {row}"]["psnr_y"]  # noqa: E731
+        g = lambda row, p=prefix: table[f"{p} | {row}"]["psnr_y"]  # noqa: E731
         raw, base, near = g("raw render"), g("matching-only base (near)"), g(f"{who} (near)")
         far, tgt = g(f"{who} (far)"), g(f"{who} (target)")
         need = 2.0 if prefix.endswith("| coloured") else 7.0

@@ -419,8 +419,8 @@ def test_trusted_calibration_workflow_on_any_subset_of_a_sweep(subset, tmp_path)
     PASS with the calibration unchanged."""
     import json
 
-    from pgt_eval import perturb_trajectory
     from pgt_check.geometry.transforms import axis_angle_to_rotmat
+    from pgt_eval import perturb_trajectory
 
     rot = axis_angle_to_rotmat(np.array([1.0, 0.6, 0.2]), 0.9).T
     given, true = _sweep(90), _sweep(90, rot)
