@@ -48,13 +48,13 @@ from pgt_check.geometry.shared_errors.calibration import estimate_calibration
 from pgt_check.geometry.shared_errors.drift import estimate_drift
 from pgt_check.geometry.shared_errors.evidence import REASONS, FrameEvidence
 from pgt_check.geometry.shared_errors.registration import estimate_registration
-from pgt_check.geometry.shared_errors.screening import FrameScreen, screen_frames
 from pgt_check.geometry.shared_errors.results import (
     CalibrationEstimate,
     DriftEstimate,
     DriftWindow,
     RegistrationEstimate,
 )
+from pgt_check.geometry.shared_errors.screening import FrameScreen, screen_frames
 from pgt_check.geometry.shared_errors.settings import (
     CalibrationSettings,
     DriftSettings,

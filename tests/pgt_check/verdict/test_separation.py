@@ -28,9 +28,9 @@ from pgt_check.verdict.separation import (
     load_probes,
     path_separation,
     probe_plan,
-    save_probes,
     rank_probabilities,
     rank_sum_p,
+    save_probes,
 )
 
 ROOT = Path(__file__).resolve().parents[3]
@@ -264,11 +264,11 @@ def test_end_to_end_a_blind_enhanced_path_is_barred_on_a_generated_scene(tmp_pat
     bars the blind path (summary.json ``path_separation``), keeps the geometric-edge path,
     which decides instead, and no frame is decided by the blind path; ``pgt-check report`` judges the stored probes
     again the same way."""
+    import pgt_check.enhance.reproject as reproject
     from pgt_check.cli import main
     from pgt_check.io import read_trajectory
     from pgt_check.io.lamar_write import write_lamar
     from pgt_eval import perturb_pose
-    import pgt_check.enhance.reproject as reproject
 
     # the registry names the class by module path: the serial run builds this one
     monkeypatch.setattr(reproject, "ReprojectEnhancer", _BlindEnhancer)
