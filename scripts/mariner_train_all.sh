@@ -2,8 +2,10 @@
 # Train the gated cpu-frozen MaRINeR on every shared scene's training pool (issue 37), resumable.
 # Usage: bash scripts/mariner_train_all.sh [CACHE_DIR] [MINUTES]
 # Frame caches and triple caches go to CACHE_DIR (default ~/.cache/pgt_check/mariner_all; a few
-# GB, never in the repo); the run to CACHE_DIR/run_all, resumed from
-# reports/mariner_runs/all_scenes/last.pt when that is there and the run folder is new.
+# GB, never in the repo); the run to CACHE_DIR/run_all: resumed from its own last.pt, or, when
+# the run folder is new, started from the committed reports/mariner_runs/all_scenes/best.pt
+# (weights only: the optimiser state and the learning-rate schedule start afresh; the optimiser
+# state was not committed, it would double the file).
 # Held out: every bm_* frame with timestamp % 10 == 0 (their evaluation split) and the whole of
 # 7scenes_redkitchen/ and sceaux_castle/ (never trained on). See reports/mariner_training.md.
 set -euo pipefail
@@ -37,10 +39,11 @@ done
 $CACHE --data "$C/fc_redkitchen_train" --out "$C/tr_redkitchen" --pairs 1 --min-gap 5 --max-gap 60 \
   --val-offset 20 --val-every 4
 mkdir -p "$C/run_all"
-if [ ! -f "$C/run_all/last.pt" ] && [ -f reports/mariner_runs/all_scenes/last.pt ]; then
-  cp reports/mariner_runs/all_scenes/last.pt reports/mariner_runs/all_scenes/log.csv "$C/run_all/"
+INIT=()
+if [ ! -f "$C/run_all/last.pt" ] && [ -f reports/mariner_runs/all_scenes/best.pt ]; then
+  INIT=(--init reports/mariner_runs/all_scenes/best.pt)
 fi
-python -m mariner_core.train_frozen train --out "$C/run_all" \
+python -m mariner_core.train_frozen train --out "$C/run_all" "${INIT[@]}" \
   --caches "$C/tr_redkitchen,$C/tr_bm_asclepius,$C/tr_bm_mictlantecuhli,$C/tr_bm_virgin_child" \
   --max-minutes "$MIN" --crop 64 --batch-size 16 --gated --colour-aug 0.5 --render-aug 0.3 \
   --threads 1 --val-every-minutes 25 --resume
