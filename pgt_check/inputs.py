@@ -50,19 +50,11 @@ def load_trajectory(config: RunConfig) -> Trajectory:
 
 
 def run_output_paths(out: str | Path) -> list[Path]:
-    """Every file and folder a run writes in ``out`` (an input there would be overwritten)."""
-    from pgt_check.correct.calibration import CALIBRATED_DIR
-    from pgt_check.correct.frames import BAD_FRAMES_NAME, CORRECTED_NAME
-    from pgt_check.correct.pose import CORRECTIONS_FILE
-    from pgt_check.correct.registration import REFINED_FILE, REGISTERED_NAME
-    from pgt_check.report.assets import ASSETS_DIR
-    from pgt_check.report.outputs import COMPLETION_MARKER, OUTPUT_FILES
-    from pgt_check.store import RECORDS_FILE, RUN_FILE
+    """Every file and folder a run writes in ``out`` (an input there would be overwritten):
+    ``OutputLayout.top_level``."""
+    from pgt_check.output_layout import OUTPUTS
 
-    names = {*OUTPUT_FILES, COMPLETION_MARKER, RECORDS_FILE, RUN_FILE, CORRECTIONS_FILE,
-             CORRECTED_NAME, BAD_FRAMES_NAME, REFINED_FILE, REGISTERED_NAME, ASSETS_DIR,
-             CALIBRATED_DIR}
-    return [Path(out) / n for n in sorted(names)]
+    return OUTPUTS.paths(out)
 
 
 def check_side_inputs(config: RunConfig, frames: Sequence[Frame]) -> None:

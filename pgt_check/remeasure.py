@@ -17,6 +17,7 @@ from pgt_check.config import RunConfig
 from pgt_check.errors import InputError, RunInterrupted
 from pgt_check.measure import FrameMeasurement, build_frame_checker
 from pgt_check.measure.steps import format_exception
+from pgt_check.output_layout import OUTPUTS
 from pgt_check.progress import frame_progress
 from pgt_check.types import Frame, Trajectory
 
@@ -117,7 +118,7 @@ def separation_stage(traj: Trajectory, measurements: Sequence[FrameMeasurement],
                      config: RunConfig, fingerprint: str = "") -> list[Any]:
     """Frames moved by a known amount and measured again through each path that decides
     frames (``verdict.separation``): the probes ``judge_run`` tests each path's separating
-    power with. Stored in the run folder (``SEPARATION_FILE``, for ``pgt-check report``);
+    power with. Stored in the run folder (``OUTPUTS.separation_probes``, for ``pgt-check report``);
     probes stored under the same ``fingerprint`` for the same moves are reused (``--resume``).
     [] when ``verdict.separation_frames`` is 0 or no path has enough frames (a stale file is
     removed)."""
@@ -125,7 +126,6 @@ def separation_stage(traj: Trajectory, measurements: Sequence[FrameMeasurement],
 
     from pgt_check.verdict.self_test import ROTATION, moved_frame
     from pgt_check.verdict.separation import (
-        SEPARATION_FILE,
         Probe,
         load_probes,
         probe_plan,
@@ -135,7 +135,7 @@ def separation_stage(traj: Trajectory, measurements: Sequence[FrameMeasurement],
     out = Path(config.out)
     jobs = probe_plan(measurements, config.verdict, config.verdict.separation_frames)
     if not jobs:
-        (out / SEPARATION_FILE).unlink(missing_ok=True)
+        (out / OUTPUTS.separation_probes).unlink(missing_ok=True)
         return []
     try:
         stored = {p.job.key: p for p in load_probes(out, fingerprint)}

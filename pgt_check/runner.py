@@ -45,6 +45,7 @@ from pgt_check.store import mesh_content_hash
 from pgt_check.threads import run_threads
 from pgt_check.types import Frame, Trajectory
 from pgt_check.verdict import RunResult, judge_run
+from pgt_check.verdict.outcome import RunOutcome, judge_outcome
 
 logger = logging.getLogger(__name__)
 
@@ -56,10 +57,11 @@ __all__ = [
 ]
 
 
-def run(config: RunConfig) -> dict[str, Any]:
+def run(config: RunConfig) -> RunOutcome:
     """Check every frame of the configured trajectory and write the outputs to ``config.out``.
 
-    Returns the summary (also written as summary.json). Raises InputError for user errors
+    Returns the run's outcome (its gate, statistics, accuracy and corrected result; written as
+    summary.json and the other outputs). Raises InputError for user errors
     (SetupError when the chosen mesh / renderer / matcher / enhancer cannot be built, found
     before any frame is measured) and RunInterrupted after a Ctrl-C or SIGTERM (the frames done
     so far are kept for ``--resume``).
@@ -71,7 +73,7 @@ def run(config: RunConfig) -> dict[str, Any]:
 
 def run_trajectory(
     traj: Trajectory, config: RunConfig, *, t0: float | None = None
-) -> dict[str, Any]:
+) -> RunOutcome:
     """``run`` on an already read trajectory (the Python API passes in-memory ones): the one
     path from frames to outputs, so the CLI and the API key stored measurements alike (the
     mesh's content hash with its side files in the fingerprint, ``frame_input_keys`` per
@@ -81,7 +83,7 @@ def run_trajectory(
         return _run_trajectory(traj, config, t0)
 
 
-def _run_trajectory(traj: Trajectory, config: RunConfig, t0: float | None) -> dict[str, Any]:
+def _run_trajectory(traj: Trajectory, config: RunConfig, t0: float | None) -> RunOutcome:
     t0 = time.perf_counter() if t0 is None else t0
     check_frame_ids(traj.frames, traj.source)  # in-memory trajectories of the API too
     frames = list(traj.frames)
@@ -214,9 +216,10 @@ def check_frames(
     checker_factory: Callable[[], Any],
     *,
     t0: float | None = None,
-) -> dict[str, Any]:
+) -> RunOutcome:
     """Measure the prepared run's frames (skipping those already in the store with the same
-    fingerprint and input key), then write the outputs.
+    fingerprint and input key), judge and correct them, then write the outputs; return the
+    run's outcome.
 
     Measurements stream from the executor into ``out/records.jsonl`` as frames finish; the
     outputs are built from the store in ``frames`` order, so a resumed run writes the same
@@ -234,10 +237,10 @@ def _check_frames_locked(
     config: RunConfig,
     checker_factory: Callable[[], Any],
     t0: float | None,
-) -> dict[str, Any]:
+) -> RunOutcome:
     """``check_frames`` with the store open (and locked) by the caller."""
     from pgt_check.executor import ExecutorStats
-    from pgt_check.report.outputs import ExecutorSummary, RunFacts, write_run
+    from pgt_check.report.outputs import ExecutorSummary, RunFacts, write_outcome
 
     t0 = time.perf_counter() if t0 is None else t0
     out = Path(config.out)
@@ -251,6 +254,7 @@ def _check_frames_locked(
     result = correct_stage(traj, measurements, judged, config, checker_factory)
     if config.self_test > 0:  # the stated detection limits tested (``verdict.self_test``)
         result = self_test_stage(traj, result, config)
+    outcome = judge_outcome(result, config)  # the gate, decided on the corrected run
     assets = write_report_assets(prepared.frames, result, config, checker_factory,
                                  prepared.fingerprint)
     shadings = sorted({str(m.shading) for m in measurements if m.shading})
@@ -262,7 +266,8 @@ def _check_frames_locked(
         outside_dataset=prepared.outside_dataset,
         wall_time_s=time.perf_counter() - t0,
     )
-    return write_run(out, result, config, facts, assets=assets)
+    write_outcome(out, outcome, config, facts, assets=assets)
+    return outcome
 
 
 def _reference_pass(
@@ -301,7 +306,7 @@ def _reference_pass(
 
 def _open_store(config: RunConfig, prepared: PreparedRun) -> Any:
     """The run's ``RecordStore`` context manager; an unusable ``--out`` is an InputError."""
-    from pgt_check.report.outputs import output_files
+    from pgt_check.output_layout import OUTPUTS
     from pgt_check.store import RecordStore
 
     out = Path(config.out)
@@ -316,7 +321,7 @@ def _open_store(config: RunConfig, prepared: PreparedRun) -> Any:
             overwrite=config.overwrite,
             settings=settings,
             frame_ids=prepared.ids,
-            outputs=output_files(),  # refused where one is a file pgt-check did not write
+            outputs=OUTPUTS.marked_files(),  # refused where one is a file pgt-check did not write
             input_files=prepared.input_files,
         )
     except OSError as err:

@@ -38,6 +38,7 @@ from pgt_check.files import (
     load_json_limited,
     open_append,
 )
+from pgt_check.output_layout import OUTPUTS
 
 logger = logging.getLogger(__name__)
 
@@ -106,7 +107,7 @@ def mesh_content_hash(path: str | Path, side_files: Iterable[str] = ()) -> str:
 #: written last by ``report.outputs.write_outputs``: the output files and their sha256. Its
 #: absence means the output set is incomplete (a run or ``pgt-check report`` is writing, or was
 #: killed midway). It also says which files of the folder pgt-check wrote (``owned_outputs``)
-COMPLETION_MARKER = "outputs.complete.json"
+COMPLETION_MARKER = OUTPUTS.completion_marker
 #: run.json's key of the output names a run claims while its outputs are incomplete
 OUTPUTS_KEY = "outputs"
 
@@ -237,10 +238,10 @@ def changed_inputs(run_info: Mapping[str, Any], config_input: Mapping[str, Any] 
     return changed, unreadable
 
 
-RECORDS_FILE = "records.jsonl"
+RECORDS_FILE = OUTPUTS.records
 #: longest line of records.jsonl read (a record is ~15 KB; a longer line is a corrupt record)
 MAX_RECORD_LINE_BYTES = 16 * 1024**2
-RUN_FILE = "run.json"
+RUN_FILE = OUTPUTS.run
 FINGERPRINT_KEY = "_fingerprint"
 
 
@@ -452,7 +453,7 @@ class RecordStore:
         if not self.run_path.is_file():
             return None
         try:
-            info = load_json_limited(self.run_path, MAX_SMALL_JSON_BYTES, "run.json")
+            info = load_json_limited(self.run_path, MAX_SMALL_JSON_BYTES, RUN_FILE)
         except FormatError:
             info = None
         if not isinstance(info, dict):

@@ -11,7 +11,7 @@ PKG = Path(__file__).resolve().parents[1] / "pgt_check"
 #: layer of each top-level part; a module may import only its own layer or lower ones
 LAYERS = {
     "errors": 0, "_checks": 0, "files": 0, "types": 0, "config": 0, "constants": 0, "config_load": 0, "config_judge": 0, "registry": 0, "_cli": 0,
-    "progress": 0, "threads": 0,
+    "progress": 0, "threads": 0, "output_layout": 0,
     "io": 1, "render": 1, "match": 1, "geometry": 1, "enhance": 1,
     "measure": 2,
     "verdict": 3,

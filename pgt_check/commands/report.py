@@ -17,6 +17,7 @@ from pgt_check.config import RunConfig, merge
 from pgt_check.errors import InputError
 from pgt_check.files import MAX_SMALL_JSON_BYTES, load_json_limited, safe_text
 from pgt_check.measure.record import FrameMeasurement
+from pgt_check.output_layout import OUTPUTS
 from pgt_check.report.stored import load_run
 
 
@@ -208,7 +209,6 @@ def _check_trusted_summary_not_ours(out: Path, calibration_from: str | None) -> 
 
 
 def _report(args: argparse.Namespace) -> int:
-    from pgt_check.correct.registration import REFINED_FILE
     from pgt_check.correct.result import stored_corrections
     from pgt_check.report.outputs import RunFacts, outputs_complete, write_run
     from pgt_check.verdict import judge_run
@@ -227,7 +227,7 @@ def _report(args: argparse.Namespace) -> int:
         if not complete:
             print(f"pgt-check report: note: the output set in {out} was incomplete ({why}); "
                   "rebuilding all of it", file=sys.stderr)
-        old = _old_summary(out / "summary.json")
+        old = _old_summary(out / OUTPUTS.summary_json)
         stale = _inputs_changed(out, cfg, args.rejudge_stale)
         extra = {
             k: old[k]
@@ -249,8 +249,8 @@ def _report(args: argparse.Namespace) -> int:
             ) from err
         result, stale = stored_corrections(judged, out)
         if stale:
-            print(f"pgt-check report: note: {REFINED_FILE} was measured for another "
-                  "registration estimate (other verdict settings); the estimate shown is not "
+            print(f"pgt-check report: note: {OUTPUTS.registration_refined} was measured for "
+                  "another registration estimate (other verdict settings); the estimate shown is not "
                   "refined", file=sys.stderr)
         summary = write_run(out, result, config, RunFacts(carried=extra))
     except (InputError, OSError) as err:

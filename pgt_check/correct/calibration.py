@@ -41,16 +41,13 @@ import numpy as np
 
 from pgt_check.geometry.transforms import invert_rigid
 from pgt_check.measure.record import camera_key
+from pgt_check.output_layout import OUTPUTS
 from pgt_check.types import CAMERA_MODELS, Camera, Trajectory
 from pgt_check.verdict.shared import SharedChecks
 from pgt_check.verdict.shared_results import CalibrationCheck
 from pgt_check.verdict.status import FAILED, FINDING
 
 logger = logging.getLogger(__name__)
-
-CALIBRATED_DIR = "calibrated"
-#: the files ``write_calibrated_rig`` writes (and removes when they would be stale)
-CALIBRATED_FILES = ("sensors.txt", "images.txt", "trajectories.txt", "rigs.txt")
 
 
 def with_focal_scale(
@@ -193,7 +190,7 @@ def write_calibrated_rig(
     ``choose_form``; without them the rotation is written)."""
     from pgt_check.io.lamar_write import write_lamar
 
-    folder = Path(out) / CALIBRATED_DIR
+    folder = Path(out) / OUTPUTS.calibrated_dir
     cals = significant_calibrations(shared)
     cams = {f.camera for f in trajectory.frames}
     rigs: dict[Camera, tuple[Camera, np.ndarray]] = {}
@@ -204,7 +201,7 @@ def write_calibrated_rig(
             forms[cam] = choose_form(cam, entry, measurements)
             rigs[cam] = (forms[cam].camera, forms[cam].rig_from_cam)
     if not rigs:
-        for name in CALIBRATED_FILES:
+        for name in OUTPUTS.calibrated_files:
             (folder / name).unlink(missing_ok=True)
         if folder.is_dir() and not any(folder.iterdir()):
             folder.rmdir()
@@ -212,7 +209,7 @@ def write_calibrated_rig(
     files = write_lamar(trajectory, folder, rigs=rigs)
     logger.info("wrote %s (the calibration estimate as a rig, %d camera(s))", folder, len(rigs))
     return CalibratedRig(
-        trajectory_file=f"{CALIBRATED_DIR}/{files['trajectories'].name}",
+        trajectory_file=f"{OUTPUTS.calibrated_dir}/{files['trajectories'].name}",
         cameras={camera_key(c): RigCamera.of(e, r, forms[c].form, forms[c].residual_px)
                  for c, (e, r) in rigs.items()},
     )
@@ -251,7 +248,7 @@ class CalibratedRig:
 
     trajectory_file: str  # relative to the output folder
     cameras: dict[str, RigCamera]  # by the calibration check's camera key
-    folder: str = CALIBRATED_DIR
+    folder: str = OUTPUTS.calibrated_dir
 
     def to_json(self) -> dict[str, Any]:
         return {"folder": self.folder, "trajectory_file": self.trajectory_file,

@@ -34,13 +34,11 @@ import numpy as np
 from pgt_check.config import RunConfig
 from pgt_check.correct.pose import Correction, refine_pose, save_corrections
 from pgt_check.measure.record import FrameMeasurement
+from pgt_check.output_layout import OUTPUTS
 from pgt_check.types import Frame, Trajectory
 from pgt_check.verdict.result import FrameResult, RunResult
 
 logger = logging.getLogger(__name__)
-
-CORRECTED_NAME = "corrected_trajectory.txt"
-BAD_FRAMES_NAME = "bad_frames.txt"
 
 
 def chosen_frames(frames: Sequence[FrameResult], mode: str) -> list[str]:
@@ -170,7 +168,7 @@ def bad_frames_text(frames: Sequence[FrameResult], corrections: Mapping[str, Cor
     lines = [
         "# pgt-check: frames whose pose FAILs the check, one id per line",
         f"# {len(bad)} FAIL frames; {len(fixed)} of them have an applied correction in "
-        f"{CORRECTED_NAME}",
+        f"{OUTPUTS.corrected_trajectory}",
     ]
     lines += [f"# corrected: {f}" for f in fixed]
     lines += bad
@@ -204,8 +202,8 @@ def correct_run(
     )
     save_corrections(out, corrections.values(), config.measurement_fingerprint())
     fmt = write_trajectory_file(corrected_trajectory(trajectory, corrections),
-                                out / CORRECTED_NAME)
-    atomic_write_text(out / BAD_FRAMES_NAME, bad_frames_text(result.frames, corrections))
+                                out / OUTPUTS.corrected_trajectory)
+    atomic_write_text(out / OUTPUTS.bad_frames, bad_frames_text(result.frames, corrections))
     return corrections, _corrections_summary(corrections, config, stopped, fmt)
 
 
@@ -278,8 +276,8 @@ class CorrectionsSummary:
     stopped: str | None
     applied: int
     format: str  # of the corrected trajectory
-    file: str = CORRECTED_NAME
-    bad_frames_file: str = BAD_FRAMES_NAME
+    file: str = OUTPUTS.corrected_trajectory
+    bad_frames_file: str = OUTPUTS.bad_frames
 
     def to_json(self) -> dict[str, Any]:
         return {

@@ -35,6 +35,7 @@ from typing import Any
 
 import numpy as np
 
+from pgt_check.output_layout import OUTPUTS
 from pgt_check.types import Frame
 
 logger = logging.getLogger(__name__)
@@ -51,9 +52,6 @@ CORRECTION_COLUMNS: tuple[str, ...] = (
     "corr_start",
     "corr_reason",
 )
-
-#: file in the run directory that keeps the corrections (``pgt-check report`` reads it back)
-CORRECTIONS_FILE = "corrections.json"
 
 
 @dataclass(frozen=True)
@@ -131,7 +129,7 @@ def _clean(v: Any) -> Any:
 def save_corrections(
     out_dir: str | Path, corrections: Iterable[Correction], fingerprint: str = ""
 ) -> Path:
-    path = Path(out_dir) / CORRECTIONS_FILE
+    path = Path(out_dir) / OUTPUTS.corrections
     doc = {"fingerprint": fingerprint, "corrections": [c.to_json() for c in corrections]}
     from pgt_check.files import atomic_write_text
 
@@ -141,7 +139,7 @@ def save_corrections(
 
 def load_corrections(out_dir: str | Path) -> dict[str, Correction]:
     """The corrections stored in a run directory by frame id ({} if there are none)."""
-    path = Path(out_dir) / CORRECTIONS_FILE
+    path = Path(out_dir) / OUTPUTS.corrections
     if not path.is_file():
         return {}
     try:

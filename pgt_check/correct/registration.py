@@ -49,8 +49,6 @@ import numpy as np
 
 from pgt_check.config import RunConfig
 from pgt_check.correct.registration_result import (  # noqa: F401  (re-exported)
-    REFINED_FILE,
-    REGISTERED_NAME,
     SAME_START_ATOL,
     RefinedRegistration,
     RefineRound,
@@ -64,6 +62,7 @@ from pgt_check.correct.registration_result import (  # noqa: F401  (re-exported)
 )
 from pgt_check.geometry.transforms import move_pose
 from pgt_check.measure.record import FrameMeasurement
+from pgt_check.output_layout import OUTPUTS
 from pgt_check.types import Frame, Trajectory
 from pgt_check.verdict.shared import SharedChecks
 from pgt_check.verdict.shared_results import RegistrationCheck
@@ -344,12 +343,13 @@ def refine_run(
     if config.run_checks.refine_rounds > 0 and needs_refinement(shared):
         refined = load_refinement(out, shared, refine_fingerprint(config))
         if refined is not None:
-            logger.info("registration refinement reused from %s", out / REFINED_FILE)
+            logger.info("registration refinement reused from %s",
+                        out / OUTPUTS.registration_refined)
         else:
             refined = refine_registration(trajectory.frames, measurements, shared, config, measure)
             if refined is not None:
                 save_refinement(out, refined)
-    path = out / REGISTERED_NAME
+    path = out / OUTPUTS.registered_trajectory
     if refined is None:
         path.unlink(missing_ok=True)  # a previous run's file would no longer be true
         if config.run_checks.refine_rounds == 0 and needs_refinement(shared):

@@ -18,14 +18,12 @@ import numpy as np
 
 from pgt_check.files import atomic_write_text
 from pgt_check.geometry.transforms import move_pose, rotation_angle_deg
+from pgt_check.output_layout import OUTPUTS
 from pgt_check.types import Trajectory
 from pgt_check.verdict.shared import SharedChecks
 from pgt_check.verdict.shared_results import RegistrationCheck
 
 logger = logging.getLogger(__name__)
-
-REFINED_FILE = "registration_refined.json"
-REGISTERED_NAME = "registered_trajectory.txt"
 
 #: the start correction of a stored refinement must match the main pass's within this
 #: (elementwise, absolute) to be reused
@@ -158,8 +156,8 @@ def _refinement_record(entry: RegistrationCheck, refined: RefinedRegistration) -
         "rounds_kept": refined.n_kept,
         "stopped": refined.stopped,
         "n_frames": len(refined.frame_ids) if refined.rounds else 0,
-        "file": REFINED_FILE,
-        "trajectory_file": REGISTERED_NAME,
+        "file": OUTPUTS.registration_refined,
+        "trajectory_file": OUTPUTS.registered_trajectory,
     }
 
 
@@ -214,7 +212,7 @@ def _px(x: float | None) -> str:
 
 
 def save_refinement(out_dir: str | Path, refined: RefinedRegistration) -> Path:
-    path = Path(out_dir) / REFINED_FILE
+    path = Path(out_dir) / OUTPUTS.registration_refined
     atomic_write_text(path, json.dumps(refined.to_json(), indent=1) + "\n")  # whole, renamed
     return path
 
@@ -224,7 +222,7 @@ def load_refinement(
 ) -> RefinedRegistration | None:
     """The stored refinement when it started from this run's rigid correction (and, if
     given, was measured with the same settings); else None (stale or absent)."""
-    path = Path(out_dir) / REFINED_FILE
+    path = Path(out_dir) / OUTPUTS.registration_refined
     c = registration_entries(shared)[0].corrected_world_from_world
     if not path.is_file() or c is None:
         return None

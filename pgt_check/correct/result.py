@@ -11,6 +11,7 @@ from typing import Any
 from pgt_check.correct.calibration import CalibratedRig
 from pgt_check.correct.frames import CorrectionsSummary
 from pgt_check.correct.pose import Correction
+from pgt_check.output_layout import OUTPUTS
 from pgt_check.verdict.result import FrameResult, RunResult
 from pgt_check.verdict.self_test_curves import SelfTest
 from pgt_check.verdict.shared import SharedChecks
@@ -66,7 +67,6 @@ def stored_corrections(judged: RunResult, out: str | Path) -> tuple[CorrectedRun
     stale (measured for another estimate: other verdict settings)."""
     from pgt_check.correct.pose import load_corrections
     from pgt_check.correct.registration import (
-        REFINED_FILE,
         apply_refinement,
         load_refinement,
         needs_refinement,
@@ -77,7 +77,7 @@ def stored_corrections(judged: RunResult, out: str | Path) -> tuple[CorrectedRun
     if judged.shared is not None:
         refined = load_refinement(out, judged.shared)
         stale = (refined is None and needs_refinement(judged.shared)
-                 and (out / REFINED_FILE).is_file())
+                 and (out / OUTPUTS.registration_refined).is_file())
         reported = apply_refinement(judged.shared, refined)
     return CorrectedRun.of(judged, reported_shared=reported,
                            corrections=load_corrections(out)), stale

@@ -31,6 +31,7 @@ if TYPE_CHECKING:
     from pgt_check.measure.record import FrameMeasurement
     from pgt_check.verdict.result import RunResult
 
+from pgt_check.output_layout import OUTPUTS
 from pgt_check.report.drawing import (  # re-exported: callers and tests import them here
     ARROW_GRID,
     PANEL_MAX,
@@ -54,16 +55,13 @@ from pgt_check.report.drawing import (  # re-exported: callers and tests import 
 logger = logging.getLogger(__name__)
 
 __all__ = [
-    "ARROW_GRID", "ASSETS_DIR", "ASSET_KINDS", "FRAMES_SUBDIR", "PANEL_MAX", "PATH_BGR",
+    "ARROW_GRID", "ASSET_KINDS", "PANEL_MAX", "PATH_BGR",
     "TILE_MAX", "PanelWriter", "arrow_magnification", "asset_stem", "checkerboard",
     "difference_image", "draw_arrows", "existing_assets", "grid_points",
     "homography_displacements", "load_assets_index", "main_pass_assets", "manifest_path",
     "prune_panels", "select_detail_frames", "write_assets_index", "write_frame_assets",
 ]
 
-ASSETS_DIR = "assets"
-FRAMES_SUBDIR = "frames"
-INDEX_NAME = "index.json"
 MANIFEST_VERSION = 1
 #: asset kinds in display order
 ASSET_KINDS = (
@@ -124,7 +122,7 @@ def write_frame_assets(
     """
     out_dir = Path(out_dir)
     stem = asset_stem(record["frame_id"])
-    rel_dir = f"{ASSETS_DIR}/{FRAMES_SUBDIR}"
+    rel_dir = OUTPUTS.panels_dir
     written: dict[str, str] = {}
 
     def put(kind: str, bgr: np.ndarray) -> None:
@@ -166,7 +164,7 @@ def write_frame_assets(
 
 # -- panels during the main pass ------------------------------------------------------------------
 def manifest_path(out_dir: str | Path, frame_id: Any) -> Path:
-    return Path(out_dir) / ASSETS_DIR / FRAMES_SUBDIR / f"{asset_stem(frame_id)}.json"
+    return Path(out_dir) / OUTPUTS.panels_dir / f"{asset_stem(frame_id)}.json"
 
 
 class PanelWriter:
@@ -257,7 +255,7 @@ def main_pass_assets(
 def prune_panels(out_dir: str | Path, keep_ids: Iterable[str]) -> int:
     """Delete the panels and manifests of frames not in ``keep_ids`` (written during the main
     pass for frames that were not selected in the end). Returns the number of files removed."""
-    folder = Path(out_dir) / ASSETS_DIR / FRAMES_SUBDIR
+    folder = Path(out_dir) / OUTPUTS.panels_dir
     if not folder.is_dir():
         return 0
     keep = {asset_stem(f) for f in keep_ids}
@@ -270,7 +268,7 @@ def prune_panels(out_dir: str | Path, keep_ids: Iterable[str]) -> int:
     return removed
 
 def index_path(out_dir: str | Path) -> Path:
-    return Path(out_dir) / ASSETS_DIR / INDEX_NAME
+    return Path(out_dir) / OUTPUTS.assets_index
 
 
 def write_assets_index(out_dir: str | Path, assets: Mapping[str, Mapping[str, str]]) -> None:
@@ -289,7 +287,7 @@ def _safe_relative(rel: str) -> bool:
         not p.is_absolute()
         and ".." not in p.parts
         and bool(p.parts)
-        and p.parts[0] == ASSETS_DIR
+        and p.parts[0] == OUTPUTS.assets_dir
         and "\\" not in rel
     )
 

@@ -37,11 +37,11 @@ import numpy as np
 from pgt_check._checks import check_shape
 from pgt_check.correct.calibration import with_focal_scale
 from pgt_check.files import atomic_write_text
+from pgt_check.output_layout import OUTPUTS
 from pgt_check.types import Camera, opencv_to_colmap_params
 
 logger = logging.getLogger(__name__)
 
-CALIBRATED_SENSORS = "calibrated_sensors.txt"
 #: calibration statuses that mean a significant error (lower 95 % bound above the threshold)
 SIGNIFICANT = ("failed", "finding")
 
@@ -146,7 +146,7 @@ def calibrated_sensors_text(
         "# sends the optical axis). Re-run with --sensors calibrated_sensors.txt.",
         "# sensor_id, name, sensor_type, [sensor_params]+",
     ]
-    entry: dict[str, Any] = {"file": CALIBRATED_SENSORS, "cameras": {}, "not_written": {}}
+    entry: dict[str, Any] = {"file": OUTPUTS.calibrated_sensors, "cameras": {}, "not_written": {}}
     # a camera whose intrinsics would leave more than this is not written: the file would not
     # pass its own re-check (#39)
     limit = (shared or {}).get("threshold_px")
@@ -233,7 +233,7 @@ def write_calibrated_sensors(
     rig: Mapping[str, Any] | None = None,
 ) -> dict[str, Any] | None:
     """Write (or remove a stale) ``calibrated_sensors.txt`` in ``out``; its summary entry."""
-    path = Path(out) / CALIBRATED_SENSORS
+    path = Path(out) / OUTPUTS.calibrated_sensors
     made = calibrated_sensors_text(rows, shared, rig)
     if made is None:
         path.unlink(missing_ok=True)

@@ -14,12 +14,9 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from pgt_check.correct.calibration import CALIBRATED_DIR
-from pgt_check.report.calibrated_sensors import CALIBRATED_SENSORS
+from pgt_check.output_layout import OUTPUTS
 
 logger = logging.getLogger(__name__)
-
-REGISTERED_TRAJECTORY = "registered_trajectory.txt"
 
 
 def _g(v: Any, digits: int = 3) -> str:
@@ -118,12 +115,12 @@ def _calibration_fixes(out: Path, traj: Any, mesh: Any, texture: bool = False) -
     ``texture``: the mesh colours sit off its geometry like the photos (painted with these
     poses): the re-run judges on the geometry alone, or the colours show the offset back."""
     lines = [f"re-judge as calibration: pgt-check report {_q(out)} --remove-calibration true"]
-    rig = out / CALIBRATED_DIR / "trajectories.txt"
+    rig = out / OUTPUTS.calibrated_dir / "trajectories.txt"
     if rig.is_file():
         lines.append(f"fix (the estimate as a camera-to-sensor rig): pgt-check {_q(rig)} --mesh "
                      f"{_q(mesh)} --out {_q(str(out) + '-calibrated')}"
                      + (" --shading shaded" if texture else ""))
-    sensors_file = out / CALIBRATED_SENSORS
+    sensors_file = out / OUTPUTS.calibrated_sensors
     cmd = traj if isinstance(traj, _InputCommand) else _InputCommand(traj, "", "lamar", [])
     intrinsics = cmd.intrinsics(sensors_file) if sensors_file.is_file() else None
     if intrinsics is not None:
@@ -177,8 +174,8 @@ def _calibration_or_registration(
            if texture else ""),
         *_calibration_fixes(out, traj, mesh, texture),
         "or, if it is a misregistration: "
-        + (f"{_q(out / REGISTERED_TRAJECTORY)} holds the registered poses"
-           if (out / REGISTERED_TRAJECTORY).is_file()
+        + (f"{_q(out / OUTPUTS.registered_trajectory)} holds the registered poses"
+           if (out / OUTPUTS.registered_trajectory).is_file()
            else "re-run with --registration-rounds 8 --resume to write "
            "registered_trajectory.txt (only the rounds are measured)"),
     ]
@@ -186,7 +183,7 @@ def _calibration_or_registration(
 
 def _misregistration(out: Path, mesh: Any) -> list[str]:
     """Lines naming a misregistration as the likely cause, with the command that fixes it."""
-    reg_file = out / REGISTERED_TRAJECTORY
+    reg_file = out / OUTPUTS.registered_trajectory
     return [
         "most likely: a misregistration of the trajectory to the mesh (the alignment "
         "step: one transform for all frames)",
@@ -285,5 +282,5 @@ def summary_lines(summary: Mapping[str, Any], out: str | Path) -> list[str]:
               (summary.get("path_separation") or {}).get("sentences") or ()]
     gate = summary["gate"]
     lines.append(f"gate {'PASSED' if gate['passed'] else 'FAILED'}: {gate['explanation']}")
-    lines.append(f"report: {Path(out) / 'report.html'} (all outputs in {out})")
+    lines.append(f"report: {Path(out) / OUTPUTS.report_html} (all outputs in {out})")
     return lines

@@ -15,6 +15,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+from pgt_check.output_layout import OUTPUTS
 from pgt_check.report.assets import (
     ASSET_KINDS,
     existing_assets,
@@ -39,14 +40,12 @@ from pgt_check.report.text import display_path, is_absolute_path, redact_text, s
 logger = logging.getLogger(__name__)
 
 __all__ = [
-    "BASE_COLUMNS", "ENHANCED_COLUMNS", "JUNIT_NAME", "OPTIONAL_COLUMNS", "REPORT_NAME",
+    "BASE_COLUMNS", "ENHANCED_COLUMNS", "OPTIONAL_COLUMNS",
     "build_report", "comparison_rows", "display_path", "has_enhanced_path", "is_absolute_path",
     "page_context", "redact_text", "render_html", "script_json", "shared_error_rows",
     "table_columns", "table_rows", "table_value",
 ]
 
-REPORT_NAME = "report.html"
-JUNIT_NAME = "junit.xml"
 PAGE_SIZE = 100
 #: longest error_detail (e.g. a traceback) carried into the page, characters
 MAX_DETAIL_CHARS = 1200
@@ -381,15 +380,16 @@ def build_report(
     plots = write_plots(records, summary, out_dir)
     context = page_context(records, summary, assets, plots, absolute_paths)
     # the measurement store exists in real runs (written by the runner, not by the writers)
-    context["has_records"] = (out_dir / "records.jsonl").is_file()
+    context["has_records"] = (out_dir / OUTPUTS.records).is_file()
     html = render_html(context)
-    path = out_dir / REPORT_NAME
+    path = out_dir / OUTPUTS.report_html
     atomic_write_text(path, html)
     atomic_write_text(
-        out_dir / JUNIT_NAME,
+        out_dir / OUTPUTS.junit_xml,
         junit_xml_text(records, summary, lambda p: display_path(p, absolute_paths)),
     )
     logger.info(
-        "wrote %s and %s (%d frames, %d with images)", path, JUNIT_NAME, len(records), len(assets)
+        "wrote %s and %s (%d frames, %d with images)", path, OUTPUTS.junit_xml, len(records),
+        len(assets),
     )
     return path

@@ -10,21 +10,27 @@ import logging
 import math
 import platform
 import statistics
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from importlib import metadata
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pgt_check import __version__
 from pgt_check.config import RunConfig
 from pgt_check.correct.pose import CORRECTION_COLUMNS
 from pgt_check.files import safe_text
 from pgt_check.measure.columns import MEASUREMENT_COLUMNS, TIMING_COLUMNS
+from pgt_check.output_layout import OUTPUTS
 from pgt_check.report.files import atomic_write_text
 from pgt_check.store import COMPLETION_MARKER, check_outputs_owned
 from pgt_check.verdict.frame_bounds import ACCURACY_COLUMNS
-from pgt_check.verdict.result import VERDICT_COLUMNS, RunResult
+from pgt_check.verdict.result import VERDICT_COLUMNS
+
+if TYPE_CHECKING:  # pragma: no cover
+    from pgt_check.verdict.accuracy import RunAccuracy
+    from pgt_check.verdict.outcome import RunOutcome
+    from pgt_check.verdict.run_stats import Gate, RunStatistics
 
 logger = logging.getLogger(__name__)
 
@@ -132,81 +138,67 @@ def timing_summary(records: list[dict[str, Any]]) -> dict[str, dict[str, float]]
     return out
 
 
-def build_summary(
-    records: list[dict[str, Any]], config: RunConfig, extra: dict[str, Any] | None = None
+def summary_sections(
+    records: Sequence[Mapping[str, Any]],
+    config: RunConfig,
+    threshold_px: float,
+    statistics: RunStatistics,
+    accuracy: RunAccuracy,
+    gate: Gate,
+    extra: Mapping[str, Any],
 ) -> dict[str, Any]:
+    """summary.json: the gate, counts, statistics and accuracy the verdict stage decided, the
+    report's own tables over the rows (timing, raw vs enhanced), the settings, then ``extra``
+    (the run's facts and its results' sections); JSON-safe."""
     from pgt_check.report.paths import path_comparison
-    from pgt_check.verdict import gate, run_statistics
-    from pgt_check.verdict.accuracy import run_accuracy
-    from pgt_check.verdict.decide import resolve_threshold_px
 
-    if records:
-        w, h = int(records[0]["width"]), int(records[0]["height"])
-    else:
-        w, h = 0, 0
-    threshold = resolve_threshold_px(config.verdict, w, h)
-    stats = run_statistics(records, threshold)
-    passed, why = gate(stats["counts"], config.gate, stats["unverifiable_reasons"])
-    accuracy = run_accuracy(
-        records, (extra or {}).get("shared_errors"), config, threshold
-    )
-    if passed and accuracy.gate_passed is False:  # --require-accuracy
-        passed, why = False, accuracy.gate_explanation
-    elif passed and accuracy.gate_passed:
-        why = f"{why}; {accuracy.gate_explanation}"
-    changed = (extra or {}).get("inputs_changed")
-    if isinstance(changed, Mapping) and changed.get("files") and not changed.get("rejudged"):
-        # ``pgt-check report`` on measurements whose inputs changed since: fail closed
-        passed, why = False, str(changed.get("explanation") or "inputs changed")
     summary = {
         "tool": "pgt-check",
         "version": __version__,
-        "gate": {"passed": passed, "explanation": why},
-        "counts": stats["counts"],
-        "n_frames": stats["n_frames"],
-        "threshold_px": threshold,
-        "statistics": stats,
+        "gate": gate.to_json(),
+        "counts": dict(statistics.counts),
+        "n_frames": statistics.n_frames,
+        "threshold_px": threshold_px,
+        "statistics": statistics.to_json(),
         "accuracy": accuracy.to_json(),
-        "timing": timing_summary(records),
+        "timing": timing_summary(list(records)),
         "raw_vs_enhanced": path_comparison(records),
         "settings": config.to_dict(),
         "fingerprint": config.measurement_fingerprint(),
         "versions": versions(),
     }
-    if extra:
-        summary.update(extra)
+    summary.update(extra)
     return _clean(summary)
 
 
-#: the files ``write_outputs`` writes (or removes: calibrated_sensors.txt, older plots)
-OUTPUT_FILES = ("frames.csv", "config.json", "summary.json", "report.html", "junit.xml",
-                "assets/index.json", "calibrated_sensors.txt")
+def outcome_summary(outcome: RunOutcome, config: RunConfig, facts: RunFacts) -> dict[str, Any]:
+    """summary.json of a run's outcome: ``facts``, then its results' sections."""
+    extra = facts.sections()
+    if outcome.inputs_changed is not None:
+        extra["inputs_changed"] = outcome.inputs_changed.to_json()
+    extra.update(outcome.result.summary_extra())
+    if facts.wall_time_s is not None:
+        extra["wall_time_s"] = facts.wall_time_s
+    return summary_sections(outcome.result.rows(), config, outcome.threshold_px,
+                            outcome.statistics, outcome.accuracy, outcome.gate, extra)
 
 
-def report_files() -> tuple[str, ...]:
-    """Every file ``write_outputs`` (a run's last step and ``pgt-check report``) may write or
-    remove, relative to the output folder: ``OUTPUT_FILES`` and the plots of either format."""
-    from pgt_check.report.plots import PLOT_NAMES
+def build_summary(
+    records: list[dict[str, Any]], config: RunConfig, extra: dict[str, Any] | None = None
+) -> dict[str, Any]:
+    """summary.json of judged frames.csv rows without a ``RunOutcome`` (tests, benchmarks on
+    rows): the verdict stage's statistics, accuracy and gate over the rows
+    (``verdict.outcome.outcome_parts_of_rows``), ``extra``'s ``shared_errors`` and
+    ``inputs_changed`` read back as their typed values."""
+    from pgt_check.verdict.outcome import InputsChanged, outcome_parts_of_rows
+    from pgt_check.verdict.shared import SharedChecks
 
-    plots = [f"assets/plot_{n}.{ext}" for n in PLOT_NAMES for ext in ("svg", "png")]
-    return (*OUTPUT_FILES, *plots)
-
-
-def output_files() -> tuple[str, ...]:
-    """Every file of fixed name a run may write or remove in its output folder (relative
-    names; the record store and the report panels, named by frame hashes, aside): those of
-    ``report_files``, of the correction stage and the separation check's probes. The completion marker lists those present;
-    a run refuses to start where one exists that no marker lists (``store.check_outputs_owned``:
-    it is not the tool's to replace)."""
-    from pgt_check.correct.calibration import CALIBRATED_DIR, CALIBRATED_FILES
-    from pgt_check.correct.frames import BAD_FRAMES_NAME, CORRECTED_NAME
-    from pgt_check.correct.pose import CORRECTIONS_FILE
-    from pgt_check.correct.registration import REFINED_FILE, REGISTERED_NAME
-    from pgt_check.verdict.separation import SEPARATION_FILE
-
-    return (*report_files(), CORRECTIONS_FILE, CORRECTED_NAME, BAD_FRAMES_NAME, REFINED_FILE,
-            REGISTERED_NAME, SEPARATION_FILE,
-            *(f"{CALIBRATED_DIR}/{n}" for n in CALIBRATED_FILES))
+    extra = dict(extra or {})
+    shared, changed = extra.get("shared_errors"), extra.get("inputs_changed")
+    threshold, stats, accuracy, gate = outcome_parts_of_rows(
+        records, SharedChecks.from_summary(shared) if isinstance(shared, Mapping) else None,
+        config, InputsChanged.from_json(changed) if isinstance(changed, Mapping) else None)
+    return summary_sections(records, config, threshold, stats, accuracy, gate, extra)
 
 
 def remove_completion_marker(out: Path) -> None:
@@ -222,7 +214,7 @@ def write_completion_marker(out: Path) -> None:
 
     out = Path(out)
     files = {}
-    for name in output_files():
+    for name in OUTPUTS.marked_files():
         p = out / name
         if p.is_file() and not p.is_symlink():
             files[name] = hashlib.sha256(p.read_bytes()).hexdigest()
@@ -259,19 +251,34 @@ def write_outputs(
     report: bool = True,
     assets: dict[str, dict[str, str]] | None = None,
 ) -> dict[str, Any]:
-    """Write frames.csv, config.json and summary.json into ``out`` from the verdict rows
-    (``pgt_check.verdict.apply_verdicts``); return the summary. records.jsonl is the
-    measurement store and is never rewritten here. With ``report`` (default) also report.html,
-    its plots and junit.xml; ``assets`` (``{frame_id: {kind: relative path}}`` from
-    ``write_frame_assets``) become the detail images, None keeps whatever
-    ``assets/index.json`` already lists."""
+    """``write_summary`` of judged frames.csv rows without a ``RunOutcome``
+    (``build_summary``: tests, benchmarks); return the summary."""
+    return write_summary(out, records, lambda: build_summary(records, config, extra), config,
+                         report=report, assets=assets)
+
+
+def write_summary(
+    out: Path,
+    records: list[dict[str, Any]],
+    summary_of: Callable[[], dict[str, Any]],
+    config: RunConfig,
+    *,
+    report: bool = True,
+    assets: dict[str, dict[str, str]] | None = None,
+) -> dict[str, Any]:
+    """Write frames.csv (``records``), config.json and summary.json (``summary_of()``) into
+    ``out``; return the summary. records.jsonl is the measurement store and is never rewritten
+    here. With ``report`` (default) also report.html, its plots and junit.xml; ``assets``
+    (``{frame_id: {kind: relative path}}`` from ``write_frame_assets``) become the detail
+    images, None keeps whatever ``assets/index.json`` already lists."""
     out = Path(out)
-    check_outputs_owned(out, report_files())  # nothing of the user's is replaced or removed
+    check_outputs_owned(out, OUTPUTS.report_files())  # nothing of the user's is replaced
     out.mkdir(parents=True, exist_ok=True)
     remove_completion_marker(out)
-    atomic_write_text(out / "frames.csv", frames_csv_text(records))
-    atomic_write_text(out / "config.json", json.dumps(config.settings_dict(), indent=2) + "\n")
-    summary = build_summary(records, config, extra)
+    atomic_write_text(out / OUTPUTS.frames_csv, frames_csv_text(records))
+    atomic_write_text(out / OUTPUTS.config_json,
+                      json.dumps(config.settings_dict(), indent=2) + "\n")
+    summary = summary_of()
     # a significant calibration estimate as intrinsics a re-run loads (``--sensors``)
     from pgt_check.report.calibrated_sensors import write_calibrated_sensors
 
@@ -279,7 +286,7 @@ def write_outputs(
                                           summary.get("calibrated_rig"))
     if calibrated is not None:
         summary["calibrated_sensors"] = _clean(calibrated)
-    atomic_write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
+    atomic_write_text(out / OUTPUTS.summary_json, json.dumps(summary, indent=2) + "\n")
     if report:
         from pgt_check.report.html import build_report
 
@@ -338,18 +345,16 @@ class RunFacts:
         return out
 
 
-def write_run(
+def write_outcome(
     out: Path,
-    result: RunResult,
+    outcome: RunOutcome,
     config: RunConfig,
     facts: RunFacts,
     *,
     assets: dict[str, dict[str, str]] | None = None,
 ) -> dict[str, Any]:
-    """``write_outputs`` for a run's typed result (``verdict.RunResult``, or the correction
-    stage's ``correct.result.CorrectedRun``): its rows and its summary sections, after
-    ``facts``; return the summary."""
-    extra = {**facts.sections(), **result.summary_extra()}
-    if facts.wall_time_s is not None:
-        extra["wall_time_s"] = facts.wall_time_s
-    return write_outputs(out, result.rows(), config, extra=extra, assets=assets)
+    """Write a run's outcome (``verdict.outcome.RunOutcome``: its result's rows; the gate,
+    statistics and accuracy the verdict stage decided; the result's summary sections, after
+    ``facts``); return the summary written."""
+    return write_summary(out, outcome.result.rows(),
+                         lambda: outcome_summary(outcome, config, facts), config, assets=assets)

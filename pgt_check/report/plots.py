@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from pgt_check.files import atomic_write_text
+from pgt_check.output_layout import OUTPUTS
 
 if TYPE_CHECKING:
     from matplotlib.axes import Axes
@@ -35,8 +36,6 @@ if TYPE_CHECKING:
 logger = logging.getLogger(__name__)
 
 VERDICT_COLOURS = {"PASS": "#2e7d32", "FAIL": "#c62828", "UNVERIFIABLE": "#9e9e9e"}
-#: every plot ``write_plots`` may write (assets/plot_<name>.svg)
-PLOT_NAMES = ("error_hist", "error_time", "raw_vs_enhanced", "top_view", "drift")
 #: bins of the corner-error histogram (log-spaced; the threshold is one of the edges)
 HIST_BINS = 39
 #: what the SVG writer reads at save time: text kept as <text>, ids the same at every run
@@ -134,7 +133,7 @@ def svg_text(fig: Figure, title: str, desc: str) -> str:
 
 
 def _save(fig: Figure, out_dir: Path, name: str, title: str, desc: str) -> str:
-    rel = f"assets/plot_{name}.svg"
+    rel = OUTPUTS.plot_file(name)
     path = out_dir / rel
     path.parent.mkdir(parents=True, exist_ok=True)
     atomic_write_text(path, svg_text(fig, title, desc))  # a symlink there is replaced
@@ -419,9 +418,8 @@ def write_plots(
             plots.append({"name": name, "title": title, "path": path})
     # a regenerated report must not show a plot of an older run (nor keep the PNG plots of
     # older versions)
-    stale = {f"plot_{n}.{ext}" for n in PLOT_NAMES for ext in ("svg", "png")}
-    stale -= {Path(p["path"]).name for p in plots}
-    for name in stale:
-        (out_dir / "assets" / name).unlink(missing_ok=True)
+    stale = set(OUTPUTS.plot_files()) - {p["path"] for p in plots}
+    for rel in stale:
+        (out_dir / rel).unlink(missing_ok=True)
     logger.debug("wrote %d plots", len(plots))
     return plots

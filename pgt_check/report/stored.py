@@ -18,12 +18,13 @@ def load_run(out_dir: Path) -> tuple[list[FrameMeasurement], dict]:
     Reads the current records of ``records.jsonl`` (the fingerprint and frame order come from
     ``run.json``); records of another pgt-check record layout are an InputError.
     """
-    from pgt_check.store import RUN_FILE, iter_records
+    from pgt_check.output_layout import OUTPUTS
+    from pgt_check.store import iter_records
 
     rec_path, cfg_path, run_path = (
-        out_dir / "records.jsonl",
-        out_dir / "config.json",
-        out_dir / RUN_FILE,
+        out_dir / OUTPUTS.records,
+        out_dir / OUTPUTS.config_json,
+        out_dir / OUTPUTS.run,
     )
     for p in (rec_path, cfg_path, run_path):
         if not p.exists():

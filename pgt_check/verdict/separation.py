@@ -28,8 +28,8 @@ constant fitted to a scene:
   separates may decide). Fewer than ``MIN_PAIRS`` usable frames: ``not_tested`` (the path keeps
   deciding; the summary says so).
 
-The probe measurements are stored (``SEPARATION_FILE``) so ``pgt-check report`` judges them
-again with its own settings.
+The probe measurements are stored (``OUTPUTS.separation_probes``) so ``pgt-check report``
+judges them again with its own settings.
 """
 
 from __future__ import annotations
@@ -45,6 +45,7 @@ import numpy as np
 
 from pgt_check.config import VerdictConfig
 from pgt_check.measure.record import FrameMeasurement
+from pgt_check.output_layout import OUTPUTS
 from pgt_check.verdict.decide import CANNOT_SEPARATE  # re-exported: the reason prefix
 
 #: the probe moves the image centre by this x the frame's threshold (a clear error: a path
@@ -59,8 +60,6 @@ MIN_PAIRS = 5
 #: frames probed per path by default (0 = off; ``verdict.separation_frames``): with 8, T <= 11
 #: (at most three frames ranked second) is significant, p = 0.024
 DEFAULT_FRAMES = 8
-#: the stored probe measurements in the run folder
-SEPARATION_FILE = "separation_probes.json"
 #: the paths probed
 PATHS = ("raw", "enhanced", "edges")
 SEED = 38
@@ -353,10 +352,10 @@ def path_separation(
 
 
 def save_probes(out: str | Path, probes: Sequence[Probe], fingerprint: str = "") -> Path:
-    """Write the probes to ``out / SEPARATION_FILE`` (atomic); returns its path."""
+    """Write the probes to ``out / OUTPUTS.separation_probes`` (atomic); returns its path."""
     from pgt_check.files import atomic_write_text
 
-    path = Path(out) / SEPARATION_FILE
+    path = Path(out) / OUTPUTS.separation_probes
     doc = {"version": 1, "fingerprint": fingerprint, "probes": [p.to_json() for p in probes]}
     atomic_write_text(path, json.dumps(doc))
     return path
@@ -365,12 +364,12 @@ def save_probes(out: str | Path, probes: Sequence[Probe], fingerprint: str = "")
 def load_probes(out: str | Path, fingerprint: str | None = None) -> list[Probe]:
     """The probes stored in ``out`` ([] when there are none, or when ``fingerprint`` is given
     and they were measured under another one)."""
-    path = Path(out) / SEPARATION_FILE
+    path = Path(out) / OUTPUTS.separation_probes
     if not path.is_file():
         return []
     from pgt_check.files import load_json_limited
 
-    doc = load_json_limited(path, 256 * 1024 * 1024, SEPARATION_FILE)
+    doc = load_json_limited(path, 256 * 1024 * 1024, OUTPUTS.separation_probes)
     if fingerprint is not None and doc.get("fingerprint") != fingerprint:
         return []
     return [Probe.from_json(d) for d in doc.get("probes") or ()]

@@ -8,7 +8,8 @@ import json
 from pgt_check import runner
 from pgt_check.cli import main
 from pgt_check.measure import FrameChecker
-from pgt_check.report.assets import ASSETS_DIR, FRAMES_SUBDIR, asset_stem
+from pgt_check.output_layout import OUTPUTS
+from pgt_check.report.assets import asset_stem
 
 
 def _count_measures(monkeypatch) -> list[str]:
@@ -36,10 +37,10 @@ def test_sample_run_keeps_panels_from_the_main_pass(tmp_path, capsys, sample_sce
     assert len(calls) == summary["n_frames"] == len(set(calls))
     last = capsys.readouterr().out.strip().splitlines()[-1]
     assert last.startswith("pgt-check: report: ") and str(out / "report.html") in last
-    index = json.loads((out / ASSETS_DIR / "index.json").read_text())["frames"]
+    index = json.loads((out / OUTPUTS.assets_index).read_text())["frames"]
     assert index and all("arrows_raw" in kinds and "diff" in kinds for kinds in index.values())
     # panels of frames not shown are removed; the shown ones are all there
-    folder = out / ASSETS_DIR / FRAMES_SUBDIR
+    folder = out / OUTPUTS.panels_dir
     stems = {p.name.split("_")[0].split(".")[0] for p in folder.iterdir()}
     assert stems == {asset_stem(f) for f in index}
     for kinds in index.values():
@@ -55,6 +56,6 @@ def test_missing_panels_are_measured_again(tmp_path, sample_scene, monkeypatch):
     main([str(sample_scene / "trajectories.txt"), "--mesh", str(sample_scene / "mesh.glb"),
           "--out", str(out), "-q", "--enhance", "never", "--report-details", "3",
           "--separation-frames", "0"])
-    index = json.loads((out / ASSETS_DIR / "index.json").read_text())["frames"]
+    index = json.loads((out / OUTPUTS.assets_index).read_text())["frames"]
     n = json.loads((out / "summary.json").read_text())["n_frames"]
     assert len(index) == 3 and len(calls) == n + 3

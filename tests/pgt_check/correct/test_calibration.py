@@ -11,7 +11,6 @@ import pytest
 from numpy.testing import assert_allclose
 
 from pgt_check.correct.calibration import (
-    CALIBRATED_DIR,
     rig_from_cam,
     with_focal_scale,
     write_calibrated_rig,
@@ -24,6 +23,7 @@ from pgt_check.geometry.transforms import (
 )
 from pgt_check.io import read_trajectory
 from pgt_check.measure.record import camera_key
+from pgt_check.output_layout import OUTPUTS
 from pgt_check.types import Camera, Frame, Trajectory
 from pgt_check.verdict.shared_results import CalibrationCheck
 
@@ -90,10 +90,10 @@ def test_no_significant_estimate_removes_an_earlier_folder(tmp_path, random_rigi
     traj = _trajectory(tmp_path, random_rigid)
     shared = SimpleNamespace(calibration={camera_key(CAM): _estimate(translation=None)})
     assert write_calibrated_rig(traj, shared, tmp_path) is not None
-    assert (tmp_path / CALIBRATED_DIR / "rigs.txt").is_file()
+    assert (tmp_path / OUTPUTS.calibrated_dir / "rigs.txt").is_file()
     shared = SimpleNamespace(calibration={camera_key(CAM): _estimate("passed")})
     assert write_calibrated_rig(traj, shared, tmp_path) is None
-    assert not (tmp_path / CALIBRATED_DIR).exists()
+    assert not (tmp_path / OUTPUTS.calibrated_dir).exists()
     assert write_calibrated_rig(traj, None, tmp_path) is None
 
 

@@ -16,7 +16,6 @@ import pytest
 
 from pgt_check.config import RunConfig
 from pgt_check.correct.registration import (
-    REGISTERED_NAME,
     apply_refinement,
     load_refinement,
     refine_fingerprint,
@@ -28,6 +27,7 @@ from pgt_check.correct.registration import (
 from pgt_check.enhance.base import Evidence
 from pgt_check.geometry.transforms import invert_rigid, rotation_angle_deg
 from pgt_check.measure import AbsoluteEvidence, FrameMeasurement, PathMeasurement
+from pgt_check.output_layout import OUTPUTS
 from pgt_check.types import Camera, Frame, Trajectory
 from pgt_check.verdict import judge_run
 from pgt_check.verdict.shared_results import RegistrationCheck
@@ -182,10 +182,10 @@ def test_rounds_zero_switches_it_off(moved_case, tmp_path):
     off = RunConfig.from_dict({"input": {"trajectory": "t", "mesh": "m"},
                                "run_checks": {"refine_rounds": 0}})
     fake = FakeMeasure(true)
-    (tmp_path / REGISTERED_NAME).write_text("stale\n")
+    (tmp_path / OUTPUTS.registered_trajectory).write_text("stale\n")
     summary = refine_run(checked, ms, judged.shared, off, fake, tmp_path).summary()
     assert fake.calls == [] and "refinement" not in summary["registration"]
-    assert not (tmp_path / REGISTERED_NAME).exists()  # a stale file is not left behind
+    assert not (tmp_path / OUTPUTS.registered_trajectory).exists()  # a stale file is not left behind
 
 
 def test_refine_run_writes_the_registered_trajectory_and_reuses_the_stored_result(
@@ -199,7 +199,7 @@ def test_refine_run_writes_the_registered_trajectory_and_reuses_the_stored_resul
     n_calls = len(fake.calls)
     assert n_calls >= 2 and summary["registration"]["refinement"]["rounds"]
     files = write_lamar(checked, tmp_path / "in")  # sensors and images to read it with
-    registered = read_trajectory(tmp_path / REGISTERED_NAME, "lamar", sensors=files["sensors"],
+    registered = read_trajectory(tmp_path / OUTPUTS.registered_trajectory, "lamar", sensors=files["sensors"],
                                  images=files["images"])
     assert len(registered.frames) == len(checked.frames)
     off = [np.linalg.norm(r.center - t.center)
@@ -258,13 +258,13 @@ def test_a_deferred_refinement_is_said_and_writes_no_registered_trajectory(moved
     true, checked, move, config, ms, judged = moved_case
     deferred = replace(config, run_checks=replace(config.run_checks, refine_rounds=0))
     fake = FakeMeasure(true)
-    (tmp_path / REGISTERED_NAME).write_text("an older run's file\n")
+    (tmp_path / OUTPUTS.registered_trajectory).write_text("an older run's file\n")
     out = refine_run(checked, ms, judged.shared, deferred, fake, tmp_path)
     assert fake.calls == []  # nothing measured again
     reg = out.summary()["registration"]
     assert "refinement" not in reg and reg["angle_deg"] == judged.shared.registration.angle_deg
     assert "Not refined" in reg["message"] and "--registration-rounds 8 --resume" in reg["message"]
-    assert not (tmp_path / REGISTERED_NAME).exists()  # no longer true of this run
+    assert not (tmp_path / OUTPUTS.registered_trajectory).exists()  # no longer true of this run
     # said once, also when the stage runs again on its own output (pgt-check report)
     again = refine_run(checked, ms, out, deferred, fake, tmp_path).summary()["registration"]
     assert again["message"].count("Not refined") == 1
@@ -438,7 +438,7 @@ def test_an_oscillating_refinement_stops_and_says_why(moved_case, monkeypatch, t
         first = judged.shared.summary()["registration"]
         assert reg["angle_deg"] == first["angle_deg"]
         assert "the first estimate is reported" in reg["message"]
-    assert (tmp_path / REGISTERED_NAME).is_file()
+    assert (tmp_path / OUTPUTS.registered_trajectory).is_file()
 
 
 def test_the_rounds_stop_at_their_time_budget(moved_case, monkeypatch):

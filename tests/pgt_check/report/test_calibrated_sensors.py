@@ -10,8 +10,8 @@ import pytest
 
 from pgt_check.geometry.frame_accuracy import _exp
 from pgt_check.io.lamar import read_sensors
+from pgt_check.output_layout import OUTPUTS
 from pgt_check.report.calibrated_sensors import (
-    CALIBRATED_SENSORS,
     calibrated_camera,
     parse_camera_key,
     write_calibrated_sensors,
@@ -54,11 +54,11 @@ def test_written_file_reads_back_and_a_stale_one_is_removed(tmp_path):
     rows = [{"frame_id": f"{i}/cam0", "camera_id": KEY, "acc_depth": 2.0} for i in range(3)]
     entry = write_calibrated_sensors(tmp_path, rows, _shared("finding"))
     assert entry is not None and entry["cameras"][KEY]["sensor_ids"] == ["cam0"]
-    cams, ids = read_sensors(tmp_path / CALIBRATED_SENSORS)
+    cams, ids = read_sensors(tmp_path / OUTPUTS.calibrated_sensors)
     cam = cams["cam0"]
     want = calibrated_camera(CAM, np.asarray(_shared("finding")["calibration"][KEY]["rotation"]),
                              0.998, depth=2.0).camera
     np.testing.assert_allclose(cam.params, want.params, rtol=1e-9)
     # a calibration within the threshold writes nothing, and removes an earlier file
     assert write_calibrated_sensors(tmp_path, rows, _shared("passed")) is None
-    assert not (tmp_path / CALIBRATED_SENSORS).exists()
+    assert not (tmp_path / OUTPUTS.calibrated_sensors).exists()
