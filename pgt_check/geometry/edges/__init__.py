@@ -61,7 +61,13 @@ from pgt_check.geometry.edges.config import (
 from pgt_check.geometry.edges.photo import photo_edges
 from pgt_check.geometry.edges.refine import rotation_homography, translation_matrix
 from pgt_check.geometry.edges.render import geometric_edges
-from pgt_check.geometry.edges.results import EdgeAlignment, EdgeMatches, PhotoEdges, RenderEdges
+from pgt_check.geometry.edges.results import (
+    EdgeAlignment,
+    EdgeMatches,
+    EdgeProblem,
+    PhotoEdges,
+    RenderEdges,
+)
 
 __all__ = [
     "KIND_BORDER",
@@ -72,6 +78,7 @@ __all__ = [
     "EdgeAlignConfig",
     "EdgeAlignment",
     "EdgeMatches",
+    "EdgeProblem",
     "EdgeReason",
     "PhotoEdgeConfig",
     "PhotoEdges",

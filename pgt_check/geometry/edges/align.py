@@ -21,7 +21,13 @@ from pgt_check.geometry.edges.refine import (
     translation_matrix,
     warp_points,
 )
-from pgt_check.geometry.edges.results import EdgeAlignment, EdgeMatches, PhotoEdges, RenderEdges
+from pgt_check.geometry.edges.results import (
+    EdgeAlignment,
+    EdgeMatches,
+    EdgeProblem,
+    PhotoEdges,
+    RenderEdges,
+)
 from pgt_check.geometry.edges.search import ShiftSearch, bins_of, search_shifts, subset
 from pgt_check.geometry.edges.tiles import tile_start
 from pgt_check.geometry.homography import check_homography, corner_error
@@ -35,13 +41,7 @@ def auto_tau(width: int, height: int) -> float:
 
 
 def _failure(
-    reason: EdgeReason,
-    re: RenderEdges,
-    pe: PhotoEdges,
-    tau: float,
-    config: EdgeAlignConfig,
-    timings: dict[str, float],
-    **kw,
+    reason: EdgeReason, problem: EdgeProblem, timings: dict[str, float], **kw: object
 ) -> EdgeAlignment:
     """An unsuccessful ``EdgeAlignment``; ``kw`` overrides the empty defaults (diagnostics)."""
     base = dict(
@@ -52,8 +52,8 @@ def _failure(
         support=0.0,
         support_identity=0.0,
         residual_px=float("nan"),
-        n_edges=len(re),
-        n_photo_edges=len(pe),
+        n_edges=len(problem.render),
+        n_photo_edges=len(problem.photo),
         score=0.0,
         baseline_score=0.0,
         shift=None,
@@ -61,29 +61,15 @@ def _failure(
         second_score=0.0,
         ambiguity=0.0,
         ambiguous=False,
-        tau_px=tau,
-        model=config.model,
+        tau_px=problem.tau,
+        model=problem.config.model,
         timings=timings,
     )
     base.update(kw)
-    return EdgeAlignment(**base)
+    return EdgeAlignment(**base)  # type: ignore[arg-type]
 
 
-def _part(re: RenderEdges, keep: np.ndarray) -> RenderEdges:
-    return dataclasses.replace(
-        re, points=re.points[keep], normals=re.normals[keep], depth=re.depth[keep],
-        kind=re.kind[keep],
-    )  # fmt: skip
-
-
-def select_model(
-    re: RenderEdges,
-    pe: PhotoEdges,
-    bins: np.ndarray,
-    start: np.ndarray,
-    tau: float,
-    config: EdgeAlignConfig,
-) -> tuple[str, dict[str, float]]:
+def select_model(problem: EdgeProblem, start: np.ndarray) -> tuple[str, dict[str, float]]:
     """The motion model the frame's edges support, by two-fold spatial cross-validation.
 
     The render edges are split by image quadrant into two folds (top-left + bottom-right, and
@@ -96,6 +82,8 @@ def select_model(
     error of a correct pose large (issue #29: 4-9.5 px on the TSDF scene where a shift gives
     1-3 px). Nothing in it is a tuned constant: it adapts to each frame's edges. Returns the
     model and the held-out cost of each tried model (inf: a fold had too few edges)."""
+    re, pe, bins, tau, config = (problem.render, problem.photo, problem.bins, problem.tau,
+                                 problem.config)
     cands = MODELS[: MODELS.index(config.model) + 1]
     cx, cy = (re.width - 1) / 2, (re.height - 1) / 2
     fold = (re.points[:, 0] < cx) == (re.points[:, 1] < cy)
@@ -109,7 +97,7 @@ def select_model(
             if train.sum() < config.min_edges or len(test) < config.min_edges:
                 total = math.inf
                 break
-            h, cost = refine(_part(re, train), pe, bins[train], start, tau, cfg)
+            h, cost = refine(problem.part(train).with_config(cfg), start)
             if not math.isfinite(cost):
                 total = math.inf
                 break
@@ -141,14 +129,7 @@ def _roll(width: int, height: int, angle_deg: float) -> np.ndarray:
     return np.array([[c, -s, cx - c * cx + s * cy], [s, c, cy - s * cx - c * cy], [0, 0, 1.0]])
 
 
-def _refined(
-    re: RenderEdges,
-    pe: PhotoEdges,
-    bins: np.ndarray,
-    shift: np.ndarray,
-    tau: float,
-    config: EdgeAlignConfig,
-) -> tuple[np.ndarray, str]:
+def _refined(problem: EdgeProblem, shift: np.ndarray) -> tuple[np.ndarray, str]:
     """The refined start: the best shift as a translation or as the camera rotation that
     produces it, whichever puts more edges exactly on photo edges (narrow score), polished and
     refined; replaced by the refined affine map of the tile shifts (``tiles.tile_start``) where
@@ -158,60 +139,52 @@ def _refined(
     The best of the rolled starts (``config.roll_starts_deg``) replaces that start when its
     narrow score is higher by ``_score_margin``. With ``select_model``, refined with the model
     ``select_model`` picks (returned)."""
+    re, config = problem.render, problem.config
     starts = [translation_matrix(*shift)]
     if re.camera_K is not None and np.hypot(*shift) > 0.5:
         starts.append(rotation_homography(re.camera_K, *shift))
-    polished = [polish(re, pe, bins, h0, tau, config) for h0 in starts]
+    polished = [polish(problem, h0) for h0 in starts]
     # rolled starts: the search's shift is biased under a roll, so their shift is searched
     # again within a wider radius (on fewer points), then polished as the others are (the
     # scores compare on the same points)
     wide = dataclasses.replace(config, polish_radius_px=ROLL_POLISH_RADIUS_PX,
                                refine_points=min(config.refine_points, ROLL_POLISH_POINTS))
-    rolled = [polish(re, pe, bins, translation_matrix(*shift) @ _roll(re.width, re.height, a),
-                     tau, wide) for a in config.roll_starts_deg]
+    rolled = [polish(problem.with_config(wide),
+                     translation_matrix(*shift) @ _roll(re.width, re.height, a))
+              for a in config.roll_starts_deg]
     h_start, score = max(polished, key=lambda hs: hs[1])
     if rolled:  # the best of them (same points) replaces the others only by a clear margin
-        h_roll, s_roll = polish(re, pe, bins, max(rolled, key=lambda hs: hs[1])[0], tau, config)
+        h_roll, s_roll = polish(problem, max(rolled, key=lambda hs: hs[1])[0])
         if s_roll > score + _score_margin(score, min(len(re), config.refine_points)):
             h_start = h_roll
     if config.select_model:
-        config = dataclasses.replace(
-            config, model=select_model(re, pe, bins, h_start, tau, config)[0]
-        )
-    hmat, cost = refine(re, pe, bins, h_start, tau, config)
-    tiled = tile_start(re, pe, bins, shift, tau, config)
+        config = dataclasses.replace(config, model=select_model(problem, h_start)[0])
+        problem = problem.with_config(config)
+    hmat, cost = refine(problem, h_start)
+    tiled = tile_start(problem, shift)
     if tiled is not None:
-        h_t, cost_t = refine(re, pe, bins, polish(re, pe, bins, tiled, tau, config)[0], tau, config)
+        h_t, cost_t = refine(problem, polish(problem, tiled)[0])
         if cost_t < cost:
             return h_t, config.model
     return hmat, config.model
 
 
-def _ambiguity_after(
-    re: RenderEdges,
-    pe: PhotoEdges,
-    bins: np.ndarray,
-    hmat: np.ndarray,
-    found: ShiftSearch,
-    tau: float,
-    config: EdgeAlignConfig,
-) -> ShiftSearch:
+def _ambiguity_after(problem: EdgeProblem, hmat: np.ndarray, found: ShiftSearch) -> ShiftSearch:
     """The ambiguity judged again around the refined alignment: the shift search of the render
     edges moved by ``hmat``. A motion that no single shift fits (a zoom, a strong keystone)
     spreads the shift scores over several peaks, one per image part, and reads as ambiguous;
     once aligned by the model, its edges peak at one shift. A repeated structure or a ridge of
     parallel edges stays ambiguous (the second peak is still there). The significance
     (``p_value``) is judged there too: a zoom also lowers the best shift's peak."""
+    re, tau, config = problem.render, problem.tau, problem.config
     q = warp_points(hmat, re.points)
     inside = np.all(np.isfinite(q), axis=1)
     inside &= (q[:, 0] >= 0) & (q[:, 0] <= re.width - 1) & (q[:, 1] >= 0) & (q[:, 1] <= re.height - 1)
     if inside.sum() < config.min_edges:
         return found
-    moved = dataclasses.replace(
-        re, points=q[inside], normals=re.normals[inside], depth=re.depth[inside],
-        kind=re.kind[inside],
-    )  # fmt: skip
-    again = search_shifts(moved, pe, bins[inside], tau, config, {})
+    moved = problem.part(inside)
+    moved = dataclasses.replace(moved, render=dataclasses.replace(moved.render, points=q[inside]))
+    again = search_shifts(moved, {})
     if again is None or np.hypot(*again.best_shift) > tau or again.ambiguous:
         return found
     second = None if again.second_shift is None else found.best_shift + again.second_shift
@@ -226,13 +199,12 @@ def _ambiguity_after(
     )
 
 
-def _evaluate(
-    re: RenderEdges, pe: PhotoEdges, bins: np.ndarray, hmat: np.ndarray, tau: float
-) -> tuple[float, EdgeMatches]:
+def _evaluate(problem: EdgeProblem, hmat: np.ndarray) -> tuple[float, EdgeMatches]:
     """Support (share of render edges within ``tau`` of a compatible photo edge) of ``hmat``
     and the matches (photo points moved onto the photo edge lines)."""
+    re, pe = problem.render, problem.photo
     q = warp_points(hmat, re.points)
-    ok, e = correspond(q, bins, pe, tau)
+    ok, e = correspond(q, problem.bins, pe, problem.tau)
     nrm = pe.normals[e[ok]]
     res = np.sum(nrm * (q[ok] - pe.points[e[ok]]), axis=1)
     matches = EdgeMatches(
@@ -298,19 +270,14 @@ def _tau(re: RenderEdges, pe: PhotoEdges, config: EdgeAlignConfig) -> float:
 
 
 def _refine_found(
-    re: RenderEdges,
-    pe: PhotoEdges,
-    bins: np.ndarray,
-    found: ShiftSearch,
-    tau: float,
-    config: EdgeAlignConfig,
-    timings: dict[str, float],
+    problem: EdgeProblem, found: ShiftSearch, timings: dict[str, float]
 ) -> tuple[np.ndarray, str, ShiftSearch]:
     """(b) the refinement of the shift start and of the tile start (the lower robust cost
     wins), with the ambiguity judged again where the search was spread: (hmat (3, 3), model,
     search). Adds the "refine" time (s) to ``timings``."""
     t2 = time.perf_counter()
-    hmat, model = _refined(re, pe, bins, found.best_shift, tau, config)
+    config = problem.config
+    hmat, model = _refined(problem, found.best_shift)
     spread = found.ambiguous or (
         config.decision == "significance" and not found.p_value <= config.alpha
     )
@@ -319,7 +286,7 @@ def _refine_found(
         # (not by default: on shaded 7-Scenes renders it accepted wrong alignments that the
         # shift search had called ambiguous, and fewer frames of a misregistered trajectory
         # were flagged; reports/shared_errors_tiles.md has it on)
-        found = _ambiguity_after(re, pe, bins, hmat, found, tau, config)
+        found = _ambiguity_after(problem, hmat, found)
     timings["refine"] = time.perf_counter() - t2
     return hmat, model, found
 
@@ -362,30 +329,27 @@ def align_edges(
     timings: dict[str, float] = {}
     t0 = time.perf_counter()
     bins = bins_of(re.normals, pe.n_bins) if len(re) else np.zeros(0, dtype=np.int64)
+    problem = EdgeProblem(re, pe, bins, tau, config)
     support_id = support_at(re.points, bins, np.eye(3), pe, tau) if len(pe) else 0.0
     if len(re) < config.min_edges:
-        return _failure(
-            EdgeReason.TOO_FEW_EDGES, re, pe, tau, config, timings, support_identity=support_id
-        )
+        return _failure(EdgeReason.TOO_FEW_EDGES, problem, timings, support_identity=support_id)
     if len(pe) < config.min_photo_edges:
-        return _failure(EdgeReason.TOO_FEW_PHOTO_EDGES, re, pe, tau, config, timings)
+        return _failure(EdgeReason.TOO_FEW_PHOTO_EDGES, problem, timings)
 
     # (a) shift search
-    found = search_shifts(re, pe, bins, tau, config, timings)
+    found = search_shifts(problem, timings)
     if found is None:
-        return _failure(
-            EdgeReason.NO_OVERLAP, re, pe, tau, config, timings, support_identity=support_id
-        )
+        return _failure(EdgeReason.NO_OVERLAP, problem, timings, support_identity=support_id)
     # (b) refinement of the shift start and of the tile start; the lower robust cost wins
-    hmat, model, found = _refine_found(re, pe, bins, found, tau, config, timings)
+    hmat, model, found = _refine_found(problem, found, timings)
 
-    support, matches = _evaluate(re, pe, bins, hmat, tau)
+    support, matches = _evaluate(problem, hmat)
     timings["total"] = time.perf_counter() - t0
     out = _measured(found, hmat, support, support_id, matches, w, h)
     out["model"] = model
     reason = _reason(hmat, found, support, config, w, h)
     if reason is not None:
-        return _failure(reason, re, pe, tau, config, timings, **out)
+        return _failure(reason, problem, timings, **out)
     logger.debug(
         "edge alignment: corner error %.2f px, support %.2f (identity %.2f), ambiguity %.2f, "
         "p %.2g (%d null cells)",

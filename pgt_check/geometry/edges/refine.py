@@ -8,7 +8,7 @@ import math
 import numpy as np
 
 from pgt_check.geometry.edges.config import MODELS, N_PARAMS, EdgeAlignConfig
-from pgt_check.geometry.edges.results import PhotoEdges, RenderEdges
+from pgt_check.geometry.edges.results import EdgeProblem, PhotoEdges
 from pgt_check.geometry.edges.search import subset
 from pgt_check.geometry.homography import image_corners
 
@@ -32,18 +32,13 @@ def rotation_homography(camera_K: np.ndarray, dx: float, dy: float) -> np.ndarra
     return h / h[2, 2]
 
 
-def polish(
-    re: RenderEdges,
-    pe: PhotoEdges,
-    bins: np.ndarray,
-    start: np.ndarray,
-    tau: float,
-    config: EdgeAlignConfig,
-) -> tuple[np.ndarray, float]:
+def polish(problem: EdgeProblem, start: np.ndarray) -> tuple[np.ndarray, float]:
     """``start`` followed by the integer shift within +-``polish_radius_px`` with the best score
     at a narrow truncation (the final Tukey scale), and that score: the wide tau of the search
     favours the middle of a clutter of edges, the narrow one the shift that puts most edges
     exactly on photo edges."""
+    re, pe, bins, tau, config = (problem.render, problem.photo, problem.bins, problem.tau,
+                                 problem.config)
     r = max(0, int(config.polish_radius_px))
     tau_n = max(config.min_scale_px, config.final_scale * tau)
     sub = subset(len(re), config.refine_points)
@@ -160,16 +155,11 @@ def _observable_solve(
     return vecs[:, keep] @ (proj / (ev[keep] + lam))
 
 
-def refine(
-    re: RenderEdges,
-    pe: PhotoEdges,
-    bins: np.ndarray,
-    init: np.ndarray,
-    tau: float,
-    config: EdgeAlignConfig,
-) -> tuple[np.ndarray, float]:
+def refine(problem: EdgeProblem, init: np.ndarray) -> tuple[np.ndarray, float]:
     """Point-to-line IRLS (Tukey) from ``init`` (3x3 photo_from_render); returns the refined
     photo_from_render (pixels) and its robust cost (lower is better)."""
+    re, pe, bins, tau, config = (problem.render, problem.photo, problem.bins, problem.tau,
+                                 problem.config)
     t = _normaliser(re.width, re.height)
     t_inv = np.linalg.inv(t)
     hn = t @ init @ t_inv

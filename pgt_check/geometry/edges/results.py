@@ -3,12 +3,12 @@ matches and the alignment."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 
 import numpy as np
 
-from pgt_check.geometry.edges.config import EdgeReason
+from pgt_check.geometry.edges.config import EdgeAlignConfig, EdgeReason
 from pgt_check.geometry.edges.distance import distance_with_labels, row_major_index
 
 
@@ -138,6 +138,32 @@ class PhotoEdges:
     def nearest(self) -> np.ndarray:
         """(H, W) int32 index into ``points`` of the nearest edge (-1 if there is none)."""
         return self._unoriented[1]
+
+
+@dataclass(frozen=True, eq=False)
+class EdgeProblem:
+    """One alignment's fixed inputs, handed together through the search, the refinement and
+    the evaluation: the render's edges, the photo's edges, the render edges' orientation bins
+    (``search.bins_of``: (N,) int64 into the photo's oriented distance maps), the chamfer
+    truncation ``tau`` (px) and the settings."""
+
+    render: RenderEdges
+    photo: PhotoEdges
+    bins: np.ndarray
+    tau: float
+    config: EdgeAlignConfig
+
+    def with_config(self, config: EdgeAlignConfig) -> EdgeProblem:
+        return replace(self, config=config)
+
+    def part(self, keep: np.ndarray) -> EdgeProblem:
+        """The problem on the render edges ``keep`` selects (a bool mask or indices)."""
+        re = self.render
+        render = replace(
+            re, points=re.points[keep], normals=re.normals[keep], depth=re.depth[keep],
+            kind=re.kind[keep],
+        )  # fmt: skip
+        return replace(self, render=render, bins=self.bins[keep])
 
 
 @dataclass(frozen=True, eq=False)

@@ -10,7 +10,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from pgt_check.geometry.edges.config import EdgeAlignConfig
-from pgt_check.geometry.edges.results import PhotoEdges, RenderEdges
+from pgt_check.geometry.edges.results import EdgeProblem, PhotoEdges
 
 
 def bins_of(normals: np.ndarray, n_bins: int) -> np.ndarray:
@@ -247,17 +247,12 @@ def _fine_peaks(
     return best_shift, best_score, second_shift, second_score
 
 
-def search_shifts(
-    re: RenderEdges,
-    pe: PhotoEdges,
-    bins: np.ndarray,
-    tau: float,
-    config: EdgeAlignConfig,
-    timings: dict[str, float],
-) -> ShiftSearch | None:
+def search_shifts(problem: EdgeProblem, timings: dict[str, float]) -> ShiftSearch | None:
     """Coarse exhaustive search of the shift, then 1 px around the best and the separated
     runner-up; None when no shift keeps enough render edges inside the photo. Adds the
     "coarse" and "fine" times (s) to ``timings``."""
+    re, pe, bins, tau, config = (problem.render, problem.photo, problem.bins, problem.tau,
+                                 problem.config)
     t0 = time.perf_counter()
     diag = math.hypot(re.width, re.height)
     step = coarse_step(config, diag, tau)

@@ -13,8 +13,7 @@ import math
 
 import numpy as np
 
-from pgt_check.geometry.edges.config import EdgeAlignConfig
-from pgt_check.geometry.edges.results import PhotoEdges, RenderEdges
+from pgt_check.geometry.edges.results import EdgeProblem
 from pgt_check.geometry.edges.search import _ScoreMaps, subset
 
 #: tiles with fewer render edge points are left out
@@ -38,14 +37,7 @@ def _tile_shift(
     return best
 
 
-def tile_start(
-    re: RenderEdges,
-    pe: PhotoEdges,
-    bins: np.ndarray,
-    shift: np.ndarray,
-    tau: float,
-    config: EdgeAlignConfig,
-) -> np.ndarray | None:
+def tile_start(problem: EdgeProblem, shift: np.ndarray) -> np.ndarray | None:
     """photo_from_render (3x3 affine) fitting the best shifts of ``config.tile_grid`` x
     ``config.tile_grid`` tiles (each searched within +-``config.tile_radius`` x diagonal of
     ``shift``; RANSAC over the tile centres, inlier distance tau / 2, at least 3 px); None
@@ -57,6 +49,8 @@ def tile_start(
     2 deg + 4 %: angle off by 60 % instead of 6 %)."""
     import cv2
 
+    re, pe, bins, tau, config = (problem.render, problem.photo, problem.bins, problem.tau,
+                                 problem.config)
     grid = int(config.tile_grid)
     shift = np.asarray(shift, dtype=np.float64)
     if grid < 2 or len(re) == 0:

@@ -88,18 +88,20 @@ def test_ambiguity_judged_again_ignores_edges_moved_out_of_the_image():
     distorted one (clutter in a near view) can move many far outside the photo, which must
     not index past the score maps (it did on a 7-Scenes frame)."""
     from pgt_check.geometry.edges.align import _ambiguity_after, auto_tau
+    from pgt_check.geometry.edges.results import EdgeProblem
     from pgt_check.geometry.edges.search import bins_of, search_shifts
 
     z = blocks_depth(seed=1)
     re, pe = geometric_edges(z, K), photo_edges(photo_from_depth(z))
     bins = bins_of(re.normals, pe.n_bins)
     tau, cfg = auto_tau(W, H), EdgeAlignConfig(tile_grid=3)
-    found = dataclasses.replace(search_shifts(re, pe, bins, tau, cfg, {}), ambiguous=True)
+    problem = EdgeProblem(re, pe, bins, tau, cfg)
+    found = dataclasses.replace(search_shifts(problem, {}), ambiguous=True)
     stretch = np.array([[3.0, 0.0, -2.0 * W], [0.0, 3.0, -H], [0.0, 0.0, 1.0]])
     for hmat in (stretch, translation(3.0 * W, 0.0)):
-        assert _ambiguity_after(re, pe, bins, hmat, found, tau, cfg) is found
+        assert _ambiguity_after(problem, hmat, found) is found
     # aligned (identity), the blocks peak at one shift: no longer ambiguous
-    assert not _ambiguity_after(re, pe, bins, np.eye(3), found, tau, cfg).ambiguous
+    assert not _ambiguity_after(problem, np.eye(3), found).ambiguous
 
 
 def test_matches_lie_on_photo_edges_and_carry_depth():

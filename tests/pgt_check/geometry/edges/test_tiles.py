@@ -7,7 +7,13 @@ import dataclasses
 import numpy as np
 import pytest
 
-from pgt_check.geometry.edges import EdgeAlignConfig, align_edges, geometric_edges, photo_edges
+from pgt_check.geometry.edges import (
+    EdgeAlignConfig,
+    EdgeProblem,
+    align_edges,
+    geometric_edges,
+    photo_edges,
+)
 from tests.pgt_check.geometry.edges.drawn import (
     H,
     K,
@@ -46,7 +52,7 @@ def test_a_zoom_larger_than_tau_is_recovered_from_the_tile_start(zoom, seed):
     assert not al.ambiguous
     # the start itself carries the zoom: nearer the truth than the best shift
     shift = np.array(al.shift)
-    start = tile_start(re, pe, bins_of(re.normals, pe.n_bins), shift, 3.0, tiles)
+    start = tile_start(EdgeProblem(re, pe, bins_of(re.normals, pe.n_bins), 3.0, tiles), shift)
     assert start is not None
     assert corner_distance(start, warp) < 0.7 * corner_distance(translation(*shift), warp)
 
@@ -61,9 +67,9 @@ def test_tile_start_off_or_without_enough_tiles():
     bins = bins_of(re.normals, pe.n_bins)
     shift = np.array([5.0, -3.0])
     tiles = EdgeAlignConfig(tile_grid=3)
-    assert tile_start(re, pe, bins, shift, 3.0, EdgeAlignConfig()) is None  # off by default
+    assert tile_start(EdgeProblem(re, pe, bins, 3.0, EdgeAlignConfig()), shift) is None  # off by default
     # a shift: every tile finds it, the affine map is that shift
-    h = tile_start(re, pe, bins, shift, 3.0, tiles)
+    h = tile_start(EdgeProblem(re, pe, bins, 3.0, tiles), shift)
     assert h is not None and corner_distance(h, warp) < 1.5
     # edges in one corner only: fewer than 4 tiles with enough points
     corner = re.points[:, 0] < W / 3
@@ -71,4 +77,4 @@ def test_tile_start_off_or_without_enough_tiles():
     few = dataclasses.replace(
         re, **{k: getattr(re, k)[corner] for k in ("points", "normals", "depth", "kind")}
     )
-    assert tile_start(few, pe, bins[corner], shift, 3.0, tiles) is None
+    assert tile_start(EdgeProblem(few, pe, bins[corner], 3.0, tiles), shift) is None
