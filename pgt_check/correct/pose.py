@@ -190,21 +190,28 @@ def _references_views(frame: Frame, references: Sequence[Frame], cam_w: Any) -> 
     return out
 
 
-def _round(
-    checker: Any,
-    frame: Frame,
-    pose: np.ndarray,
-    photo_w: np.ndarray,
-    camera: Any,
-    size: tuple[int, int],
-    references: Sequence[Frame] = (),
-) -> _Round:
+@dataclass(frozen=True, eq=False)
+class _Target:
+    """The frame a correction refines and what every round matches against: the checker (its
+    renderer, matcher, enhancer and config), the frame, its photo at the working size
+    ``size`` (w, h) and the photo's camera (full size, undistorted)."""
+
+    checker: Any
+    frame: Frame
+    photo_w: np.ndarray
+    camera: Any
+    size: tuple[int, int]
+
+
+def _round(target: _Target, pose: np.ndarray, references: Sequence[Frame] = ()) -> _Round:
     """Render at ``pose``, match raw render (and the render enhanced with each reference) vs
     photo, the raw homography's corner error, the lifted correspondences and their PnP."""
     from pgt_check.enhance.base import View
     from pgt_check.geometry.pnp import estimate_pose_from_points, lift_keypoints
     from pgt_check.measure.steps import Clock, match_path
 
+    checker, frame, photo_w, camera, size = (target.checker, target.frame, target.photo_w,
+                                             target.camera, target.size)
     cfg = checker.config
     scale = (size[0] / camera.width, size[1] / camera.height)
     cam_w = camera.scaled(*scale)
@@ -304,14 +311,7 @@ class _Rounds:
 
 
 def _run_rounds(
-    checker: Any,
-    frame: Frame,
-    pose: np.ndarray,
-    photo_w: np.ndarray,
-    camera: Any,
-    size: tuple[int, int],
-    rounds: int,
-    references: Sequence[Frame] = (),
+    target: _Target, pose: np.ndarray, rounds: int, references: Sequence[Frame] = ()
 ) -> _Rounds:
     """Up to ``rounds`` rounds from ``pose``; stops early when a round moves the pose by
     < 0.002 deg and < 1e-5 x the scene depth, or when a later round's PnP fails."""
@@ -329,7 +329,7 @@ def _run_rounds(
         # the references take turns (one enhancement per round): the pool holds each one's
         # correspondences, so no single reference's own bias decides
         refs = (references[k % len(references)],) if references else ()
-        rnd = _round(checker, frame, pose, photo_w, camera, size, refs)
+        rnd = _round(target, pose, refs)
         n_done = k + 1
         if k == 0:
             first = rnd
@@ -391,7 +391,7 @@ def refine_pose(
         if threshold_px is None
         else threshold_px
     )
-    done = _run_rounds(checker, frame, pose, photo_w, camera, size, rounds, references)
+    done = _run_rounds(_Target(checker, frame, photo_w, camera, size), pose, rounds, references)
     first_err = done.first.corner_error_px
     if done.last is None:
         return Correction(
