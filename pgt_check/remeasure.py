@@ -24,6 +24,7 @@ from pgt_check.types import Frame, Trajectory
 if TYPE_CHECKING:
     from pgt_check.correct.calibration import CalibratedRig
     from pgt_check.correct.result import CorrectedRun
+    from pgt_check.executor import CheckerLender
     from pgt_check.verdict.result import RunResult
     from pgt_check.verdict.shared import SharedChecks
 
@@ -178,19 +179,20 @@ class PlainMeasure:
 
     def __init__(self, desc: str = "pgt-check registration",
                  references: Mapping[str, tuple[Frame, ...]] | None = None) -> None:
-        self._checker: Any = None
+        self._lender: CheckerLender | None = None  # serial: one checker over all rounds
         self._desc = desc
         self._refs = dict(references or {})
 
     def __call__(self, frames: Sequence[Frame], config: RunConfig) -> list[FrameMeasurement]:
-        from pgt_check.executor import iter_results, stop_on_sigint
+        from pgt_check.executor import CheckerLender, iter_results, stop_on_sigint
 
         factory: Callable[[], Any] = functools.partial(build_frame_checker, config,
                                                        self._refs or None)
         if config.executor == "serial":
-            if self._checker is None:
-                self._checker = factory()
-            factory = functools.partial(_Borrowed, self._checker)
+            if self._lender is None:
+                self._lender = CheckerLender(factory)
+                self._lender.borrow()  # built here, before the pass, as the rounds' one checker
+            factory = self._lender.lend
         with stop_on_sigint() as stop:
             results = iter_results(frames, factory, config, stop=stop)
             ms = list(frame_progress(results, len(frames), self._desc))
@@ -199,19 +201,6 @@ class PlainMeasure:
         return ms
 
     def close(self) -> None:
-        if self._checker is not None:
-            self._checker.close()
-            self._checker = None
-
-
-class _Borrowed:
-    """A checker lent to one executor pass: closing it is left to its owner."""
-
-    def __init__(self, checker: Any) -> None:
-        self._checker = checker
-
-    def measure(self, frame: Frame, keep: Any = None) -> FrameMeasurement:
-        return self._checker.measure(frame, keep)
-
-    def close(self) -> None:
-        pass
+        if self._lender is not None:
+            self._lender.close()
+            self._lender = None

@@ -114,10 +114,12 @@ def _run_trajectory(traj: Trajectory, config: RunConfig, t0: float | None) -> Ru
     except BaseException:
         checker.close()
         raise
-    factory = functools.partial(build_frame_checker, config, references, panel_sink=sink)
-    if config.executor == "serial":  # the serial executor reuses the checker built here
-        factory = _ReuseFirst(checker, factory)
-    else:
+    from pgt_check.executor import CheckerLender
+
+    build = functools.partial(build_frame_checker, config, references, panel_sink=sink)
+    # the serial executor's main pass measures with the checker built here
+    lender = CheckerLender(build, checker if config.executor == "serial" else None)
+    if config.executor != "serial":
         checker.close()
     outside = prepared.outside_dataset
     if outside:
@@ -125,10 +127,9 @@ def _run_trajectory(traj: Trajectory, config: RunConfig, t0: float | None) -> Ru
                        "read and their thumbnails may appear in this report", len(outside),
                        outside[0])
     try:
-        return check_frames(prepared, config, factory, t0=t0)
+        return check_frames(prepared, config, lender.hand_over, t0=t0)
     finally:
-        if isinstance(factory, _ReuseFirst):
-            factory.close_unused()
+        lender.close()  # the checker built here, where no pass took it
 
 
 def _side_files(checker: Any) -> tuple[str, ...]:
@@ -136,24 +137,6 @@ def _side_files(checker: Any) -> tuple[str, ...]:
     none for a checker without a loaded mesh)."""
     mesh = getattr(checker, "_mesh", None) or getattr(checker, "mesh", None)
     return tuple(getattr(mesh, "side_files", ()) or ())
-
-
-class _ReuseFirst:
-    """A checker factory whose first call returns an already built checker."""
-
-    def __init__(self, checker: Any, factory: Callable[[], Any]) -> None:
-        self._checker, self._factory = checker, factory
-
-    def __call__(self) -> Any:
-        if self._checker is not None:
-            checker, self._checker = self._checker, None
-            return checker
-        return self._factory()
-
-    def close_unused(self) -> None:
-        if self._checker is not None:
-            self._checker.close()
-            self._checker = None
 
 
 def panel_writer(config: RunConfig, fingerprint: str):
@@ -391,32 +374,24 @@ def write_report_assets(
 
     if config.report_details <= 0:
         return None
-    again = _PanelImages(checker_factory, {f.frame_id: f for f in frames})
+    from pgt_check.executor import CheckerLender
+
+    by_id = {f.frame_id: f for f in frames}
+    lender = CheckerLender(checker_factory)  # built on the first frame measured again
+
+    def again(frame_id: str) -> FrameImages | None:
+        """``frame_id -> FrameImages`` of a frame measured again (None for an unknown frame
+        or one without a photo)."""
+        if frame_id not in by_id:
+            return None
+        checker = lender.borrow()
+        if getattr(checker, "panel_sink", None) is not None:
+            checker.panel_sink = None  # panels are written for these frames only
+        images = FrameImages()
+        checker.measure(by_id[frame_id], keep=images)
+        return None if images.photo is None else images
+
     try:
         return report_panels(config.out, result, config.report_details, fingerprint, again)
     finally:
-        again.close()
-
-
-class _PanelImages:
-    """``frame_id -> FrameImages`` of a frame measured again (None for an unknown frame or
-    one without a photo); the checker is built on the first call."""
-
-    def __init__(self, checker_factory: Callable[[], Any], by_id: dict[str, Frame]) -> None:
-        self._factory, self._by_id, self._checker = checker_factory, by_id, None
-
-    def __call__(self, frame_id: str) -> FrameImages | None:
-        if frame_id not in self._by_id:
-            return None
-        if self._checker is None:
-            self._checker = self._factory()
-            if getattr(self._checker, "panel_sink", None) is not None:
-                self._checker.panel_sink = None  # panels are written for these frames only
-        images = FrameImages()
-        self._checker.measure(self._by_id[frame_id], keep=images)
-        return None if images.photo is None else images
-
-    def close(self) -> None:
-        if self._checker is not None:
-            self._checker.close()
-            self._checker = None
+        lender.close()

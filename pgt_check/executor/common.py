@@ -172,6 +172,55 @@ def build_checker(checker_factory: CheckerFactory) -> Checker:
         raise checker_setup_error(err) from err
 
 
+class CheckerLender:
+    """One checker, owned here and lent out: built by ``factory`` on first need (or given
+    already built), closed by ``close``. The one way a checker is shared between passes:
+
+    - ``borrow()``: the checker itself, for this process's own calls (``close`` stays here);
+    - ``lend()``: a ``CheckerFactory`` for an executor pass that must not close it (the serial
+      executor closes what its factory returns; here that is a no-op);
+    - ``hand_over()``: a ``CheckerFactory`` whose first call gives the built checker away (the
+      taker closes it) and later calls build new ones with ``factory`` (the serial main pass
+      measuring with the checker the preflight built).
+    """
+
+    def __init__(self, factory: Callable[[], Any], checker: Any = None) -> None:
+        self._factory, self._checker = factory, checker
+
+    def borrow(self) -> Any:
+        if self._checker is None:
+            self._checker = self._factory()
+        return self._checker
+
+    def lend(self) -> _Lent:
+        return _Lent(self.borrow())
+
+    def hand_over(self) -> Any:
+        if self._checker is not None:
+            checker, self._checker = self._checker, None
+            return checker
+        return self._factory()
+
+    def close(self) -> None:
+        """Close the checker if it was built and not handed over."""
+        if self._checker is not None:
+            self._checker.close()
+            self._checker = None
+
+
+class _Lent:
+    """A lent checker: measures with its owner's, closing is left to the owner."""
+
+    def __init__(self, checker: Any) -> None:
+        self._checker = checker
+
+    def measure(self, frame: Frame, keep: Any = None) -> FrameMeasurement:
+        return self._checker.measure(frame, keep)
+
+    def close(self) -> None:
+        pass
+
+
 def close_checker(checker: Any) -> None:
     close = getattr(checker, "close", None)
     if callable(close):

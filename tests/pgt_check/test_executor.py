@@ -463,6 +463,50 @@ def test_sample_data_process_and_dask_match_serial(tmp_path, sample_scene):
     assert tables["dask"] == tables["serial"]
 
 
+class _Counted:
+    built = 0
+
+    def __init__(self) -> None:
+        type(self).built += 1
+        self.closed = 0
+        self.seen: list[Any] = []
+
+    def measure(self, frame: Any, keep: Any = None) -> Any:
+        self.seen.append((frame, keep))
+        return frame
+
+    def close(self) -> None:
+        self.closed += 1
+
+
+def test_checker_lender_borrows_lends_and_hands_over_one_checker():
+    from pgt_check.executor import CheckerLender
+
+    _Counted.built = 0
+    lender = CheckerLender(_Counted)
+    a = lender.borrow()
+    assert lender.borrow() is a and _Counted.built == 1  # built once, on first need
+    lent = lender.lend()
+    assert lent.measure("f", "k") == "f" and a.seen == [("f", "k")]
+    lent.close()  # an executor closing what it got: left to the owner
+    assert a.closed == 0
+    lender.close()
+    lender.close()
+    assert a.closed == 1
+    # hand_over: the built checker once (the taker owns it), then new ones
+    built = _Counted()
+    lender = CheckerLender(_Counted, built)
+    assert lender.hand_over() is built
+    other = lender.hand_over()
+    assert other is not built and isinstance(other, _Counted)
+    lender.close()
+    assert built.closed == 0 and other.closed == 0  # nothing left here to close
+    # a built checker no pass took is closed by its owner
+    unused = _Counted()
+    CheckerLender(_Counted, unused).close()
+    assert unused.closed == 1
+
+
 if __name__ == "__main__" and sys.argv[1:2] == ["--cli"]:
     import test_executor  # pickle this module's functions by its importable name
 
