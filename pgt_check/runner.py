@@ -370,12 +370,11 @@ def write_report_assets(
     """Panels for the report's detail frames (``report.assets.report_panels``); the selected
     frames without panels from the main pass are measured again here (in this process,
     keeping their images)."""
+    from pgt_check.executor import CheckerLender
     from pgt_check.report.assets import report_panels
 
     if config.report_details <= 0:
         return None
-    from pgt_check.executor import CheckerLender
-
     by_id = {f.frame_id: f for f in frames}
     lender = CheckerLender(checker_factory)  # built on the first frame measured again
 
