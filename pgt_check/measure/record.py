@@ -25,6 +25,9 @@ from pgt_check.enhance.base import Evidence
 
 #: layout of the JSON records (1 = the flat dicts of pgt-check <= 0.1 before this schema)
 SCHEMA_VERSION = 2
+#: the measured paths of a frame by name (``FrameMeasurement.path``; ``verdict_path`` and a
+#: judgement's ``decided_by`` are one of them)
+PATH_NAMES = ("raw", "enhanced", "edges")
 
 
 class MeasureReason(str, Enum):
@@ -313,16 +316,21 @@ class FrameMeasurement:
     input_key: str = ""
 
     # -- access ---------------------------------------------------------------------------
+    def path(self, name: str | None) -> PathMeasurement | None:
+        """The path named ``name`` (one of ``PATH_NAMES``); None for another name or a path
+        that was not measured."""
+        if name == "raw":
+            return self.raw
+        if name == "enhanced":
+            return self.enhanced
+        if name == "edges":
+            return self.edges
+        return None
+
     @property
     def chosen(self) -> PathMeasurement | None:
         """The path named by ``verdict_path``."""
-        if self.verdict_path == "enhanced":
-            return self.enhanced
-        if self.verdict_path == "raw":
-            return self.raw
-        if self.verdict_path == "edges":
-            return self.edges
-        return None
+        return self.path(self.verdict_path)
 
     @property
     def enhanced_why(self) -> str:

@@ -175,7 +175,7 @@ def path_error_px(
 ) -> float | None:
     """The named path's corner error as the verdict compares it (the camera's calibration
     error removed where the run removes it), photo px; None when the path has none."""
-    p = getattr(m, name, None) if name in ("raw", "enhanced", "edges") else None
+    p = m.path(name)
     if p is None or p.corner_error_px is None:
         return None
     err = p.corner_error_px

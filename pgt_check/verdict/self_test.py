@@ -282,8 +282,8 @@ def _missed(m: FrameMeasurement, j: Any, v: Any) -> str:
     from pgt_check.verdict.decide import resolve_threshold_px
 
     name = j.decided_by
-    path = getattr(m, name, None) if name in ("raw", "enhanced", "edges") else None
-    err = getattr(path, "corner_error_px", None)
+    path = m.path(name)
+    err = None if path is None else path.corner_error_px
     thr = resolve_threshold_px(v, m.width, m.height)
     return f"{m.frame_id} ({_g(err)} px / {_g(thr)} px, {name or '?'})"
 
