@@ -21,12 +21,32 @@ class Column:
     csv: bool = True
 
 
+#: the parts of a record a column reads: its paths (``record.PATH_NAMES``), the PnP estimate
+#: and the deciding path
+PARTS = ("raw", "enhanced", "edges", "pose", "chosen")
+
+
+def _part(m: FrameMeasurement, name: str) -> Any:
+    if name == "pose":
+        return m.pose
+    if name == "chosen":
+        return m.chosen
+    return m.path(name)
+
+
+def _checked_part(name: str) -> str:
+    if name not in PARTS:
+        raise ValueError(f"no record part {name!r} (one of {', '.join(PARTS)})")
+    return name
+
+
 def _path_attr(path: str, attr: str, default: Any = None) -> Callable[[FrameMeasurement], Any]:
     """``attr`` of the record's part ``path`` (raw, enhanced, edges, pose, or ``chosen``: the
     deciding path), ``default`` when it is absent."""
+    _checked_part(path)
 
     def get(m: FrameMeasurement) -> Any:
-        p = getattr(m, path)
+        p = _part(m, path)
         return default if p is None else getattr(p, attr)
 
     return get
@@ -34,9 +54,10 @@ def _path_attr(path: str, attr: str, default: Any = None) -> Callable[[FrameMeas
 
 def _path_success_attr(path: str, attr: str) -> Callable[[FrameMeasurement], Any]:
     """``attr`` of path ``path`` where it found a homography (None otherwise)."""
+    _checked_part(path)
 
     def get(m: FrameMeasurement) -> Any:
-        p = getattr(m, path)
+        p = _part(m, path)
         return None if p is None or not p.success else getattr(p, attr)
 
     return get
