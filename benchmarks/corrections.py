@@ -100,9 +100,9 @@ def run_scene(name, truth, mesh, extra, n_frames, rot, trans, seed):
             refs = checker.references.get(bad.frame_id, ())[:CORRECTION_REFERENCES]
             t0 = time.perf_counter()
             m = checker.measure(bad)
-            c = correct_frame(checker, bad, m, cfg, references=refs)
+            c = correct_frame(checker, bad, m, cfg.correct, references=refs)
             secs = time.perf_counter() - t0
-            base = correct_frame(checker, f, None, cfg, references=refs)  # from the reference pose
+            base = correct_frame(checker, f, None, cfg.correct, references=refs)  # from the reference pose
             row = {"frame_id": f.frame_id, "inj_rot_deg": r, "inj_t": t, "depth": med,
                    "success": c.success, "applied": c.applied, "start": c.start,
                    "rounds": c.rounds, "seconds": secs,

@@ -138,7 +138,7 @@ def corrected(traj: Trajectory, ms, cfg: RunConfig, ids: set[str]) -> dict:
     by_id = traj.by_id()
     checker = build_frame_checker(cfg, None)
     try:
-        return {fid: correct_frame(checker, by_id[fid], m_by_id.get(fid), cfg, thr.get(fid),
+        return {fid: correct_frame(checker, by_id[fid], m_by_id.get(fid), cfg.correct, thr.get(fid),
                                    refs.get(fid, ())) for fid in order}
     finally:
         checker.close()

@@ -31,7 +31,7 @@ from typing import Any
 
 import numpy as np
 
-from pgt_check.config import RunConfig
+from pgt_check.config import CorrectConfig, RunConfig
 from pgt_check.correct.pose import Correction, refine_pose, save_corrections
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.output_layout import OUTPUTS
@@ -58,13 +58,13 @@ def chosen_frames(frames: Sequence[FrameResult], mode: str) -> list[str]:
     ]
 
 
-def correct_frame(checker: Any, frame: Frame, m: FrameMeasurement | None, config: RunConfig,
+def correct_frame(checker: Any, frame: Frame, m: FrameMeasurement | None, c: CorrectConfig,
                   threshold_px: float | None = None,
                   references: Sequence[Frame] = ()) -> Correction:
     """One frame: start from the measurement's PnP estimate, else (or if that fails) the
-    checked pose. ``references``: frames the run vouches for, whose photos enhance the rounds'
-    renders (``refine_pose``)."""
-    c = config.correct
+    checked pose, ``c.rounds`` rounds each (``refine_pose``; ``c``: the run's ``correct``
+    section). ``references``: frames the run vouches for, whose photos enhance the rounds'
+    renders."""
     start = kind = None
     if m is not None and m.pose is not None and m.pose.world_from_cam is not None:
         start, kind = np.asarray(m.pose.world_from_cam, float), f"pnp_{m.verdict_path or 'raw'}"
@@ -198,13 +198,14 @@ def correct_run(
     budget = config.correct.budget * main_pass_seconds(measurements)
     refs = vouched_references(trajectory, result.frames, m_by_id, config, ids)
     corrections, stopped = _correct_frames(
-        ids, by_id, m_by_id, thr, config, checker_factory, budget, clock, refs
+        ids, by_id, m_by_id, thr, config.correct, config.fail_fast, checker_factory, budget,
+        clock, refs,
     )
     save_corrections(out, corrections.values(), config.measurement_fingerprint())
     fmt = write_trajectory_file(corrected_trajectory(trajectory, corrections),
                                 out / OUTPUTS.corrected_trajectory)
     atomic_write_text(out / OUTPUTS.bad_frames, bad_frames_text(result.frames, corrections))
-    return corrections, _corrections_summary(corrections, config, stopped, fmt)
+    return corrections, _corrections_summary(corrections, config.correct.frames, stopped, fmt)
 
 
 def _correct_frames(
@@ -212,7 +213,8 @@ def _correct_frames(
     by_id: Mapping[str, Frame],
     m_by_id: Mapping[str, FrameMeasurement],
     thr: Mapping[str, float | None],
-    config: RunConfig,
+    correct: CorrectConfig,
+    fail_fast: bool,
     checker_factory: Callable[[], Any],
     budget: float,
     clock: Callable[[], float],
@@ -225,7 +227,7 @@ def _correct_frames(
     if not ids:
         return corrections, stopped
     logger.info("correcting %d frame(s) (%d rounds of render -> match -> PnP%s)", len(ids),
-                config.correct.rounds, f", at most {budget:.0f} s" if budget > 0 else "")
+                correct.rounds, f", at most {budget:.0f} s" if budget > 0 else "")
     checker = checker_factory()
     t0 = clock()
     try:
@@ -238,13 +240,13 @@ def _correct_frames(
                 if not stopped:
                     stopped = (f"time limit: {n_done} frame(s) took {spent:.1f} s of the "
                                f"{budget:.1f} s budget (correct.budget "
-                               f"{config.correct.budget:g} x the main pass)")
+                               f"{correct.budget:g} x the main pass)")
                     logger.warning("corrections: %s; %d frame(s) left uncorrected",
                                    stopped, len(ids) - n_done)
                 corrections[fid] = Correction(fid, False, "time_limit")
                 continue
             corrections[fid] = _correct_one(checker, fid, by_id[fid], m_by_id.get(fid),
-                                            config, thr.get(fid),
+                                            correct, fail_fast, thr.get(fid),
                                             (references or {}).get(fid, ()))
     finally:
         checker.close()
@@ -252,13 +254,13 @@ def _correct_frames(
 
 
 def _correct_one(checker: Any, fid: str, frame: Frame, m: FrameMeasurement | None,
-                 config: RunConfig, threshold_px: float | None,
+                 correct: CorrectConfig, fail_fast: bool, threshold_px: float | None,
                  references: Sequence[Frame] = ()) -> Correction:
     """``correct_frame``, or on an error (unless ``fail_fast``) an ``internal_error`` one."""
     try:
-        return correct_frame(checker, frame, m, config, threshold_px, references)
+        return correct_frame(checker, frame, m, correct, threshold_px, references)
     except Exception as err:  # one frame must not stop the outputs
-        if config.fail_fast:
+        if fail_fast:
             raise
         logger.error("frame %s: correction failed: %s", fid, err)
         return Correction(fid, False, "internal_error")
@@ -289,11 +291,12 @@ class CorrectionsSummary:
 
 
 def _corrections_summary(
-    corrections: Mapping[str, Correction], config: RunConfig, stopped: str, fmt: str
+    corrections: Mapping[str, Correction], mode: str, stopped: str, fmt: str
 ) -> CorrectionsSummary:
-    """The summary's ``corrections`` entry (``fmt``: the corrected trajectory's format)."""
+    """The summary's ``corrections`` entry (``mode``: ``correct.frames``; ``fmt``: the
+    corrected trajectory's format)."""
     return CorrectionsSummary(
-        mode=config.correct.frames,
+        mode=mode,
         attempted=sum(c.reason != "time_limit" for c in corrections.values()),
         succeeded=sum(c.success for c in corrections.values()),
         not_attempted=sum(c.reason == "time_limit" for c in corrections.values()),

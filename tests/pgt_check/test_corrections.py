@@ -117,8 +117,8 @@ def test_real_data_correction_7scenes(shared_data):
     checker = FrameChecker(cfg)
     try:
         m = checker.measure(bad)
-        c = correct_frame(checker, bad, m, cfg)
-        base = correct_frame(checker, f, None, cfg)
+        c = correct_frame(checker, bad, m, cfg.correct)
+        base = correct_frame(checker, f, None, cfg.correct)
     finally:
         checker.close()
     assert c.success and base.success
@@ -155,7 +155,7 @@ def test_corrections_stop_at_their_time_budget(tmp_path, monkeypatch):
         for m in ms), None)
     now = [0.0]
 
-    def fake_correct(checker, frame, m, config, threshold_px=None, references=()):
+    def fake_correct(checker, frame, m, correct, threshold_px=None, references=()):
         now[0] += 4.0  # each correction takes 4 s
         return Correction(frame.frame_id, True, "", rounds=1)
 
