@@ -97,7 +97,7 @@ def judge(ms: list, cfg: RunConfig):
     thr = resolve_threshold_px(cfg.verdict, w, h)
     shared = None if j.shared is None else json_safe(j.shared.summary())
     rows = j.rows()
-    return rows, shared, run_accuracy(rows, shared, cfg, thr)
+    return rows, shared, run_accuracy(j, j.shared, cfg, thr)
 
 
 def per_frame_copy(traj: Trajectory, deg: float, units: float, skip: set[str], seed: int):

@@ -29,7 +29,7 @@ from _common import REPORTS, command_line, machine, md_table, shared_data
 
 from pgt_check.config import PRESETS, RunConfig, merge
 from pgt_check.io import read_trajectory
-from pgt_check.report.outputs import json_safe
+from pgt_check.report.outputs import json_safe, read_summary
 from pgt_check.runner import run_trajectory
 from pgt_check.types import Trajectory
 
@@ -113,7 +113,8 @@ def run_dataset(name: str, traj: Trajectory, mesh: Path, cfgd: dict, n: int) -> 
         "input": {"trajectory": str(traj.source or mesh), "mesh": str(mesh)},
         "out": str(OUT / name), "overwrite": True, "report_details": 0, "self_test": n,
     }))
-    summary = run_trajectory(traj, cfg)
+    run_trajectory(traj, cfg)
+    summary = read_summary(cfg.out)  # the summary.json it wrote
     return {"dataset": name, "n_frames": summary["n_frames"], "counts": summary["counts"],
             "limits": summary["accuracy"]["limits"], "self_test": summary.get("self_test"),
             "registration": (summary.get("shared_errors") or {}).get("registration", {}).get(

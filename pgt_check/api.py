@@ -125,6 +125,7 @@ def check(
     columns are the DataFrame's; ``df.attrs["summary"]`` is summary.json, ``df.attrs["out"]``
     the output folder. Raises InputError (see the module docstring) for any input problem.
     """
+    from pgt_check.report.outputs import read_summary
     from pgt_check.runner import load_trajectory, run_trajectory
 
     base = _base_settings(config)
@@ -157,19 +158,17 @@ def check(
         traj = load_trajectory(cfg)
     # the CLI's own path: the same content keys decide what ``out`` may reuse
     # (a checker that cannot be built, here or in a worker, raises SetupError: an InputError)
-    summary = run_trajectory(traj, cfg, t0=t0)
+    run_trajectory(traj, cfg, t0=t0)  # its outcome is written to cfg.out
     df = frames_dataframe(_rows(Path(cfg.out), cfg))  # the stored rows, as frames.csv has them
-    df.attrs["summary"] = summary
+    df.attrs["summary"] = read_summary(Path(cfg.out))
     df.attrs["out"] = str(cfg.out)
     return df
 
 
 def _rows(out: Path, cfg: RunConfig) -> list[dict[str, Any]]:
-    """The judged rows of a finished run directory (verdicts + correction columns)."""
-    from pgt_check.correct.result import stored_corrections
-    from pgt_check.report.stored import load_run
-    from pgt_check.verdict import judge_run
-    from pgt_check.verdict.separation import load_probes
+    """The judged rows of a finished run directory (verdicts + correction columns): the
+    stored measurements judged again with ``cfg`` (``rejudge.rejudge``, as ``pgt-check
+    report`` does)."""
+    from pgt_check.rejudge import rejudge
 
-    records, _ = load_run(out)
-    return stored_corrections(judge_run(records, cfg, load_probes(out)), out)[0].rows()
+    return rejudge(out, cfg).result.rows()

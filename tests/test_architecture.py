@@ -18,7 +18,7 @@ LAYERS = {
     "store": 3,
     "correct": 4,
     "report": 5,
-    "executor": 6, "inputs": 6, "runner": 6, "remeasure": 6, "compare": 6,
+    "executor": 6, "inputs": 6, "runner": 6, "remeasure": 6, "rejudge": 6, "compare": 6,
     "enhance_folder": 6, "enhance_refs": 6,
     "cli": 7, "commands": 7, "__main__": 7, "api": 7,
 }

@@ -15,6 +15,7 @@ import argparse
 import logging
 import sys
 from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 from pgt_check import __version__
@@ -370,10 +371,12 @@ def load_config(args: argparse.Namespace) -> RunConfig:
         raise
 
 
-def _print_summary(summary: dict[str, Any], out: str) -> None:
+def _print_summary(out: str) -> None:
+    """The lines after a run, from the summary.json it wrote (``report.headline``)."""
     from pgt_check.report.headline import summary_lines
+    from pgt_check.report.outputs import read_summary
 
-    for line in summary_lines(summary, out):
+    for line in summary_lines(read_summary(Path(out)), out):
         print(f"pgt-check: {safe_text(line)}")
 
 
@@ -393,7 +396,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
             print(json.dumps(config.to_dict(), indent=2))
             return EXIT_PASSED
-        summary = run(config)
+        outcome = run(config)
     except (InputError, OSError) as err:
         # InputError covers ConfigError, FormatError, MissingExtraError and SetupError; an
         # OSError that reaches here is a file the user named (--out, an input) that cannot be
@@ -410,8 +413,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"pgt-check: aborted; resume with: {safe_text(resume_command(argv))}",
               file=sys.stderr)
         return 130
-    _print_summary(summary, config.out)
-    return EXIT_PASSED if summary["gate"]["passed"] else EXIT_FAILED
+    _print_summary(config.out)
+    return EXIT_PASSED if outcome.gate.passed else EXIT_FAILED
 
 
 def _one_line(err: BaseException) -> str:

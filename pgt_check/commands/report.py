@@ -13,12 +13,12 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from pgt_check._cli import OneLineErrorParser, install_sigterm_handler, parse_args, path_arg
-from pgt_check.config import RunConfig, merge
+from pgt_check.config import RunConfig
 from pgt_check.errors import InputError
 from pgt_check.files import MAX_SMALL_JSON_BYTES, load_json_limited, safe_text
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.output_layout import OUTPUTS
-from pgt_check.report.stored import load_run
+from pgt_check.verdict.outcome import InputsChanged
 
 
 def _warn_stale_auto_decisions(records: list[FrameMeasurement], config: RunConfig) -> None:
@@ -158,7 +158,7 @@ def main(argv: Sequence[str]) -> int:
         return 130
 
 
-def _inputs_changed(out: Path, cfg: dict, rejudge: bool) -> dict | None:
+def _inputs_changed(out: Path, cfg: dict, rejudge: bool) -> InputsChanged | None:
     """summary.json's ``inputs_changed``: the input files (run.json's content hashes) that
     changed since they were measured, said on stderr; None when none did. Without ``rejudge``
     its explanation is the gate's (``build_summary`` fails the gate on it)."""
@@ -184,9 +184,9 @@ def _inputs_changed(out: Path, cfg: dict, rejudge: bool) -> dict | None:
         print(f"pgt-check report: {what}; the stored measurements are not of these "
               "inputs, so the gate fails: measure again (pgt-check ... --resume), or pass "
               "--rejudge-stale to judge the stored measurements as they are", file=sys.stderr)
-    return {"files": changed, "unreadable": unreadable, "rejudged": rejudge,
-            "explanation": f"{what}: measure again with --resume (or pgt-check report "
-                           "--rejudge-stale judges the stored measurements as they are)"}
+    return InputsChanged(tuple(changed), tuple(unreadable), rejudge,
+                         f"{what}: measure again with --resume (or pgt-check report "
+                         "--rejudge-stale judges the stored measurements as they are)")
 
 
 def _check_trusted_summary_not_ours(out: Path, calibration_from: str | None) -> None:
@@ -209,26 +209,23 @@ def _check_trusted_summary_not_ours(out: Path, calibration_from: str | None) -> 
 
 
 def _report(args: argparse.Namespace) -> int:
-    from pgt_check.correct.result import stored_corrections
-    from pgt_check.report.outputs import RunFacts, outputs_complete, write_run
-    from pgt_check.verdict import judge_run
-    from pgt_check.verdict.separation import load_probes
+    from pgt_check.rejudge import rejudge, stored_run
+    from pgt_check.report.outputs import RunFacts, outputs_complete, write_outcome
 
     try:
         out = Path(args.out_dir)
-        records, cfg = load_run(out)
         override: dict = verdict_overrides(args)
         if args.absolute_paths:
             override["absolute_paths"] = True
-        config = RunConfig.from_dict(merge(cfg, override))
+        stored = stored_run(out, override)
+        config = stored.config
         _check_trusted_summary_not_ours(out, config.run_checks.calibration_from)
-        _warn_stale_auto_decisions(records, config)
+        _warn_stale_auto_decisions(stored.measurements, config)
         complete, why = outputs_complete(out)
         if not complete:
             print(f"pgt-check report: note: the output set in {out} was incomplete ({why}); "
                   "rebuilding all of it", file=sys.stderr)
         old = _old_summary(out / OUTPUTS.summary_json)
-        stale = _inputs_changed(out, cfg, args.rejudge_stale)
         extra = {
             k: old[k]
             for k in ("trajectory_format", "shading", "setup_s", "wall_time_s",
@@ -236,33 +233,22 @@ def _report(args: argparse.Namespace) -> int:
                       "self_test", "calibrated_rig")  # calibrated/ is not rewritten here
             if k in old
         }
-        if stale is not None:
-            extra["inputs_changed"] = stale
-        try:
-            judged = judge_run(records, config, load_probes(out))
-        except (KeyError, ValueError, TypeError, AttributeError, IndexError) as err:
-            if isinstance(err, InputError):
-                raise
-            raise InputError(
-                f"{out}: the stored records cannot be judged, one is malformed "
-                f"({type(err).__name__}: {err}); measure again with --overwrite"
-            ) from err
-        result, stale = stored_corrections(judged, out)
-        if stale:
-            print(f"pgt-check report: note: {OUTPUTS.registration_refined} was measured for "
-                  "another registration estimate (other verdict settings); the estimate shown is not "
-                  "refined", file=sys.stderr)
-        summary = write_run(out, result, config, RunFacts(carried=extra))
+        outcome = rejudge(stored, inputs_changed=_inputs_changed(out, dict(stored.settings),
+                                                                 args.rejudge_stale),
+                          note=lambda s: print(f"pgt-check report: note: {s}", file=sys.stderr))
+        summary = write_outcome(out, outcome, config, RunFacts(carried=extra))
     except (InputError, OSError) as err:
         print(f"pgt-check report: error: {safe_text(err)}", file=sys.stderr)
         return 2
     from pgt_check.report.headline import failure_headline
+    from pgt_check.verdict import Verdict
 
     for line in failure_headline(summary, out):
         print(f"pgt-check report: {safe_text(line)}")
-    c = summary["counts"]
+    n = outcome.statistics.count
     print(
-        f"pgt-check report: {c['PASS']} PASS, {c['FAIL']} FAIL, {c['UNVERIFIABLE']} UNVERIFIABLE; "
-        f"gate {'PASSED' if summary['gate']['passed'] else 'FAILED'}"
+        f"pgt-check report: {n(Verdict.PASS)} PASS, {n(Verdict.FAIL)} FAIL, "
+        f"{n(Verdict.UNVERIFIABLE)} UNVERIFIABLE; "
+        f"gate {'PASSED' if outcome.gate.passed else 'FAILED'}"
     )
-    return 0 if summary["gate"]["passed"] else 1
+    return 0 if outcome.gate.passed else 1

@@ -371,4 +371,4 @@ def _deferred(shared: SharedChecks) -> SharedChecks:
     reg = shared.registration
     if reg.corrected_world_from_world is None or DEFERRED in reg.message:
         return shared
-    return replace(shared, registration=replace(reg, message=f"{reg.message}. {DEFERRED}"))
+    return shared.with_entries(registration=replace(reg, message=f"{reg.message}. {DEFERRED}"))

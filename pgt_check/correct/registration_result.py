@@ -204,7 +204,7 @@ def apply_refinement(shared: SharedChecks, refined: RefinedRegistration | None) 
     (reports/shared_errors.md) and rigid rounds cannot refine a scale."""
     if refined is None:
         return shared
-    return replace(shared, registration=refined_registration(shared.registration, refined))
+    return shared.with_entries(registration=refined_registration(shared.registration, refined))
 
 
 def _px(x: float | None) -> str:

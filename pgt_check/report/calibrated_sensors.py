@@ -39,6 +39,7 @@ from pgt_check.correct.calibration import with_focal_scale
 from pgt_check.files import atomic_write_text
 from pgt_check.output_layout import OUTPUTS
 from pgt_check.types import Camera, opencv_to_colmap_params
+from pgt_check.verdict.shared import SharedChecks
 
 logger = logging.getLogger(__name__)
 
@@ -132,14 +133,14 @@ def _fitted_camera(rig: Mapping[str, Any] | None, cam_id: str) -> Camera | None:
 
 
 def calibrated_sensors_text(
-    rows: Sequence[Mapping[str, Any]], shared: Mapping[str, Any] | None,
+    rows: Sequence[Mapping[str, Any]], shared: SharedChecks | None,
     rig: Mapping[str, Any] | None = None,
 ) -> tuple[str, dict[str, Any]] | None:
     """(file text, summary entry) for the cameras whose calibration is significant; None when
-    none is. ``rows``: judged rows (``frame_id``, ``camera_id``); ``shared``: the summary's
-    ``shared_errors``; ``rig``: its ``calibrated_rig`` (a camera written there as a fitted
+    none is. ``rows``: judged rows (``frame_id``, ``camera_id``); ``shared``: the run-level
+    checks as reported (their calibration entries and threshold); ``rig``: its ``calibrated_rig`` (a camera written there as a fitted
     principal-point shift is written so here too: the file and ``calibrated/`` agree)."""
-    calib = (shared or {}).get("calibration") or {}
+    calib = shared.calibration if shared is not None else {}
     lines = [
         "# calibrated_sensors.txt: written by pgt-check from the run-level calibration estimate",
         "# (focal x focal_scale; principal point moved to where the camera-to-sensor rotation",
@@ -149,12 +150,10 @@ def calibrated_sensors_text(
     entry: dict[str, Any] = {"file": OUTPUTS.calibrated_sensors, "cameras": {}, "not_written": {}}
     # a camera whose intrinsics would leave more than this is not written: the file would not
     # pass its own re-check (#39)
-    limit = (shared or {}).get("threshold_px")
+    limit = shared.threshold_px if shared is not None else None
     n = 0
     for cam_id, e in sorted(calib.items()):
-        if not isinstance(e, Mapping) or e.get("status") not in SIGNIFICANT:
-            continue
-        if e.get("rotation") is None or e.get("focal_scale") is None:
+        if e.status not in SIGNIFICANT or e.rotation is None or e.focal_scale is None:
             continue
         try:
             cam = parse_camera_key(cam_id)
@@ -163,14 +162,14 @@ def calibrated_sensors_text(
             continue
         frames = [str(r["frame_id"]) for r in rows if r.get("camera_id") == cam_id]
         depth = _median_depth(rows, cam_id)
-        cc = calibrated_camera(cam, np.asarray(e["rotation"], float), float(e["focal_scale"]),
-                               e.get("translation"), depth)
+        cc = calibrated_camera(cam, np.asarray(e.rotation, float), float(e.focal_scale),
+                               e.translation, depth)
         fitted = _fitted_camera(rig, cam_id)
         if fitted is not None:  # the fitted shift; what is left: the roll and translation
             from pgt_check.correct.calibration import roll_only
 
-            left = calibrated_camera(fitted, roll_only(np.asarray(e["rotation"], float)), 1.0,
-                                     e.get("translation"), depth)
+            left = calibrated_camera(fitted, roll_only(np.asarray(e.rotation, float)), 1.0,
+                                     e.translation, depth)
             cc = CalibratedCamera(fitted, cc.roll_deg, cc.translation, left.residual_px,
                                   cc.effect_px)
         if isinstance(limit, (int, float)) and cc.residual_px > limit:
@@ -229,7 +228,7 @@ def _median_depth(rows: Sequence[Mapping[str, Any]], cam_id: str) -> float:
 
 
 def write_calibrated_sensors(
-    out: Path, rows: Sequence[Mapping[str, Any]], shared: Mapping[str, Any] | None,
+    out: Path, rows: Sequence[Mapping[str, Any]], shared: SharedChecks | None,
     rig: Mapping[str, Any] | None = None,
 ) -> dict[str, Any] | None:
     """Write (or remove a stale) ``calibrated_sensors.txt`` in ``out``; its summary entry."""

@@ -242,20 +242,11 @@ def _drift_lines(summary: Mapping[str, Any], drift: Mapping[str, Any]) -> list[s
 
 
 def shared_error_lines(shared: Mapping[str, Any]) -> list[str]:
-    """One line per run-level check worth reading: failed, inconclusive or a finding."""
-    entries = [shared.get(k) for k in ("registration", "similarity", "drift")]
-    entries += list((shared.get("calibration") or {}).values())
-    entries += list((shared.get("calibration_change") or {}).values())
-    texture = shared.get("texture") or {}
-    # informational: printed as a finding, or when it could not be checked at all
-    if texture.get("status") == "finding" or texture.get("reason") == "no_geometric_evidence":
-        entries.append(texture)
-    entries.append(shared.get("frame_screen"))  # frames left out of the pooled fits, and why
-    return [
-        str(e["message"]) for e in entries
-        if isinstance(e, dict) and (e.get("status") in ("failed", "inconclusive", "finding")
-                                    or e.get("reason") == "no_geometric_evidence")
-    ]
+    """The lines of the run-level checks worth reading (failed, inconclusive, a finding): each
+    check's ``lines`` of its summary entry, in registry order (``verdict.checks.CHECKS``)."""
+    from pgt_check.verdict.checks import CHECKS
+
+    return [line for check in CHECKS for line in check.lines(shared.get(check.KEY))]
 
 
 def summary_lines(summary: Mapping[str, Any], out: str | Path) -> list[str]:

@@ -31,6 +31,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from pgt_check.verdict.accuracy import RunAccuracy
     from pgt_check.verdict.outcome import RunOutcome
     from pgt_check.verdict.run_stats import Gate, RunStatistics
+    from pgt_check.verdict.shared import SharedChecks
 
 logger = logging.getLogger(__name__)
 
@@ -263,6 +264,7 @@ def write_summary(
     summary_of: Callable[[], dict[str, Any]],
     config: RunConfig,
     *,
+    shared: SharedChecks | None = None,
     report: bool = True,
     assets: dict[str, dict[str, str]] | None = None,
 ) -> dict[str, Any]:
@@ -282,8 +284,11 @@ def write_summary(
     # a significant calibration estimate as intrinsics a re-run loads (``--sensors``)
     from pgt_check.report.calibrated_sensors import write_calibrated_sensors
 
-    calibrated = write_calibrated_sensors(out, records, summary.get("shared_errors"),
-                                          summary.get("calibrated_rig"))
+    if shared is None and isinstance(summary.get("shared_errors"), Mapping):
+        from pgt_check.verdict.shared import SharedChecks
+
+        shared = SharedChecks.from_summary(summary["shared_errors"])  # rows without a result
+    calibrated = write_calibrated_sensors(out, records, shared, summary.get("calibrated_rig"))
     if calibrated is not None:
         summary["calibrated_sensors"] = _clean(calibrated)
     atomic_write_text(out / OUTPUTS.summary_json, json.dumps(summary, indent=2) + "\n")
@@ -345,6 +350,12 @@ class RunFacts:
         return out
 
 
+def read_summary(out: Path) -> dict[str, Any]:
+    """``out``'s summary.json as written (what the printed lines are built from, so
+    ``pgt-check`` and ``pgt-check report`` print alike)."""
+    return json.loads((Path(out) / OUTPUTS.summary_json).read_text(encoding="utf-8"))
+
+
 def write_outcome(
     out: Path,
     outcome: RunOutcome,
@@ -357,4 +368,5 @@ def write_outcome(
     statistics and accuracy the verdict stage decided; the result's summary sections, after
     ``facts``); return the summary written."""
     return write_summary(out, outcome.result.rows(),
-                         lambda: outcome_summary(outcome, config, facts), config, assets=assets)
+                         lambda: outcome_summary(outcome, config, facts), config,
+                         shared=outcome.shared, assets=assets)

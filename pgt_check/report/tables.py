@@ -65,16 +65,7 @@ CORRECTION_TABLE_COLUMNS: tuple[tuple[str, str, str, int | None], ...] = (
     ("corr_sigma_t", "± shift [units]", "num", 4),
     ("corr_corner_error_px", "err after corr. [px]", "num", 2),
 )
-#: shared-error checks in display order, with their titles (others follow with their key)
-SHARED_ERROR_TITLES = {
-    "registration": "registration",
-    "similarity": "similarity (scale)",
-    "drift": "drift",
-    "calibration": "calibration",
-    "calibration_change": "calibration change since the trusted run",
-    "texture": "mesh colours vs geometry",
-    "frame_screen": "frames left out of the run-level fits",
-}
+#: the numbers of a run-level check's entry shown in its row (key, label, format)
 SHARED_ERROR_NUMBERS = (
     ("angle_deg", "angle [deg]", ".3f"),
     ("translation", "translation [scene units]", ".4g"),
@@ -182,27 +173,26 @@ def _shared_error_entry(name: str, entry: Mapping[str, Any]) -> dict[str, Any]:
 
 
 def shared_error_rows(summary: Mapping[str, Any]) -> list[dict[str, Any]]:
-    """``summary["shared_errors"]`` as display rows: one per check, and one per camera for
-    checks given per camera id (calibration). Known checks first."""
+    """``summary["shared_errors"]`` as display rows: each check's ``table`` rows of its entry in
+    registry order (``verdict.checks.CHECKS``: one per check, or one per camera), then entries
+    of checks this version does not know (a newer run's), by key."""
+    from pgt_check.verdict.checks import CHECKS
+
     se = summary.get("shared_errors")
     if not isinstance(se, Mapping):
         return []
-    keys = [k for k in SHARED_ERROR_TITLES if k in se] + sorted(
-        k for k in se if k not in SHARED_ERROR_TITLES
-    )
-    rows = []
-    for key in keys:
+    known = {c.KEY for c in CHECKS}
+    pairs = [pair for c in CHECKS if c.KEY in se for pair in c.table(se[c.KEY])]
+    for key in sorted(k for k in se if k not in known):
         entry = se[key]
         if not isinstance(entry, Mapping):
             continue
-        title = SHARED_ERROR_TITLES.get(key, str(key))
         if "status" in entry:
-            rows.append(_shared_error_entry(title, entry))
+            pairs.append((str(key), entry))
             continue
-        for cam, sub in entry.items():  # per camera id
-            if isinstance(sub, Mapping) and "status" in sub:
-                rows.append(_shared_error_entry(f"{title} (camera {cam})", sub))
-    return rows
+        pairs += [(f"{key} (camera {cam})", sub) for cam, sub in entry.items()  # per camera id
+                  if isinstance(sub, Mapping) and "status" in sub]
+    return [_shared_error_entry(name, entry) for name, entry in pairs]
 
 
 def comparison_rows(comparison: Mapping[str, Any]) -> list[tuple[str, str, str]]:

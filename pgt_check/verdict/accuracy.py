@@ -27,6 +27,7 @@ from pgt_check.config import GateConfig, RunConfig
 from pgt_check.verdict.accuracy_text import _fmt, _need, accuracy_sentences  # re-exported
 from pgt_check.verdict.result import RunResult
 from pgt_check.verdict.shared import SharedChecks
+from pgt_check.verdict.status import NOT_CHECKED
 
 logger = logging.getLogger(__name__)
 
@@ -141,48 +142,46 @@ def _median(values: Sequence[Any]) -> float | None:
 
 
 def shared_sizes(
-    shared: Mapping[str, Any] | None, px_per_deg: float | None, px_per_unit: float | None
+    shared: SharedChecks | None, px_per_deg: float | None, px_per_unit: float | None
 ) -> tuple[SharedSize, ...]:
     """The run-level checks that were measured, as sizes with intervals."""
-    if not shared:
+    if shared is None:
         return ()
     out = []
-    for key in ("registration", "similarity"):
-        e = shared.get(key) or {}
-        if e.get("status") in (None, "not_checked"):
+    for key, e in (("registration", shared.registration), ("similarity", shared.similarity)):
+        if e.status == NOT_CHECKED:
             continue
         out.append(
             SharedSize(
-                key, str(e["status"]), _num(e.get("angle_deg")), _ci(e.get("angle_deg_ci")),
-                _num(e.get("translation")), _ci(e.get("translation_ci")),
-                _num(e.get("effect_px")), _ci(e.get("effect_px_ci")),
+                key, str(e.status), _num(e.angle_deg), _ci(e.angle_deg_ci),
+                _num(e.translation), _ci(e.translation_ci),
+                _num(e.effect_px), _ci(e.effect_px_ci),
             )  # fmt: skip
         )
-    cams = shared.get("calibration") or {}
-    for cam, e in sorted(cams.items()):
-        if not isinstance(e, Mapping) or e.get("status") in (None, "not_checked"):
+    cams = shared.calibration
+    for cam, c in sorted(cams.items()):
+        if c.status == NOT_CHECKED:
             continue
-        t = e.get("translation")
+        t = c.translation
         tn = _num(np.linalg.norm(np.asarray(t, float))) if isinstance(t, list) else None
         out.append(
             SharedSize(
-                "calibration" if len(cams) == 1 else f"calibration ({cam})", str(e["status"]),
-                _num(e.get("rotation_deg")),
-                _ci(e.get("rotation_deg_ci")), tn, None, _num(e.get("effect_px")),
-                _ci(e.get("effect_px_ci")),
+                "calibration" if len(cams) == 1 else f"calibration ({cam})", str(c.status),
+                _num(c.rotation_deg),
+                _ci(c.rotation_deg_ci), tn, None, _num(c.effect_px),
+                _ci(c.effect_px_ci),
             )  # fmt: skip
         )
-    d = shared.get("drift") or {}
-    if d.get("status") not in (None, "not_checked"):
-        per = d.get("per_frame") or []
-        worst = max((p for p in per if _num(p.get("effect_px")) is not None),
-                    key=lambda p: p["effect_px"], default=None)
+    d = shared.drift
+    if d.status != NOT_CHECKED:
+        worst = max((p for p in d.per_frame if _num(p.effect_px) is not None),
+                    key=lambda p: p.effect_px, default=None)
         if worst is not None:
-            px, lo = _num(worst["effect_px"]), _num(worst.get("lo_px"))
+            px, lo = _num(worst.effect_px), _num(worst.lo_px)
             ci = None if lo is None else (lo, px + (px - lo))
             out.append(
                 SharedSize(
-                    "drift", str(d["status"]),
+                    "drift", str(d.status),
                     None if not px_per_deg else px / px_per_deg,
                     None if not (ci and px_per_deg) else (ci[0] / px_per_deg, ci[1] / px_per_deg),
                     None if not px_per_unit else px / px_per_unit,
@@ -248,7 +247,7 @@ NOT_SEPARABLE = (
 def detection_limits(
     rows: Sequence[Mapping[str, Any]],
     threshold_px: float,
-    shared: Mapping[str, Any] | None,
+    shared: SharedChecks | None,
     calibration_removed: bool = False,
 ) -> DetectionLimits:
     """This run's detection limits from its own noise (module docstring). With
@@ -267,15 +266,16 @@ def detection_limits(
     # the shared limit: the registration check's own sensitivity to a world rotation /
     # translation (``world_sensitivity``, stored with the registration entry by judge_run);
     # else the frames' camera-frame sensitivity at their points
-    reg_s = ((shared or {}).get("registration") or {}).get("sensitivity") or {}
-    pts_ppd = _num(reg_s.get("px_per_deg")) or _median([r.get("acc_pts_px_per_deg") for r in rows])
-    pts_ppu = _num(reg_s.get("px_per_unit")) or _median(
+    reg = shared.registration if shared is not None else None
+    reg_s = reg.sensitivity if reg is not None else None
+    pts_ppd = (_num(reg_s.px_per_deg) if reg_s else None) or _median(
+        [r.get("acc_pts_px_per_deg") for r in rows])
+    pts_ppu = (_num(reg_s.px_per_unit) if reg_s else None) or _median(
         [r.get("acc_pts_px_per_unit") for r in rows])
     frame_px = None if noise_px is None else threshold_px + noise_px
     shared_px = None
-    reg = (shared or {}).get("registration") or {}
-    thr_shared = _num((shared or {}).get("threshold_px"))
-    ci = _ci(reg.get("effect_px_ci"))
+    thr_shared = _num(shared.threshold_px) if shared is not None else None
+    ci = _ci(reg.effect_px_ci) if reg is not None else None
     note = NOT_SEPARABLE if calibration_removed else ""
     if thr_shared is not None and ci is not None and not note:
         shared_px = thr_shared + 0.5 * (ci[1] - ci[0])
@@ -305,18 +305,25 @@ def detection_limits(
 
 
 def run_accuracy(
-    rows: RunResult | Sequence[Mapping[str, Any]],
-    shared: SharedChecks | Mapping[str, Any] | None,
+    result: RunResult, shared: SharedChecks | None, config: RunConfig, threshold_px: float
+) -> RunAccuracy:
+    """The run's accuracy statement from its verdicts (each frame's verdict, threshold and
+    ``FrameBound``) and the run-level checks as reported (``shared``)."""
+    rows = [
+        {"verdict": f.verdict, "threshold_px": f.threshold_px, **f.bound.columns()}
+        for f in result.frames
+    ]
+    return accuracy_of_rows(rows, shared, config, threshold_px)
+
+
+def accuracy_of_rows(
+    rows: Sequence[Mapping[str, Any]],
+    shared: SharedChecks | None,
     config: RunConfig,
     threshold_px: float,
 ) -> RunAccuracy:
-    """The run's accuracy statement from the verdicts (a ``RunResult``, or judged rows with
-    ``ACCURACY_COLUMNS``) and the run-level checks (``SharedChecks`` or their summary.json
-    section)."""
-    if isinstance(rows, RunResult):
-        rows = rows.rows()
-    if isinstance(shared, SharedChecks):
-        shared = shared.summary()
+    """``run_accuracy`` over the frames' columns (``verdict``, ``threshold_px`` and the
+    ``ACCURACY_COLUMNS`` of frames.csv: a stored run's rows, or the test's)."""
     bounded = [
         r for r in rows
         if _num(r.get("acc_rot_bound_deg")) is not None and _num(r.get("acc_t_bound")) is not None

@@ -57,7 +57,7 @@ def judge_run(
     if shared is not None and shared.registration.status != NOT_CHECKED:
         # what a world rotation / translation does to the images (the shared detection limit)
         sens = Sensitivity(*world_sensitivity(ms))
-        shared = replace(shared, registration=replace(shared.registration, sensitivity=sens))
+        shared = shared.with_entries(registration=replace(shared.registration, sensitivity=sens))
     outs = [path_outcomes(m, v, shared, barred) for m in ms]
     own = own_outcomes(ms, v, shared, outs)
     judged = [judge(m, v, shared, own, out) for m, out in zip(ms, outs, strict=True)]

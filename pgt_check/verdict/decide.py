@@ -6,7 +6,7 @@ import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from enum import Enum
-from typing import Any
+from typing import TYPE_CHECKING, Any, NamedTuple
 
 import numpy as np
 
@@ -15,6 +15,9 @@ from pgt_check.constants import CLEAR_MARGIN
 from pgt_check.enhance.base import Evidence
 from pgt_check.measure.record import FrameMeasurement, MeasureReason, PathMeasurement
 from pgt_check.verdict.status import FAILED, NOT_CHECKED, PASSED
+
+if TYPE_CHECKING:  # pragma: no cover
+    from pgt_check.verdict.shared import SharedChecks
 
 #: the reason prefix of a path that cannot tell right from wrong on this run
 #: (``verdict.separation.CANNOT_SEPARATE``)
@@ -27,6 +30,23 @@ class Verdict(str, Enum):
     UNVERIFIABLE = "UNVERIFIABLE"
 
 
+class PathOutcome(NamedTuple):
+    """What one path alone says (``path_outcome``): its verdict and why."""
+
+    verdict: Verdict
+    reason: str
+
+
+class Decision(NamedTuple):
+    """A frame's judgement while ``judge`` applies its rules: the verdict, why, the evidence it
+    rests on (``Judgement.evidence``) and the path that decided ("" when none)."""
+
+    verdict: Verdict
+    reason: str
+    evidence: str
+    path: str
+
+
 def resolve_threshold_px(config: VerdictConfig, width: int, height: int) -> float:
     """The PASS threshold in original photo pixels for an image of this size."""
     return config.threshold_for(width, height)
@@ -37,31 +57,31 @@ def path_outcome(
     path: PathMeasurement | None,
     config: VerdictConfig,
     photo_from_render: Any = None,
-) -> tuple[Verdict, str]:
+) -> PathOutcome:
     """Verdict and reason that one path alone gives (``photo_from_render`` overrides the path's
     homography, e.g. after removing a calibration error)."""
     if path is None:
-        return Verdict.UNVERIFIABLE, "not_measured"
+        return PathOutcome(Verdict.UNVERIFIABLE, "not_measured")
     if path.reason:
-        return Verdict.UNVERIFIABLE, path.reason
+        return PathOutcome(Verdict.UNVERIFIABLE, path.reason)
     if path.n_inliers < config.min_inliers:
-        return Verdict.UNVERIFIABLE, "too_few_inliers"
+        return PathOutcome(Verdict.UNVERIFIABLE, "too_few_inliers")
     if path.inlier_ratio < config.min_inlier_ratio:
-        return Verdict.UNVERIFIABLE, "low_inlier_ratio"
+        return PathOutcome(Verdict.UNVERIFIABLE, "low_inlier_ratio")
     err = path.corner_error_px
     if photo_from_render is not None:
         from pgt_check.geometry.homography import corner_error
 
         err = corner_error(np.asarray(photo_from_render, np.float64), m.width, m.height)
     if err is None or not math.isfinite(err):
-        return Verdict.UNVERIFIABLE, "non_finite_homography"
+        return PathOutcome(Verdict.UNVERIFIABLE, "non_finite_homography")
     threshold = config.threshold_for(m.width, m.height)
     if err <= threshold:
-        return Verdict.PASS, ""
-    return Verdict.FAIL, f"corner_error {err:.1f} px > {threshold:.1f} px"
+        return PathOutcome(Verdict.PASS, "")
+    return PathOutcome(Verdict.FAIL, f"corner_error {err:.1f} px > {threshold:.1f} px")
 
 
-def decide(m: FrameMeasurement, config: VerdictConfig) -> tuple[Verdict, str]:
+def decide(m: FrameMeasurement, config: VerdictConfig) -> PathOutcome:
     """Verdict and reason of the deciding path (the one with more inliers) alone.
 
     Order of checks: measurement error (missing image, internal error), render coverage,
@@ -69,9 +89,9 @@ def decide(m: FrameMeasurement, config: VerdictConfig) -> tuple[Verdict, str]:
     per-frame judgement with evidence kinds and run-level checks is ``judge``.
     """
     if m.error is not MeasureReason.NONE:
-        return Verdict.UNVERIFIABLE, m.error.value
+        return PathOutcome(Verdict.UNVERIFIABLE, m.error.value)
     if m.coverage is not None and m.coverage < config.min_coverage:
-        return Verdict.UNVERIFIABLE, MeasureReason.LOW_COVERAGE.value
+        return PathOutcome(Verdict.UNVERIFIABLE, MeasureReason.LOW_COVERAGE.value)
     return path_outcome(m, m.chosen, config)
 
 
@@ -116,7 +136,7 @@ class Judgement:
 
 
 def _calibrated(
-    m: FrameMeasurement, path: PathMeasurement | None, config: VerdictConfig, shared: Any
+    m: FrameMeasurement, path: PathMeasurement | None, config: VerdictConfig, shared: SharedChecks | None
 ) -> Any:
     """The path's homography with the camera's estimated calibration error removed, where the
     run-level checks took it out (``run_checks.remove_calibration`` / ``calibration_from``);
@@ -133,18 +153,18 @@ def _calibrated(
 def path_outcomes(
     m: FrameMeasurement,
     config: VerdictConfig,
-    shared: Any = None,
+    shared: SharedChecks | None = None,
     barred: Mapping[str, str] | None = None,
-) -> dict[str, tuple[Verdict, str] | None]:
+) -> dict[str, PathOutcome | None]:
     """What each path (raw, enhanced, edges) alone says, after removing the camera's estimated
     calibration error from absolute paths when the config asks for it. ``barred``: path ->
     reason, the paths that cannot tell right from wrong on this run
     (``verdict.separation``): their outcome is UNVERIFIABLE with that reason."""
-    out: dict[str, tuple[Verdict, str] | None] = {}
+    out: dict[str, PathOutcome | None] = {}
     for name in ("raw", "enhanced", "edges"):
         p = getattr(m, name)
         if p is not None and barred and name in barred:
-            out[name] = (Verdict.UNVERIFIABLE, barred[name])
+            out[name] = PathOutcome(Verdict.UNVERIFIABLE, barred[name])
             continue
         h = _calibrated(m, p, config, shared)
         out[name] = None if p is None else path_outcome(m, p, config, h)
@@ -152,14 +172,14 @@ def path_outcomes(
 
 
 def own_outcome(
-    m: FrameMeasurement, outcomes: Mapping[str, tuple[Verdict, str] | None], config: VerdictConfig
+    m: FrameMeasurement, outcomes: Mapping[str, PathOutcome | None], config: VerdictConfig
 ) -> tuple[Verdict, str, str]:
     """What the frame's own render says (absolute evidence only): the raw path when it is
     verifiable with ``confident_inliers``, else the geometric-edge path when verifiable, else a
     raw path with fewer inliers; UNVERIFIABLE when none is. Returns (verdict, reason, path)."""
     raw, edges = outcomes.get("raw"), outcomes.get("edges")
 
-    def ok(o: tuple[Verdict, str] | None) -> bool:
+    def ok(o: PathOutcome | None) -> bool:
         return o is not None and o[0] is not Verdict.UNVERIFIABLE
 
     if ok(raw) and m.raw is not None and m.raw.n_inliers >= config.confident_inliers:
@@ -171,7 +191,7 @@ def own_outcome(
 
 
 def path_error_px(
-    m: FrameMeasurement, name: str, config: VerdictConfig, shared: Any = None
+    m: FrameMeasurement, name: str, config: VerdictConfig, shared: SharedChecks | None = None
 ) -> float | None:
     """The named path's corner error as the verdict compares it (the camera's calibration
     error removed where the run removes it), photo px; None when the path has none."""
@@ -187,7 +207,7 @@ def path_error_px(
     return float(err)
 
 
-def _error_ratio(m: FrameMeasurement, name: str, config: VerdictConfig, shared: Any) -> float:
+def _error_ratio(m: FrameMeasurement, name: str, config: VerdictConfig, shared: SharedChecks | None) -> float:
     """The named path's corner error (calibration removed where asked) over the threshold;
     NaN when the path has none."""
     err = path_error_px(m, name, config, shared)
@@ -199,8 +219,8 @@ def _error_ratio(m: FrameMeasurement, name: str, config: VerdictConfig, shared: 
 def own_outcomes(
     measurements: Iterable[FrameMeasurement],
     config: VerdictConfig,
-    shared: Any = None,
-    outcomes: Sequence[Mapping[str, tuple[Verdict, str] | None]] | None = None,
+    shared: SharedChecks | None = None,
+    outcomes: Sequence[Mapping[str, PathOutcome | None]] | None = None,
 ) -> dict[str, bool]:
     """frame id -> whether its own render is clearly off (``own_outcome`` FAILs with the
     corner error beyond ``1 + CLEAR_MARGIN`` x the threshold, on a raw path with
@@ -218,20 +238,16 @@ def own_outcomes(
     return out
 
 
-#: a frame's judgement while ``judge`` applies its rules: (verdict, reason, evidence, the path
-#: it rests on)
-_Decision = tuple[Verdict, str, str, str]
-
 #: what each path alone says (``path_outcomes``)
-_Outcomes = Mapping[str, tuple[Verdict, str] | None]
+_Outcomes = Mapping[str, PathOutcome | None]
 
 
 def judge(
     m: FrameMeasurement,
     config: VerdictConfig,
-    shared: Any = None,
+    shared: SharedChecks | None = None,
     own: Mapping[str, bool] | None = None,
-    outcomes: Mapping[str, tuple[Verdict, str] | None] | None = None,
+    outcomes: Mapping[str, PathOutcome | None] | None = None,
 ) -> Judgement:
     """The frame's verdict from its paths and the run-level checks (``verdict.shared``).
 
@@ -270,18 +286,18 @@ def judge(
 def _paths_decision(
     m: FrameMeasurement,
     config: VerdictConfig,
-    shared: Any,
+    shared: SharedChecks | None,
     out: _Outcomes,
     ref_off: str,
-    base: tuple[Verdict, str],
-) -> tuple[_Decision, bool]:
+    base: PathOutcome,
+) -> tuple[Decision, bool]:
     """(decision, final) from the frame's paths, before the run-level checks (``judge``);
     final: no run-level check applies. ``base``: what ``decide`` says."""
     confident = _confident_fail(m, config, out, ref_off)
     if confident is not None:
         return confident, True
     d = _deciding_path(m, out, base)
-    if ref_off and d[2] == Evidence.RELATIVE.value:
+    if ref_off and d.evidence == Evidence.RELATIVE.value:
         d, final = _without_reference(m, config, out, ref_off, d)
         if final:
             return d, True
@@ -291,18 +307,18 @@ def _paths_decision(
 
 def _confident_fail(
     m: FrameMeasurement, config: VerdictConfig, out: _Outcomes, ref_off: str
-) -> _Decision | None:
+) -> Decision | None:
     """A FAIL of a feature path with ``confident_inliers`` (None when there is none)."""
     for name in ("raw", "enhanced"):
         p = getattr(m, name)
         if out[name] and out[name][0] is Verdict.FAIL and p.n_inliers >= config.confident_inliers:
             if ref_off and p.evidence is Evidence.RELATIVE:
                 continue  # the reference's own error explains it
-            return Verdict.FAIL, out[name][1], p.evidence.value, name
+            return Decision(Verdict.FAIL, out[name][1], p.evidence.value, name)
     return None
 
 
-def _deciding_path(m: FrameMeasurement, out: _Outcomes, base: tuple[Verdict, str]) -> _Decision:
+def _deciding_path(m: FrameMeasurement, out: _Outcomes, base: PathOutcome) -> Decision:
     """What the deciding path says (``base`` when it has no outcome): the measurement's
     ``verdict_path``, or the other feature path when that one cannot separate on this run
     (``verdict.separation``) and the other gives a PASS or FAIL."""
@@ -316,7 +332,7 @@ def _deciding_path(m: FrameMeasurement, out: _Outcomes, base: tuple[Verdict, str
     chosen = getattr(m, name, None) if name else None
     evidence = "none" if chosen is None else chosen.evidence.value
     verdict, reason = out.get(name) or base
-    return verdict, reason, evidence, name
+    return Decision(verdict, reason, evidence, name)
 
 
 def _without_reference(
@@ -324,32 +340,31 @@ def _without_reference(
     config: VerdictConfig,
     out: _Outcomes,
     ref_off: str,
-    d: _Decision,
-) -> tuple[_Decision, bool]:
+    d: Decision,
+) -> tuple[Decision, bool]:
     """(decision, final) where the reference that decided is clearly off on its own render."""
     # a reference that its own render shows off cannot vouch for or against this frame:
     # what this frame's own render says decides (absolute evidence; demanding a clear PASS
     # there made correct frames next to a wrong one UNVERIFIABLE: reports/edge_pipeline.md)
-    evidence, path = d[2], d[3]
     base, why, own_path = own_outcome(m, out, config)
     off = f"reference {ref_off} fails on its own render"
     if base is Verdict.UNVERIFIABLE:
-        return (base, f"reference_off ({off})", evidence, path), True
-    return (base, why, Evidence.ABSOLUTE.value, own_path), False
+        return Decision(base, f"reference_off ({off})", d.evidence, d.path), True
+    return Decision(base, why, Evidence.ABSOLUTE.value, own_path), False
 
 
-def _edges_if_unverifiable(out: _Outcomes, d: _Decision) -> _Decision:
+def _edges_if_unverifiable(out: _Outcomes, d: Decision) -> Decision:
     """The geometric-edge path's PASS or FAIL where the decision so far is UNVERIFIABLE."""
-    edge_v = None if out["edges"] is None else out["edges"][0]
-    if d[0] is Verdict.UNVERIFIABLE and edge_v in (Verdict.PASS, Verdict.FAIL):
-        base, why = out["edges"]
-        return base, why, Evidence.ABSOLUTE.value, "edges"
+    edges = out["edges"]
+    if d.verdict is Verdict.UNVERIFIABLE and edges is not None and edges.verdict in (
+            Verdict.PASS, Verdict.FAIL):
+        return Decision(edges.verdict, edges.reason, Evidence.ABSOLUTE.value, "edges")
     return d
 
 
 def _settle_disagreement(
-    m: FrameMeasurement, config: VerdictConfig, shared: Any, out: _Outcomes, d: _Decision
-) -> tuple[_Decision, bool]:
+    m: FrameMeasurement, config: VerdictConfig, shared: SharedChecks | None, out: _Outcomes, d: Decision
+) -> tuple[Decision, bool]:
     """(decision, final) of a FAIL that another absolute path's PASS contradicts."""
     base, why, evidence, path = d
     passing = [
@@ -368,9 +383,9 @@ def _settle_disagreement(
         clear = clear or passing
     if not clear:
         reason = f"paths_disagree ({why} on the {path} path; an absolute path passes)"
-        return (Verdict.UNVERIFIABLE, reason, evidence, path), True
+        return Decision(Verdict.UNVERIFIABLE, reason, evidence, path), True
     base, why = out[clear[0]]
-    return (base, why, Evidence.ABSOLUTE.value, clear[0]), False
+    return Decision(base, why, Evidence.ABSOLUTE.value, clear[0]), False
 
 
 def _absolute_pass(out: _Outcomes) -> bool:
@@ -445,7 +460,7 @@ def vouched_reference(
 
 
 def _run_level(
-    frame_id: str, shared: Any, evidence: str, absolute_pass: bool, camera_id: str = ""
+    frame_id: str, shared: SharedChecks | None, evidence: str, absolute_pass: bool, camera_id: str = ""
 ) -> tuple[Verdict, str, str]:
     """(verdict, reason, evidence) of a frame whose paths PASS, after the run-level checks:
     a flagged drift segment, a failed registration or (``--calibration-from``) a camera whose

@@ -93,6 +93,12 @@ class RunResult:
     #: checked)
     separation: Separation | None = None
 
+    @property
+    def shared_as_reported(self) -> SharedChecks | None:
+        """The run-level checks as reported (the correction stage's ``CorrectedRun`` refines a
+        failed registration check's estimate)."""
+        return self.shared
+
     def rows(self) -> list[dict[str, Any]]:
         """frames.csv rows (``row`` of each frame), for ``pgt_check.report`` and column-wise
         statistics over the run. Built once per result: the report panels, the accuracy

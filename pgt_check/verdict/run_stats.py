@@ -1,12 +1,14 @@
-"""Run-level statistics of judged frames: the gate over verdict counts, the systematic offset
-of the frames' homographies, and corner-error percentiles / AUC."""
+"""Run-level statistics of judged frames (``RunStatistics``: verdict counts, corner-error
+percentiles / AUC, the systematic offset of the frames' homographies) and the CI gate over them
+(``Gate``)."""
 
 from __future__ import annotations
 
 import math
 from collections import Counter
-from collections.abc import Iterable, Mapping
-from typing import Any
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass, replace
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -14,6 +16,9 @@ from pgt_check.config import GateConfig
 from pgt_check.geometry.homography import auc_at_thresholds
 from pgt_check.measure.record import MeasureReason
 from pgt_check.verdict.decide import Verdict
+
+if TYPE_CHECKING:  # pragma: no cover
+    from pgt_check.verdict.result import RunResult
 
 #: UNVERIFIABLE reasons that mean the tool itself failed on a frame (they count against the gate)
 INTERNAL_REASONS = (MeasureReason.INTERNAL_ERROR.value, MeasureReason.WORKER_CRASHED.value)
@@ -59,9 +64,44 @@ def gate(
     )
 
 
+@dataclass(frozen=True)
+class SystematicOffset:
+    """summary.json -> ``statistics.systematic_offset`` (``systematic_offset``): the median
+    shift and zoom of the frames' homographies, the share of frames in the median direction,
+    whether it is systematic, its sentence and the path it was measured on."""
+
+    n_frames: int
+    systematic: bool
+    message: str
+    median_dx_px: float | None = None
+    median_dy_px: float | None = None
+    median_shift_px: float | None = None
+    direction_deg: float | None = None
+    consistency: float | None = None
+    median_zoom: float | None = None
+    #: "raw" or "verdict_path" (``run_statistics``; "" where not set)
+    path: str = ""
+
+    def to_json(self) -> dict[str, Any]:
+        out: dict[str, Any] = {"n_frames": self.n_frames, "systematic": self.systematic}
+        if self.median_dx_px is not None:
+            out.update(
+                median_dx_px=self.median_dx_px,
+                median_dy_px=self.median_dy_px,
+                median_shift_px=self.median_shift_px,
+                direction_deg=self.direction_deg,
+                consistency=self.consistency,
+                median_zoom=self.median_zoom,
+            )
+        out["message"] = self.message
+        if self.path:
+            out["path"] = self.path
+        return out
+
+
 def systematic_offset(
     shifts: Iterable[tuple[float, float]], zooms: Iterable[float], threshold_px: float
-) -> dict[str, Any]:
+) -> SystematicOffset:
     """Detect a consistent image-space offset across frames (a calibration hint).
 
     shifts: per-frame mean corner displacement (dx, dy) in px of successfully measured frames;
@@ -76,10 +116,8 @@ def systematic_offset(
     z = np.asarray(list(zooms), dtype=np.float64).reshape(-1)
     s = s[np.all(np.isfinite(s), axis=1)]
     z = z[np.isfinite(z)]
-    out: dict[str, Any] = {"n_frames": int(len(s)), "systematic": False}
     if len(s) == 0:
-        out["message"] = "no frame was measured"
-        return out
+        return SystematicOffset(0, False, "no frame was measured")
     med = np.median(s, axis=0)
     mag = float(np.hypot(*med))
     zoom = float(np.median(z)) if len(z) else 1.0
@@ -88,17 +126,17 @@ def systematic_offset(
     systematic = len(s) >= 5 and (
         (mag >= 0.25 * threshold_px and consistency >= 0.7) or abs(zoom - 1.0) >= 0.01
     )
-    out.update(
+    return SystematicOffset(
+        n_frames=int(len(s)),
+        systematic=bool(systematic),
+        message=_offset_message(med, mag, consistency, zoom, bool(systematic), threshold_px),
         median_dx_px=float(med[0]),
         median_dy_px=float(med[1]),
         median_shift_px=mag,
         direction_deg=direction,
         consistency=consistency,
         median_zoom=zoom,
-        systematic=bool(systematic),
     )
-    out["message"] = _offset_message(med, mag, consistency, zoom, bool(systematic), threshold_px)
-    return out
 
 
 def _consistency(s: np.ndarray, med: np.ndarray, mag: float) -> float:
@@ -142,8 +180,74 @@ def _offset_message(
     )
 
 
-def run_statistics(records: list[Mapping[str, Any]], threshold_px: float) -> dict[str, Any]:
-    """Run-level statistics: verdict and reason counts, error percentiles, AUC, systematic offset."""
+@dataclass(frozen=True)
+class ErrorPercentiles:
+    """summary.json -> ``statistics.corner_error_px``: the verdict path's corner error over the
+    frames where it was measured (None without any)."""
+
+    median: float | None
+    p90: float | None
+    max: float | None
+    n_measured: int
+
+    def to_json(self) -> dict[str, Any]:
+        return {"median": self.median, "p90": self.p90, "max": self.max,
+                "n_measured": self.n_measured}
+
+
+@dataclass(frozen=True)
+class RunStatistics:
+    """Run-level statistics of the judged frames (summary.json -> ``statistics``): verdict
+    counts (every ``Verdict``, in order), UNVERIFIABLE reason counts, corner-error
+    percentiles, AUC and the systematic offset."""
+
+    n_frames: int
+    counts: Mapping[str, int]
+    unverifiable_reasons: Mapping[str, int]
+    corner_error_px: ErrorPercentiles
+    auc: Mapping[str, float]
+    systematic_offset: SystematicOffset
+
+    def count(self, verdict: Verdict) -> int:
+        return int(self.counts.get(verdict.value, 0))
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "n_frames": self.n_frames,
+            "counts": dict(self.counts),
+            "unverifiable_reasons": dict(self.unverifiable_reasons),
+            "corner_error_px": self.corner_error_px.to_json(),
+            "auc": dict(self.auc),
+            "systematic_offset": self.systematic_offset.to_json(),
+        }
+
+
+@dataclass(frozen=True)
+class Gate:
+    """The CI gate's decision (summary.json -> ``gate``; the exit code): passed, and why."""
+
+    passed: bool
+    explanation: str
+
+    def to_json(self) -> dict[str, Any]:
+        return {"passed": self.passed, "explanation": self.explanation}
+
+    @classmethod
+    def of(cls, stats: RunStatistics, config: GateConfig) -> Gate:
+        """``gate`` over the statistics' verdict and reason counts."""
+        return cls(*gate(stats.counts, config, stats.unverifiable_reasons))
+
+
+def run_statistics(result: RunResult, threshold_px: float) -> RunStatistics:
+    """Run-level statistics of a judged run (``statistics_of_rows`` over its frames.csv view,
+    ``RunResult.rows``)."""
+    return statistics_of_rows(result.rows(), threshold_px)
+
+
+def statistics_of_rows(records: Sequence[Mapping[str, Any]], threshold_px: float
+                       ) -> RunStatistics:
+    """Run-level statistics over judged frames.csv rows: verdict and reason counts, error
+    percentiles, AUC, systematic offset."""
     counts = Counter(str(r["verdict"]) for r in records)
     reasons = Counter(
         str(r["reason"]) for r in records if r["verdict"] == Verdict.UNVERIFIABLE.value
@@ -166,17 +270,16 @@ def run_statistics(records: list[Mapping[str, Any]], threshold_px: float) -> dic
         shifts = [(r["shift_dx_px"], r["shift_dy_px"]) for r in ok]
         zooms = [r.get("zoom", 1.0) for r in ok]
         source = "verdict_path"
-    stats: dict[str, Any] = {
-        "n_frames": len(records),
-        "counts": {v.value: counts.get(v.value, 0) for v in Verdict},
-        "unverifiable_reasons": dict(reasons),
-        "corner_error_px": {
-            "median": float(np.median(finite)) if len(finite) else None,
-            "p90": float(np.percentile(finite, 90)) if len(finite) else None,
-            "max": float(np.max(finite)) if len(finite) else None,
-            "n_measured": int(len(finite)),
-        },
-        "auc": auc_at_thresholds(errs, (1.0, 3.0, 5.0, 10.0)),
-        "systematic_offset": {**systematic_offset(shifts, zooms, threshold_px), "path": source},
-    }
-    return stats
+    return RunStatistics(
+        n_frames=len(records),
+        counts={v.value: counts.get(v.value, 0) for v in Verdict},
+        unverifiable_reasons=dict(reasons),
+        corner_error_px=ErrorPercentiles(
+            float(np.median(finite)) if len(finite) else None,
+            float(np.percentile(finite, 90)) if len(finite) else None,
+            float(np.max(finite)) if len(finite) else None,
+            int(len(finite)),
+        ),
+        auc=auc_at_thresholds(errs, (1.0, 3.0, 5.0, 10.0)),
+        systematic_offset=replace(systematic_offset(shifts, zooms, threshold_px), path=source),
+    )

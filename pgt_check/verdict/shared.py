@@ -37,37 +37,30 @@ from pgt_check.constants import (  # re-exported: callers and tests use them her
     OWN_ERROR_FRACTION,
 )
 from pgt_check.measure.record import FrameMeasurement
-from pgt_check.verdict.calibration import (
-    CameraCalibration,
-    camera_matrix,
-    frame_homographies,
-    trusted_calibration,
-)
-from pgt_check.verdict.shared_entries import (
-    calibration_change_entry,
-    calibration_entry,
-    drift_entry,
-    frame_screen_entry,
-    registration_entry,
-    shared_or_not,
-)
+from pgt_check.verdict.calibration import CameraCalibration, camera_matrix
+from pgt_check.verdict.checks.base import frame_residuals  # re-exported
 from pgt_check.verdict.shared_results import (
     CalibrationCheck,
+    CameraChecks,
     DriftCheck,
     FrameScreenCheck,
     RegistrationCheck,
     TextureCheck,
 )
 from pgt_check.verdict.status import FAILED, INCONCLUSIVE, NOT_CHECKED, PASSED
-from pgt_check.verdict.texture import texture_entry
 
 logger = logging.getLogger(__name__)
 
+__all__ = ["DRIFT_THRESHOLD_FACTOR", "MAX_FRAME_EVIDENCE_POINTS", "MAX_POOLED_POINTS",
+           "MIN_FRAME_EVIDENCE_POINTS", "OWN_ERROR_FRACTION", "SharedChecks", "frame_evidence",
+           "frame_residuals", "run_shared_checks", "shared_threshold"]
 
 
 @dataclass(frozen=True)
 class SharedChecks:
-    """Results of the run-level checks (``summary()`` is the summary.json section).
+    """Results of the run-level checks: each check's entry by its key (``entries``, in the
+    registry's order, ``verdict.checks.CHECKS``; ``summary()`` is the summary.json section) and
+    what the verdicts read beside the entries.
 
     ``drift_px`` / ``drift_flagged``: per frame id, the drift score and whether the frame lies in
     a flagged segment. ``calibration_homographies``: camera id -> (3, 3) photo_from_render of the
@@ -75,10 +68,8 @@ class SharedChecks:
     """
 
     threshold_px: float
-    registration: RegistrationCheck
-    similarity: RegistrationCheck
-    drift: DriftCheck
-    calibration: dict[str, CalibrationCheck]
+    #: check key -> entry (``verdict.checks``: each has ``to_json``, its summary entry)
+    entries: Mapping[str, Any]
     drift_px: dict[str, float] = field(default_factory=dict)
     drift_flagged: frozenset[str] = frozenset()
     calibration_homographies: dict[str, np.ndarray] = field(default_factory=dict)
@@ -90,17 +81,50 @@ class SharedChecks:
     frame_homographies: dict[str, np.ndarray] = field(default_factory=dict)
     #: the drift check's threshold (``DRIFT_THRESHOLD_FACTOR`` x ``threshold_px``)
     drift_threshold_px: float = float("nan")
-    #: mesh colours against mesh geometry (``texture_entry``; empty when not run)
-    texture: TextureCheck | None = None
-    #: with ``--calibration-from``, per camera id: what is left of the calibration after
-    #: removing the trusted run's (``calibration_change_entry``); a FAILED camera's frames FAIL
-    calibration_change: dict[str, CalibrationCheck] = field(default_factory=dict)
     #: camera id -> the calibration error the checks took out of the evidence
     #: (``run_checks.removes_calibration``: this run's estimate, or a trusted run's); the
     #: absolute paths are judged, and the per-frame bounds fitted, with it removed
     removed_calibrations: dict[str, CameraCalibration] = field(default_factory=dict)
-    #: which frames the pooled fits left out and why (``frame_screen_entry``)
-    frame_screen: FrameScreenCheck | None = None
+
+    def with_entries(self, **entries: Any) -> SharedChecks:
+        """These checks with some entries replaced (by key)."""
+        return replace(self, entries={**self.entries, **entries})
+
+    # the entries the verdicts and the correction stage read by name
+    @property
+    def registration(self) -> RegistrationCheck:
+        return self.entries.get("registration") or RegistrationCheck()
+
+    @property
+    def similarity(self) -> RegistrationCheck:
+        return self.entries.get("similarity") or RegistrationCheck(kind="similarity")
+
+    @property
+    def drift(self) -> DriftCheck:
+        return self.entries.get("drift") or DriftCheck(NOT_CHECKED, "", "")
+
+    @property
+    def calibration(self) -> Mapping[str, CalibrationCheck]:
+        e = self.entries.get("calibration")
+        return e.cameras if e is not None else {}
+
+    @property
+    def calibration_change(self) -> Mapping[str, CalibrationCheck]:
+        """With ``--calibration-from``, per camera id: what is left of the calibration after
+        removing the trusted run's (``calibration_change_entry``); a FAILED camera's frames
+        FAIL."""
+        e = self.entries.get("calibration_change")
+        return e.cameras if e is not None else {}
+
+    @property
+    def texture(self) -> TextureCheck | None:
+        """Mesh colours against mesh geometry (``texture_entry``; None when not run)."""
+        return self.entries.get("texture")
+
+    @property
+    def frame_screen(self) -> FrameScreenCheck | None:
+        """Which frames the pooled fits left out and why (``frame_screen_entry``)."""
+        return self.entries.get("frame_screen")
 
     @property
     def removes_calibration(self) -> bool:
@@ -122,25 +146,25 @@ class SharedChecks:
         return NOT_CHECKED
 
     def summary(self) -> dict[str, Any]:
-        """The summary.json ``shared_errors`` section."""
-        return {
-            "threshold_px": self.threshold_px,
-            "registration": self.registration.to_json(),
-            "similarity": self.similarity.to_json(),
-            "drift": self.drift.to_json(),
-            "calibration": {cam: e.to_json() for cam, e in self.calibration.items()},
-            **({"texture": self.texture.to_json()} if self.texture is not None else {}),
-            **(
-                {"frame_screen": self.frame_screen.to_json()}
-                if self.frame_screen is not None
-                else {}
-            ),
-            **(
-                {"calibration_change": {cam: e.to_json() for cam, e in self.calibration_change.items()}}
-                if self.calibration_change
-                else {}
-            ),
+        """The summary.json ``shared_errors`` section: the threshold, then each entry."""
+        return {"threshold_px": self.threshold_px,
+                **{key: e.to_json() for key, e in self.entries.items()}}
+
+    @classmethod
+    def from_summary(cls, d: Mapping[str, Any]) -> SharedChecks:
+        """The checks of a summary.json ``shared_errors`` section (``summary``'s form; for
+        callers holding a written summary: an older run's, a test's): the registration, drift
+        and calibration entries, none of the per-frame values the verdicts read."""
+        entries: dict[str, Any] = {
+            "registration": RegistrationCheck.from_json(d.get("registration") or {}),
+            "similarity": RegistrationCheck.from_json(
+                {"kind": "similarity", **(d.get("similarity") or {})}),
+            "drift": DriftCheck.from_json(d.get("drift") or {}),
+            "calibration": CameraChecks.from_json(d.get("calibration") or {}),
         }
+        if d.get("calibration_change"):
+            entries["calibration_change"] = CameraChecks.from_json(d["calibration_change"])
+        return cls(float(d.get("threshold_px", float("nan"))), entries)
 
     def calibration_changed(self, camera_id: str) -> CalibrationCheck | None:
         """The calibration-change entry of this camera when it FAILED (else None)."""
@@ -208,80 +232,14 @@ def frame_evidence(
     return out
 
 
-def frame_residuals(ev: Sequence[Any], est: Any) -> np.ndarray:
-    """Median reprojection residual (px) of each frame's evidence after the world correction
-    ``est`` (a ``RegistrationEstimate``; identity when it failed)."""
-    out = []
-    for e in ev:
-        pose = e.world_from_cam
-        if est.success and est.corrected_world_from_world is not None:
-            pose = est.correct(e.world_from_cam)
-        xc = (e.pts3d - pose[:3, 3]) @ pose[:3, :3]
-        ok = xc[:, 2] > 1e-9
-        proj = (xc[ok] @ e.K.T)[:, :2] / xc[ok, 2:3]
-        d = np.linalg.norm(proj - e.pts2d[ok], axis=1)
-        out.append(float(np.median(d)) if len(d) else float("inf"))
-    return np.asarray(out)
-
-
-def _without(cals: Mapping[str, CameraCalibration], e: Any) -> Any:
-    """The frame's evidence with its camera's calibration error removed (if one is known)."""
-    return cals[e.camera_id].remove(e) if e.camera_id in cals else e
-
-
-def _calibration_checks(
-    ev: Sequence[Any], measurements: Sequence[FrameMeasurement], config: RunConfig,
-    thr: float, frame_thr: float,
-) -> tuple[dict[str, CalibrationCheck], dict[str, CameraCalibration], dict[str, CalibrationCheck]]:
-    """Per camera: the calibration entry, the calibration to remove (this run's estimate, or the
-    trusted run's with ``calibration_from``) and, with ``calibration_from``, the change entry."""
-    from pgt_check.geometry.shared_errors import CalibrationSettings, estimate_calibration
-
-    v = config.run_checks
-    settings = CalibrationSettings(calibration_translation=v.calibration_translation)
-    # --remove-calibration: the user asserts the registration, so the shared camera-frame
-    # error of this run IS the calibration, whatever the separability test says (a joint fit
-    # would hand part of it to a world correction, and the registration check would then fail
-    # on the calibration it was told to remove); the ambiguity is reported, never the estimate
-    # dropped. Otherwise registration and calibration are told apart where the views allow.
-    asserted = bool(v.remove_calibration and not v.calibration_from)
-    calib, cals = {}, {}
-    for cam_id, est in estimate_calibration(
-        ev, settings, registration="none" if asserted else "auto"
-    ).items():
-        calib[cam_id] = calibration_entry(est, thr, frame_thr, asserted=asserted)
-        cal = CameraCalibration.from_estimate(est)
-        if cal is not None:
-            cals[cam_id] = cal
-    for cam_id in sorted({m.camera_id for m in measurements} - set(calib)):
-        calib[cam_id] = CalibrationCheck(
-            NOT_CHECKED, "no_absolute_evidence", "calibration not checked: no absolute evidence",
-            estimated=False,
-        )
-    change: dict[str, CalibrationCheck] = {}
-    if v.calibration_from:
-        # a calibration known from a trusted run (same cameras): removed before judging, so
-        # this run's own shared error cannot be taken for calibration; what is left of the
-        # calibration is this camera's change since that run
-        intrinsics = {m.camera_id: m.intrinsics for m in measurements if m.intrinsics}
-        cals = trusted_calibration(v.calibration_from, sorted(intrinsics))
-        rest = [_without(cals, e) for e in ev]
-        # calibration only: the change is what the trusted calibration leaves unexplained (a
-        # joint fit would trade part of it against a world correction, and re-split the same
-        # run's calibration differently)
-        for cam_id, est in estimate_calibration(rest, settings, registration="none").items():
-            if cam_id:
-                change[cam_id] = calibration_change_entry(est, thr)
-    return calib, cals, change
-
-
 def run_shared_checks(
     measurements: Sequence[FrameMeasurement], config: RunConfig,
     exclude_paths: Collection[str] = (),
 ) -> SharedChecks:
-    """All run-level checks on the measurements (in trajectory order); ``exclude_paths``: paths
-    whose points do not enter the pooled fits (``frame_evidence``)."""
-    from pgt_check.geometry import shared_errors as se
+    """All run-level checks (``verdict.checks.CHECKS``, in registry order) on the measurements
+    (in trajectory order); ``exclude_paths``: paths whose points do not enter the pooled fits
+    (``frame_evidence``)."""
+    from pgt_check.verdict.checks import CHECKS, CheckContext
 
     thr = shared_threshold(measurements, config)
     frame_thr = (
@@ -289,55 +247,19 @@ def run_shared_checks(
         if measurements
         else thr
     )
-    ev = frame_evidence(measurements, exclude_paths)
-    own = OWN_ERROR_FRACTION * frame_thr  # fallback where too few frames to test them
-    v = config.run_checks
-    trans = v.calibration_translation
-    # frames with an error of their own are left out of the pooled fits: a significance test
-    # of each frame's own correction against the null spread of all frames (screening.py)
-    all_ev = ev
-    screen = se.screen_frames(ev, se.FitSettings(n_bootstrap=0, calibration_translation=trans))
-    left_out = list(screen.left_out)
-    isolated = set(screen.isolated)
-    if left_out:
-        logger.info(
-            "run-level checks: %d of %d frames with their own error left out (%s)",
-            len(left_out), len(screen.frames), ", ".join(left_out[:5]),
-        )  # fmt: skip
-    ev = [e for e in ev if e.frame_id not in set(left_out)]
-    intrinsics = {m.camera_id: m.intrinsics for m in measurements if m.intrinsics}
-    calib, cals, change = _calibration_checks(ev, measurements, config, thr, frame_thr)
-    mode = "auto"
-    homs, frame_homs = frame_homographies(
-        cals, all_ev, intrinsics, {m.frame_id: m.camera_id for m in measurements}
-    )
-    if v.removes_calibration and cals:
-        # the user states that the shared camera-frame error is calibration: the evidence is
-        # corrected by it, and registration / drift are judged on what remains
-        ev, all_ev = [_without(cals, e) for e in ev], [_without(cals, e) for e in all_ev]
-        mode = "none"
-    fit = se.FitSettings(calibration_translation=trans)
-    reg, sim = (
-        shared_or_not(
-            registration_entry(
-                est := se.estimate_registration(ev, fit, similarity=s, calibration=mode), thr, kind
-            ),
-            *((screen.agreement(), 1.0) if screen.tested else (frame_residuals(ev, est), own)),
-        )
-        for s, kind in ((False, "rigid"), (True, "similarity"))
-    )
-    # drift looks at every frame but those with an isolated error of their own: a drifting
-    # segment is what the consistent frames leave out (its neighbours share its error);
-    # frames without evidence of their own are covered by the segment they lie in
-    ids = [m.frame_id for m in measurements]
-    drift_thr = DRIFT_THRESHOLD_FACTOR * thr
-    drift_set = se.DriftSettings(calibration_translation=trans)
-    drift_ev = [e for e in all_ev if e.frame_id not in isolated]
-    drift_est = se.estimate_drift(drift_ev, drift_set, threshold_px=drift_thr, calibration=mode)
-    drift, drift_px, flagged = drift_entry(drift_est, ids, drift_thr)
-    reg, sim = (replace(e, frames_left_out=tuple(left_out)) for e in (reg, sim))
+    ctx = CheckContext(measurements, config, thr, frame_thr,
+                       frame_evidence(measurements, exclude_paths))
+    entries = {c.KEY: e for c in CHECKS if (e := c.run(ctx)) is not None}
+    drift = entries.get("drift")
+    homs, frame_homs = ctx.homographies
     return SharedChecks(
-        thr, reg, sim, drift, calib, drift_px, flagged, homs, frozenset(left_out), frame_homs,
-        drift_thr, texture_entry(measurements, thr), change,
-        cals if v.removes_calibration else {}, frame_screen_entry(screen),
-    )  # fmt: skip
+        thr, entries,
+        drift_px=dict(drift.scores) if drift is not None else {},
+        drift_flagged=drift.flagged_ids if drift is not None else frozenset(),
+        calibration_homographies=homs,
+        left_out=frozenset(ctx.left_out),
+        frame_homographies=frame_homs,
+        drift_threshold_px=DRIFT_THRESHOLD_FACTOR * thr,
+        removed_calibrations=(ctx.calibrations.estimates
+                              if config.run_checks.removes_calibration else {}),
+    )

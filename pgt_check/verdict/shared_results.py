@@ -8,12 +8,12 @@ checks become dicts; ``verdict.shared_entries`` builds the entries from the type
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from pgt_check.verdict.status import NOT_CHECKED
 
-__all__ = ["CalibrationCheck", "DriftCheck", "DriftFrame", "FrameScreenCheck", "LeftOutFrame",
+__all__ = ["CalibrationCheck", "CameraChecks", "DriftCheck", "DriftFrame", "FrameScreenCheck", "LeftOutFrame",
            "RegistrationCheck", "Sensitivity", "TextureCheck"]
 
 
@@ -141,6 +141,10 @@ class DriftCheck:
     segments: tuple[tuple[str, str], ...] = ()
     n_windows: int = 0
     per_frame: tuple[DriftFrame, ...] = ()
+    #: each frame's drift score (px) and the frames in flagged segments (not in the summary
+    #: entry: ``SharedChecks.drift_px`` / ``drift_flagged`` hold them for the verdicts)
+    scores: Mapping[str, float] = field(default_factory=dict, compare=False)
+    flagged_ids: frozenset[str] = frozenset()
 
     def to_json(self) -> dict[str, Any]:
         """The summary.json entry (``shared_errors.drift``)."""
@@ -155,6 +159,17 @@ class DriftCheck:
             "per_frame": [asdict(f) for f in self.per_frame],
             "message": self.message,
         }
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> DriftCheck:
+        """The entry of a summary section (``to_json``'s form); missing keys keep defaults."""
+        return cls(
+            str(d.get("status", NOT_CHECKED)), str(d.get("reason", "")),
+            str(d.get("message", "")), float(d.get("threshold_px", float("nan"))),
+            tuple((str(a), str(b)) for a, b in d.get("segments") or ()),
+            int(d.get("n_windows", 0)),
+            tuple(DriftFrame(**f) for f in d.get("per_frame") or ()),
+        )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -205,6 +220,33 @@ class CalibrationCheck:
             "translation_ci": self.translation_ci,
             "message": self.message,
         }
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> CalibrationCheck:
+        """The entry of a summary section (``to_json``'s form); an entry with only status,
+        reason and message is one without an estimate."""
+        names = cls.__dataclass_fields__
+        kw = {k: v for k, v in d.items() if k in names}
+        kw.setdefault("status", NOT_CHECKED)
+        kw.setdefault("reason", "")
+        kw.setdefault("estimated", bool(set(kw) - {"status", "reason", "message"}))
+        return cls(**kw)
+
+
+@dataclass(frozen=True)
+class CameraChecks:
+    """A check given per camera id (calibration, calibration change): camera id -> its
+    ``CalibrationCheck``; the summary entry maps camera ids to their entries."""
+
+    cameras: Mapping[str, CalibrationCheck] = field(default_factory=dict)
+
+    def to_json(self) -> dict[str, Any]:
+        return {cam: e.to_json() for cam, e in self.cameras.items()}
+
+    @classmethod
+    def from_json(cls, d: Mapping[str, Any]) -> CameraChecks:
+        return cls({str(k): CalibrationCheck.from_json(v) for k, v in d.items()
+                    if isinstance(v, Mapping)})
 
 
 @dataclass(frozen=True)

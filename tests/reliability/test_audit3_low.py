@@ -210,18 +210,17 @@ def test_trusted_calibration_is_not_called_estimated_on_the_same_frames(case):
     """--calibration-from wins over --remove-calibration: the trusted calibration was removed,
     yet the accuracy line said the calibration was "estimated on the same frames" and stated
     no shared limit. Now both flags give what --calibration-from alone gives."""
-    from pgt_check.verdict.accuracy import run_accuracy
-    from tests.pgt_check.verdict.test_accuracy import SHARED, rows
+    from tests.pgt_check.verdict.test_accuracy import SHARED, rows, run_accuracy_rows
 
     both = RunConfig.from_dict({"run_checks": {"remove_calibration": True,
                                                "calibration_from": "trusted/summary.json"}})
     trusted = RunConfig.from_dict({"run_checks": {"calibration_from": "trusted/summary.json"}})
-    acc = run_accuracy(rows(), SHARED, both, threshold_px=8.0)
+    acc = run_accuracy_rows(rows(), SHARED, both, threshold_px=8.0)
     text = " ".join(acc.sentences)
     case("--remove-calibration --calibration-from X: the accuracy line",
          "no 'estimated on the same frames'", text[-160:])
     assert "same frames" not in text and "estimated on" not in text
-    alone = run_accuracy(rows(), SHARED, trusted, threshold_px=8.0)
+    alone = run_accuracy_rows(rows(), SHARED, trusted, threshold_px=8.0)
     assert acc.limits == alone.limits and acc.sentences == alone.sentences
     assert acc.limits.shared_px is not None
 

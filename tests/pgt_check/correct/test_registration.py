@@ -321,10 +321,10 @@ def test_a_failing_refinement_leaves_the_run_and_its_first_estimate(tmp_path, mo
     config = RunConfig.from_dict({"input": {"trajectory": "t", "mesh": "m"},
                                   "out": str(tmp_path / "out"), "report_details": 0})
     frames = list(_trajectory(4).frames)
-    summary = check_frames(PreparedRun.of(frames, config, input_keys={}, inputs={}), config,
+    outcome = check_frames(PreparedRun.of(frames, config, input_keys={}, inputs={}), config,
                            Checker)
-    assert summary["counts"]["UNVERIFIABLE"] == 4
-    assert "refinement" not in summary["shared_errors"]["registration"]
+    assert outcome.statistics.counts["UNVERIFIABLE"] == 4
+    assert outcome.shared.registration.refinement is None
     assert (tmp_path / "out" / "summary.json").is_file()
     strict = RunConfig.from_dict({"input": {"trajectory": "t", "mesh": "m"}, "fail_fast": True,
                                   "out": str(tmp_path / "out2"), "report_details": 0})

@@ -17,6 +17,7 @@ from pgt_check.report.calibrated_sensors import (
     write_calibrated_sensors,
 )
 from pgt_check.types import Camera
+from pgt_check.verdict.shared import SharedChecks
 
 CAM = Camera.pinhole(640, 480, 525.0, 525.0, 319.5, 239.5)
 KEY = "PINHOLE 640x480 525,525,319.5,239.5"
@@ -44,10 +45,14 @@ def test_rotation_about_x_y_becomes_the_principal_point():
     assert cc.roll_deg == pytest.approx(0.3, abs=1e-6) and cc.residual_px > 0.5
 
 
-def _shared(status: str) -> dict:
+def _shared_json(status: str) -> dict:
     r = _exp(np.radians([-0.2, 0.8, 0.1]))
     return {"calibration": {KEY: {"status": status, "rotation": r.tolist(),
                                   "focal_scale": 0.998, "translation": None}}}
+
+
+def _shared(status: str) -> SharedChecks:
+    return SharedChecks.from_summary(_shared_json(status))
 
 
 def test_written_file_reads_back_and_a_stale_one_is_removed(tmp_path):
@@ -56,7 +61,7 @@ def test_written_file_reads_back_and_a_stale_one_is_removed(tmp_path):
     assert entry is not None and entry["cameras"][KEY]["sensor_ids"] == ["cam0"]
     cams, ids = read_sensors(tmp_path / OUTPUTS.calibrated_sensors)
     cam = cams["cam0"]
-    want = calibrated_camera(CAM, np.asarray(_shared("finding")["calibration"][KEY]["rotation"]),
+    want = calibrated_camera(CAM, np.asarray(_shared_json("finding")["calibration"][KEY]["rotation"]),
                              0.998, depth=2.0).camera
     np.testing.assert_allclose(cam.params, want.params, rtol=1e-9)
     # a calibration within the threshold writes nothing, and removes an earlier file

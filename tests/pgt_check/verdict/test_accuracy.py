@@ -7,8 +7,15 @@ import pytest
 
 from pgt_check.config import RunConfig
 from pgt_check.errors import ConfigError
-from pgt_check.verdict.accuracy import run_accuracy
+from pgt_check.verdict.accuracy import accuracy_of_rows
 from pgt_check.verdict.frame_bounds import ACCURACY_COLUMNS
+from pgt_check.verdict.shared import SharedChecks
+
+
+def run_accuracy_rows(rows, shared, config, threshold_px):
+    """``accuracy_of_rows`` with the run-level checks given as their summary section."""
+    return accuracy_of_rows(rows, None if shared is None else SharedChecks.from_summary(shared),
+                            config, threshold_px)
 
 
 def _row(fid: str, verdict: str, rot: float | None, t: float | None, noise_px: float = 0.5):
@@ -46,7 +53,7 @@ def rows():
 
 
 def test_statement_counts_percentiles_and_limits():
-    acc = run_accuracy(rows(), SHARED, RunConfig(), threshold_px=8.0)
+    acc = run_accuracy_rows(rows(), SHARED, RunConfig(), threshold_px=8.0)
     assert acc.n_frames == 11 and acc.n_bounded == 10
     assert acc.within_from == "p90_pass"
     assert acc.within_deg == pytest.approx(0.172, abs=1e-3)
@@ -74,16 +81,16 @@ def _gate(**gate) -> RunConfig:
 
 def test_gate_on_required_accuracy():
     lax = _gate(require_accuracy_deg=1.0, require_accuracy_units=0.05, max_fail_fraction=0.2)
-    acc = run_accuracy(rows(), SHARED, lax, 8.0)
+    acc = run_accuracy_rows(rows(), SHARED, lax, 8.0)
     # 'bad' is above and 'rel' has no bound: 2 of 11 <= 0.2
     assert acc.gate_passed, acc.gate_explanation
     strict = _gate(require_accuracy_deg=1.0, require_accuracy_units=0.05,
                    max_fail_fraction=0.1)
-    acc = run_accuracy(rows(), SHARED, strict, 8.0)
+    acc = run_accuracy_rows(rows(), SHARED, strict, 8.0)
     assert acc.gate_passed is False and "1 without absolute evidence" in acc.gate_explanation
     # a shared error whose upper bound exceeds the requirement fails the gate
     tight = _gate(require_accuracy_deg=0.08, require_accuracy_units=1.0, max_fail_fraction=1.0)
-    acc = run_accuracy(rows(), SHARED, tight, 8.0)
+    acc = run_accuracy_rows(rows(), SHARED, tight, 8.0)
     assert acc.gate_passed is False and "registration" in acc.gate_explanation
 
 
@@ -102,7 +109,7 @@ def test_require_accuracy_config_is_typed_and_range_checked():
 
 
 def test_no_bounds_is_said_plainly():
-    acc = run_accuracy([_row("a", "PASS", None, None)], None, RunConfig(), 8.0)
+    acc = run_accuracy_rows([_row("a", "PASS", None, None)], None, RunConfig(), 8.0)
     assert acc.n_bounded == 0 and acc.sentences[0].startswith("None of the 1 frames")
 
 
@@ -143,10 +150,10 @@ def test_no_shared_limit_when_the_run_removes_its_own_calibration():
     from pgt_check.verdict.accuracy import NOT_SEPARABLE
 
     removed = RunConfig.from_dict({"run_checks": {"remove_calibration": True}})
-    acc = run_accuracy(rows(), SHARED, removed, threshold_px=8.0)
+    acc = run_accuracy_rows(rows(), SHARED, removed, threshold_px=8.0)
     assert acc.limits.shared_px is None and acc.limits.shared_deg is None
     assert acc.limits.shared_note == NOT_SEPARABLE
     assert any("--calibration-from" in s for s in acc.sentences)
     assert acc.limits.frame_deg == pytest.approx(0.85)  # the single-frame limit stands
-    lim = run_accuracy(rows(), SHARED, RunConfig(), threshold_px=8.0).limits
+    lim = run_accuracy_rows(rows(), SHARED, RunConfig(), threshold_px=8.0).limits
     assert lim.shared_px == pytest.approx(1.8) and lim.shared_note == ""

@@ -7,7 +7,7 @@ from pgt_check.config import GateConfig, VerdictConfig
 from pgt_check.enhance.base import Evidence
 from pgt_check.measure import FrameMeasurement, MeasureReason, PathMeasurement
 from pgt_check.verdict import Verdict, decide, gate, resolve_threshold_px, systematic_offset
-from pgt_check.verdict.run_stats import run_statistics
+from pgt_check.verdict.run_stats import statistics_of_rows
 
 
 def _m(error="", coverage=0.8, homography_reason="", n_inliers=100, inlier_ratio=0.5,
@@ -64,9 +64,9 @@ def test_gate():
 def test_systematic_offset_detected_for_consistent_shift():
     shifts = [(-8.0 + 0.5 * (i % 2), -2.0) for i in range(20)]
     out = systematic_offset(shifts, [1.0] * 20, threshold_px=16.0)
-    assert out["systematic"] and out["consistency"] == 1.0
-    assert out["median_dx_px"] == pytest.approx(-8.0, abs=0.5)
-    assert "calibration" in out["message"]
+    assert out.systematic and out.consistency == 1.0
+    assert out.median_dx_px == pytest.approx(-8.0, abs=0.5)
+    assert "calibration" in out.message
 
 
 def test_random_shifts_are_not_systematic():
@@ -76,12 +76,12 @@ def test_random_shifts_are_not_systematic():
     ang = rng.uniform(0, 2 * np.pi, 40)
     shifts = list(zip(8 * np.cos(ang), 8 * np.sin(ang), strict=False))
     out = systematic_offset(shifts, [1.0] * 40, threshold_px=16.0)
-    assert not out["systematic"]
+    assert not out.systematic
 
 
 def test_zoom_is_systematic():
     out = systematic_offset([(0.1, 0.0)] * 10, [0.89] * 10, threshold_px=16.0)
-    assert out["systematic"] and "scaled by 0.890" in out["message"]
+    assert out.systematic and "scaled by 0.890" in out.message
 
 
 def test_run_statistics_counts_and_auc():
@@ -90,7 +90,7 @@ def test_run_statistics_counts_and_auc():
         {"verdict": "FAIL", "reason": "x", "corner_error_px": 30.0, "shift_dx_px": 30, "shift_dy_px": 0, "zoom": 1},
         {"verdict": "UNVERIFIABLE", "reason": "low_coverage", "corner_error_px": None},
     ]
-    s = run_statistics(recs, 16.0)
+    s = statistics_of_rows(recs, 16.0).to_json()
     assert s["counts"] == {"PASS": 1, "FAIL": 1, "UNVERIFIABLE": 1}
     assert s["unverifiable_reasons"] == {"low_coverage": 1}
     assert s["corner_error_px"]["n_measured"] == 2
@@ -107,7 +107,7 @@ def test_systematic_offset_uses_the_raw_path_when_measured():
          "zoom_raw": 1.0}
         for _ in range(10)
     ]
-    s = run_statistics(recs, 20.0)["systematic_offset"]
+    s = statistics_of_rows(recs, 20.0).to_json()["systematic_offset"]
     assert s["path"] == "raw" and s["systematic"]
     assert s["median_dx_px"] == pytest.approx(-9.0)
 

@@ -69,7 +69,7 @@ def test_a_frame_decided_by_the_edge_path_shows_the_edge_paths_error():
     # the JUnit text and the run's median use the same error
     xml = junit_xml_text(res.rows(), {"counts": {}, "gate": {}})
     assert "corner error 5.00 px (edges path)" in xml and "30.00" not in xml
-    assert run_statistics(res.rows(), 16.0)["corner_error_px"]["median"] == pytest.approx(5.0)
+    assert run_statistics(res, 16.0).corner_error_px.median == pytest.approx(5.0)
 
 
 def _random_frames(n: int, seed: int) -> list[FrameMeasurement]:

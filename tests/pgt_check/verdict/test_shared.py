@@ -309,22 +309,22 @@ def test_calibration_from_a_trusted_run_sees_the_camera_change(truth, tmp_path):
 
 
 def test_a_changed_camera_fails_frames_the_other_checks_pass():
-    from dataclasses import replace
-
     from pgt_check.verdict.decide import _run_level
     from pgt_check.verdict.shared import SharedChecks
     from pgt_check.verdict.shared_results import (
         CalibrationCheck,
+        CameraChecks,
         DriftCheck,
         RegistrationCheck,
     )
 
     reg = RegistrationCheck(status="passed", effect_px=0.5)
     drift = DriftCheck("passed", "", "drift passed")
-    shared = SharedChecks(2.4, reg, reg, drift, {}, drift_threshold_px=4.8)
+    shared = SharedChecks(2.4, {"registration": reg, "similarity": reg, "drift": drift,
+                                "calibration": CameraChecks()}, drift_threshold_px=4.8)
     assert _run_level("f1", shared, "absolute", True, "cam0")[0].value == "PASS"
-    changed = replace(shared, calibration_change={"cam0": CalibrationCheck("failed", "",
-                                                                          effect_px=6.1)})
+    changed = shared.with_entries(calibration_change=CameraChecks(
+        {"cam0": CalibrationCheck("failed", "", effect_px=6.1)}))
     v, reason, _ = _run_level("f1", changed, "absolute", True, "cam0")
     assert (v.value, reason) == ("FAIL", "calibration: this camera changed since the trusted "
                                          "run (6.1 px)")

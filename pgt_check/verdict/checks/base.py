@@ -1,0 +1,239 @@
+"""What the run-level checks share: ``CheckContext`` (the pooled evidence, the frames screened
+out, the calibration estimated and removed, computed once, when a check first asks) and the
+default presentation of an entry (``status_lines``, ``single_row``).
+
+A check module (``pgt_check.verdict.checks``) turns the context into its entry; the entry's
+``to_json`` is its summary.json value, the module's ``lines`` / ``table`` read that value back
+(so ``pgt-check`` and ``pgt-check report`` print the same from summary.json).
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Collection, Mapping, Sequence
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+
+from pgt_check.config import RunConfig
+from pgt_check.constants import OWN_ERROR_FRACTION
+from pgt_check.measure.record import FrameMeasurement
+from pgt_check.verdict.calibration import CameraCalibration, frame_homographies, trusted_calibration
+from pgt_check.verdict.shared_entries import calibration_change_entry, calibration_entry
+from pgt_check.verdict.shared_results import CalibrationCheck
+from pgt_check.verdict.status import FAILED, FINDING, INCONCLUSIVE, NOT_CHECKED
+
+logger = logging.getLogger(__name__)
+
+__all__ = ["CheckContext", "frame_residuals", "single_row", "status_lines"]
+
+#: the statuses whose message ``pgt-check`` prints (and a texture check without geometric
+#: evidence: it says what the run cannot see)
+PRINTED = (FAILED, INCONCLUSIVE, FINDING)
+
+
+def status_lines(entry: Any) -> list[str]:
+    """The headline line of one summary entry: its message where it failed, is inconclusive or
+    a finding (or no geometric evidence could check it)."""
+    if isinstance(entry, dict) and (entry.get("status") in PRINTED
+                                    or entry.get("reason") == "no_geometric_evidence"):
+        return [str(entry["message"])]
+    return []
+
+
+def single_row(title: str, entry: Any) -> list[tuple[str, Mapping[str, Any]]]:
+    """The report table's row of one summary entry: (name, entry)."""
+    return [(title, entry)] if isinstance(entry, Mapping) and "status" in entry else []
+
+
+def camera_rows(title: str, entry: Any) -> list[tuple[str, Mapping[str, Any]]]:
+    """The report table's rows of a per-camera entry: one per camera id."""
+    if not isinstance(entry, Mapping):
+        return []
+    return [(f"{title} (camera {cam})", sub) for cam, sub in entry.items()
+            if isinstance(sub, Mapping) and "status" in sub]
+
+
+def camera_lines(entry: Any) -> list[str]:
+    """The headline lines of a per-camera entry (``status_lines`` of each camera)."""
+    if not isinstance(entry, Mapping):
+        return []
+    return [line for sub in entry.values() for line in status_lines(sub)]
+
+
+def frame_residuals(ev: Sequence[Any], est: Any) -> np.ndarray:
+    """Median reprojection residual (px) of each frame's evidence after the world correction
+    ``est`` (a ``RegistrationEstimate``; identity when it failed)."""
+    out = []
+    for e in ev:
+        pose = e.world_from_cam
+        if est.success and est.corrected_world_from_world is not None:
+            pose = est.correct(e.world_from_cam)
+        xc = (e.pts3d - pose[:3, 3]) @ pose[:3, :3]
+        ok = xc[:, 2] > 1e-9
+        proj = (xc[ok] @ e.K.T)[:, :2] / xc[ok, 2:3]
+        d = np.linalg.norm(proj - e.pts2d[ok], axis=1)
+        out.append(float(np.median(d)) if len(d) else float("inf"))
+    return np.asarray(out)
+
+
+def without(cals: Mapping[str, CameraCalibration], e: Any) -> Any:
+    """The frame's evidence with its camera's calibration error removed (if one is known)."""
+    return cals[e.camera_id].remove(e) if e.camera_id in cals else e
+
+
+@dataclass(frozen=True)
+class Calibrations:
+    """Per camera: the calibration entries, the calibrations to remove (this run's estimate,
+    or the trusted run's with ``calibration_from``) and, with ``calibration_from``, the change
+    entries."""
+
+    checks: dict[str, CalibrationCheck]
+    estimates: dict[str, CameraCalibration]
+    change: dict[str, CalibrationCheck] = field(default_factory=dict)
+
+
+@dataclass
+class CheckContext:
+    """What several run-level checks share, computed once on first use: the thresholds, the
+    frames' pooled evidence (``ev``: every frame with absolute evidence, ``pooled``: without
+    the frames screened out as having an error of their own), the screening, the calibration
+    per camera and the evidence with it removed (``--remove-calibration``)."""
+
+    measurements: Sequence[FrameMeasurement]
+    config: RunConfig
+    #: the shared-error threshold (``shared.shared_threshold``) and the median per-frame one
+    threshold_px: float
+    frame_threshold_px: float
+    #: every frame with absolute evidence (``shared.frame_evidence``), trajectory order
+    ev: list[Any]
+
+    @property
+    def translation(self) -> bool:
+        return self.config.run_checks.calibration_translation
+
+    @cached_property
+    def screen(self) -> Any:
+        """Frames with an error of their own: a significance test of each frame's own
+        correction against the null spread of all frames (``geometry.shared_errors``)."""
+        from pgt_check.geometry import shared_errors as se
+
+        screen = se.screen_frames(
+            self.ev, se.FitSettings(n_bootstrap=0, calibration_translation=self.translation))
+        if screen.left_out:
+            logger.info(
+                "run-level checks: %d of %d frames with their own error left out (%s)",
+                len(screen.left_out), len(screen.frames), ", ".join(list(screen.left_out)[:5]),
+            )  # fmt: skip
+        return screen
+
+    @cached_property
+    def left_out(self) -> tuple[str, ...]:
+        return tuple(self.screen.left_out)
+
+    @cached_property
+    def pooled(self) -> list[Any]:
+        """The evidence without the frames screened out."""
+        out = set(self.left_out)
+        return [e for e in self.ev if e.frame_id not in out]
+
+    @cached_property
+    def calibrations(self) -> Calibrations:
+        return _calibration_checks(self.pooled, self.measurements, self.config,
+                                   self.threshold_px, self.frame_threshold_px)
+
+    @property
+    def removes_calibration(self) -> bool:
+        """The evidence is corrected by the calibration before registration and drift."""
+        return bool(self.config.run_checks.removes_calibration and self.calibrations.estimates)
+
+    @property
+    def mode(self) -> str:
+        """The registration and drift fits' calibration mode."""
+        return "none" if self.removes_calibration else "auto"
+
+    def _removed(self, ev: list[Any]) -> list[Any]:
+        cals = self.calibrations.estimates
+        return [without(cals, e) for e in ev] if self.removes_calibration else ev
+
+    @cached_property
+    def fitted(self) -> list[Any]:
+        """The pooled evidence the registration fits see (calibration removed where asked)."""
+        return self._removed(self.pooled)
+
+    @cached_property
+    def all_fitted(self) -> list[Any]:
+        """Every frame's evidence, calibration removed where asked (the drift check's)."""
+        return self._removed(self.ev)
+
+    @cached_property
+    def homographies(self) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+        """The calibration error's photo_from_render per camera and per frame."""
+        intrinsics = {m.camera_id: m.intrinsics for m in self.measurements if m.intrinsics}
+        return frame_homographies(self.calibrations.estimates, self.ev, intrinsics,
+                                  {m.frame_id: m.camera_id for m in self.measurements})
+
+    @cached_property
+    def agreement(self) -> tuple[Any, float] | None:
+        """The frames' agreement with the shared model where the screening tested them (and
+        the tolerance), else None (each fit's residuals decide)."""
+        return (self.screen.agreement(), 1.0) if self.screen.tested else None
+
+    @property
+    def own_error_px(self) -> float:
+        """Fallback tolerance where too few frames to test them."""
+        return OWN_ERROR_FRACTION * self.frame_threshold_px
+
+
+def _calibration_checks(
+    ev: Sequence[Any], measurements: Sequence[FrameMeasurement], config: RunConfig,
+    thr: float, frame_thr: float,
+) -> Calibrations:
+    """Per camera: the calibration entry, the calibration to remove (this run's estimate, or the
+    trusted run's with ``calibration_from``) and, with ``calibration_from``, the change entry."""
+    from pgt_check.geometry.shared_errors import CalibrationSettings, estimate_calibration
+
+    v = config.run_checks
+    settings = CalibrationSettings(calibration_translation=v.calibration_translation)
+    # --remove-calibration: the user asserts the registration, so the shared camera-frame
+    # error of this run IS the calibration, whatever the separability test says (a joint fit
+    # would hand part of it to a world correction, and the registration check would then fail
+    # on the calibration it was told to remove); the ambiguity is reported, never the estimate
+    # dropped. Otherwise registration and calibration are told apart where the views allow.
+    asserted = bool(v.remove_calibration and not v.calibration_from)
+    calib, cals = {}, {}
+    for cam_id, est in estimate_calibration(
+        ev, settings, registration="none" if asserted else "auto"
+    ).items():
+        calib[cam_id] = calibration_entry(est, thr, frame_thr, asserted=asserted)
+        cal = CameraCalibration.from_estimate(est)
+        if cal is not None:
+            cals[cam_id] = cal
+    for cam_id in sorted({m.camera_id for m in measurements} - set(calib)):
+        calib[cam_id] = CalibrationCheck(
+            NOT_CHECKED, "no_absolute_evidence", "calibration not checked: no absolute evidence",
+            estimated=False,
+        )
+    change: dict[str, CalibrationCheck] = {}
+    if v.calibration_from:
+        # a calibration known from a trusted run (same cameras): removed before judging, so
+        # this run's own shared error cannot be taken for calibration; what is left of the
+        # calibration is this camera's change since that run
+        intrinsics = {m.camera_id: m.intrinsics for m in measurements if m.intrinsics}
+        cals = trusted_calibration(v.calibration_from, sorted(intrinsics))
+        rest = [without(cals, e) for e in ev]
+        # calibration only: the change is what the trusted calibration leaves unexplained (a
+        # joint fit would trade part of it against a world correction, and re-split the same
+        # run's calibration differently)
+        for cam_id, est in estimate_calibration(rest, settings, registration="none").items():
+            if cam_id:
+                change[cam_id] = calibration_change_entry(est, thr)
+    return Calibrations(calib, cals, change)
+
+
+def exclude(ev: Sequence[Any], frame_ids: Collection[str]) -> list[Any]:
+    """``ev`` without the frames ``frame_ids``."""
+    drop = set(frame_ids)
+    return [e for e in ev if e.frame_id not in drop]
