@@ -27,9 +27,9 @@ class VGG16Features(nn.Module):
         super().__init__()
         convs, c_in = [], 3
         for v in _VGG16:
-            if v != "M":
-                convs.append(nn.Conv2d(c_in, int(v), 3, padding=1))
-                c_in = int(v)
+            if isinstance(v, int):  # "M": a pooling layer
+                convs.append(nn.Conv2d(c_in, v, 3, padding=1))
+                c_in = v
         self.convs = nn.ModuleList(convs)
 
     def forward(self, x: torch.Tensor, taps: tuple[str, ...]) -> list[torch.Tensor]:

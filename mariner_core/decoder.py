@@ -30,6 +30,7 @@ class SAM(nn.Module):
         """Zero the gamma/beta convs (weights and biases)."""
         for conv in (self.conv_gamma, self.conv_beta):
             nn.init.zeros_(conv.weight)
+            assert conv.bias is not None  # Conv2d's default bias=True
             nn.init.zeros_(conv.bias)
 
     def forward(self, x: torch.Tensor, r: torch.Tensor) -> torch.Tensor:

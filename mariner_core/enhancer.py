@@ -54,7 +54,7 @@ FORMAT_VERSION = 1
 
 
 def save_checkpoint(
-    model: Mariner,
+    model: Mariner | FrozenMariner,
     path: str | Path,
     extra: dict[str, Any] | None = None,
     fp16: bool = False,
@@ -142,7 +142,7 @@ def _from_tensor(
     if kind == "numpy":
         arr = t.float().permute(0, 2, 3, 1).cpu().numpy()
         return arr if batched else arr[0]
-    out = t.to(device=like.device, dtype=like.dtype)
+    out = t.to(device=like.device, dtype=like.dtype)  # type: ignore[arg-type]  # a tensor here
     return out if batched else out[0]
 
 
@@ -212,7 +212,7 @@ class Enhancer:
 
     @torch.inference_mode()
     def _run(self, x: torch.Tensor, ref: torch.Tensor, iterations: int | None) -> torch.Tensor:
-        self.check_size(tuple(x.shape[-2:]), tuple(ref.shape[-2:]))
+        self.check_size((x.shape[-2], x.shape[-1]), (ref.shape[-2], ref.shape[-1]))
         x = x.to(self.device, torch.float32)
         ref = ref.to(self.device, torch.float32)
         if ref.shape[0] == 1 and x.shape[0] > 1:

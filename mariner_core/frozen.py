@@ -119,6 +119,9 @@ class FrozenMarinerConfig:
 class _VGGTo33(nn.Module):
     """The first seven VGG16 convs (relu1_1 .. relu3_3); frozen."""
 
+    mean: torch.Tensor  # buffers (register_buffer)
+    std: torch.Tensor
+
     def __init__(self) -> None:
         super().__init__()
         self.convs = VGG16Features().convs[:7]
@@ -233,6 +236,7 @@ class FrozenMariner(nn.Module):
         self.dec1 = _stage(2 * c, c, b[0])
         self.head = nn.Conv2d(c, 4 if self.cfg.gated else 3, 3, padding=1)
         nn.init.zeros_(self.head.weight)
+        assert self.head.bias is not None  # Conv2d's default bias=True
         nn.init.zeros_(self.head.bias)
         if self.cfg.gated:  # start at the base, with a small confidence: corrections are earned
             with torch.no_grad():

@@ -41,6 +41,9 @@ class PerceptualLoss(nn.Module):
     random weights (for tests / offline use).
     """
 
+    mean: torch.Tensor  # buffers (register_buffer)
+    std: torch.Tensor
+
     def __init__(self, layers: tuple[str, ...] = ("relu1_1", "relu2_2", "relu3_3")) -> None:
         super().__init__()
         self.layers = tuple(layers)
@@ -70,7 +73,8 @@ class PerceptualLoss(nn.Module):
         fp = self.vgg((pred - self.mean) / self.std, self.layers)
         with torch.no_grad():
             ft = self.vgg((target - self.mean) / self.std, self.layers)
-        return sum(F.mse_loss(a, b) for a, b in zip(fp, ft, strict=True)) / len(self.layers)
+        total = sum(F.mse_loss(a, b) for a, b in zip(fp, ft, strict=True))
+        return total / len(self.layers)  # type: ignore[return-value]  # a tensor (layers >= 1)
 
 
 class Discriminator(nn.Module):

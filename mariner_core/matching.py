@@ -129,6 +129,7 @@ def coarse_match(
         k = F.normalize(k, dim=1, eps=1e-12)
         s = torch.bmm(q, k)  # N, B, Hr*Wr
         total = s if total is None else total.add_(s)
+    assert total is not None  # at least one dilation
     flat = total.argmax(dim=2)
     return torch.stack((flat // wr, flat % wr), dim=2)
 

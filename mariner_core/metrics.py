@@ -97,6 +97,9 @@ class LPIPS(nn.Module):
     SCALE = (0.458, 0.448, 0.450)
     CHANNELS = {"alex": (64, 192, 384, 256, 256), "vgg": (64, 128, 256, 512, 512)}
 
+    shift: torch.Tensor  # buffers (register_buffer)
+    scale: torch.Tensor
+
     def __init__(self, net: str = "alex") -> None:
         super().__init__()
         if net not in self.CHANNELS:

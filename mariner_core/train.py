@@ -215,6 +215,7 @@ class _Trainer:
         self.model.load_state_dict(st["model"], strict=True)
         self.opt.load_state_dict(st["opt"])
         if self.disc is not None and st.get("disc") is not None:
+            assert self.d_opt is not None  # built with the discriminator
             self.disc.load_state_dict(st["disc"])
             self.d_opt.load_state_dict(st["d_opt"])
         self.state = _Progress(
@@ -253,7 +254,7 @@ class _Trainer:
         v, vr = validate(
             self.model, self.cache, self.val_pairs, self.cfg.val_iterations, self.device
         )
-        row = {k: "" for k in LOG_FIELDS}
+        row: dict[str, Any] = {k: "" for k in LOG_FIELDS}
         row.update(step=s.step, samples=s.samples, elapsed_s=f"{self.elapsed():.1f}")
         row.update(val_psnr=f"{v:.3f}", val_psnr_render=f"{vr:.3f}")
         writer.writerow(row)
@@ -283,24 +284,27 @@ class _Trainer:
         l1 = sum(float((y.detach() - target).abs().mean()) for y in outputs)
         loss = refinement_loss(outputs, target, self.perceptual, cfg.lambda_rec, cfg.lambda_per)
         rec = float(loss.detach())
-        gan_on = self.use_gan and prog >= float(cfg.gan_start)
+        gan_on = self.use_gan and cfg.gan_start is not None and prog >= float(cfg.gan_start)
         losses: dict[str, float] = {}
+        disc, d_opt = self.disc, self.d_opt
         if gan_on:
-            self.disc.requires_grad_(False)
-            g_loss = generator_adversarial_loss(self.disc(target).detach(), self.disc(outputs[-1]))
-            self.disc.requires_grad_(True)
+            assert disc is not None and d_opt is not None  # built where use_gan
+            disc.requires_grad_(False)
+            g_loss = generator_adversarial_loss(disc(target).detach(), disc(outputs[-1]))
+            disc.requires_grad_(True)
             loss = loss + cfg.lambda_adv * g_loss
             losses["g_adv"] = float(g_loss)
         self.opt.zero_grad(set_to_none=True)
         loss.backward()
         self.opt.step()
         if gan_on:
-            for g in self.d_opt.param_groups:
+            assert disc is not None and d_opt is not None
+            for g in d_opt.param_groups:
                 g["lr"] = cfg.disc_lr * lr / cfg.lr
-            d_loss = discriminator_loss(self.disc(target), self.disc(outputs[-1].detach()))
-            self.d_opt.zero_grad(set_to_none=True)
+            d_loss = discriminator_loss(disc(target), disc(outputs[-1].detach()))
+            d_opt.zero_grad(set_to_none=True)
             d_loss.backward()
-            self.d_opt.step()
+            d_opt.step()
             losses["d_loss"] = float(d_loss)
         self.state.step += 1
         self.state.samples += cfg.batch_size
@@ -310,7 +314,7 @@ class _Trainer:
         """The log row of the steps accumulated in ``acc`` (means), and their mean loss."""
         cfg = self.cfg
         mean = {k: float(np.mean(v)) for k, v in acc.items()}
-        row = {k: "" for k in LOG_FIELDS}
+        row: dict[str, Any] = {k: "" for k in LOG_FIELDS}
         per = (mean["rec"] - cfg.lambda_rec * mean["l1"]) / max(cfg.lambda_per, 1e-12)
         row.update(
             step=self.state.step,

@@ -380,7 +380,7 @@ class RunConfig:
         """
         d = self.to_dict()
         keep: dict[str, Any] = {k: d[k] for k in MEASUREMENT_SECTIONS}
-        used = {"min_coverage": self.verdict.min_coverage}
+        used: dict[str, float | None] = {"min_coverage": self.verdict.min_coverage}
         if self.enhance.mode == "auto":
             used["threshold_px"] = self.verdict.threshold_px
             used["threshold_rel_diag"] = self.verdict.threshold_rel_diag

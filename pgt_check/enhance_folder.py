@@ -302,6 +302,7 @@ def _enhance_item(it: RenderItem, method: Any, out: Path, gt_dir: Path | None,
     from pgt_check.io.images import resize_image
 
     status = it.status
+    assert it.reference is not None and it.reference.image_file is not None  # has a reference
     render = load_image(it.file)
     photo = load_image(it.reference.image_file)
     enhanced = method(render, it.frame, photo, it.reference)

@@ -66,9 +66,10 @@ def check_side_inputs(config: RunConfig, frames: Sequence[Frame]) -> None:
     from pgt_check.verdict.calibration import trusted_calibration
 
     inp = config.input
-    named = [("trajectory", inp.trajectory), ("mesh", inp.mesh), ("images", inp.images),
-             ("sensors file", inp.sensors), ("dataparser transforms", inp.dataparser_transforms),
-             ("--calibration-from summary", config.run_checks.calibration_from)]
+    named: list[tuple[str, str | Path | None]] = [
+        ("trajectory", inp.trajectory), ("mesh", inp.mesh), ("images", inp.images),
+        ("sensors file", inp.sensors), ("dataparser transforms", inp.dataparser_transforms),
+        ("--calibration-from summary", config.run_checks.calibration_from)]
     named += [("image", f.image_file) for f in frames]
     check_inputs_not_outputs(named, run_output_paths(config.out), "--out")
     if config.run_checks.calibration_from:
@@ -107,7 +108,7 @@ def _largest_render(config: RunConfig, frames: Sequence[Frame]) -> tuple[int, in
     from pgt_check.io.photo import working_scale
 
     sides = (config.match.resize_max, config.edges.resize_max)
-    longest = None if any(s is None for s in sides) else max(sides)
+    longest = None if any(s is None for s in sides) else max(s for s in sides if s is not None)
     cap = config.input.max_image_pixels
     width = height = 1
     for f in frames:

@@ -23,6 +23,7 @@ from pgt_check.types import Frame, Trajectory
 
 if TYPE_CHECKING:
     from pgt_check.correct.calibration import CalibratedRig
+    from pgt_check.correct.pose import Correction
     from pgt_check.correct.result import CorrectedRun
     from pgt_check.executor import CheckerLender
     from pgt_check.verdict.result import RunResult
@@ -50,7 +51,8 @@ def correct_stage(
     if shared is not None:  # a failed registration check: its estimate refined
         shared = _refined(traj, measurements, shared, config, out)
     rig = _calibrated_rig(traj, judged.shared, config, out, measurements)
-    corrections, summary = {}, None
+    corrections: dict[str, Correction] = {}
+    summary = None
     if config.correct.frames != "none":  # corrected poses (pgt_check.correct.frames)
         from pgt_check.correct.frames import correct_run
 

@@ -166,7 +166,7 @@ def choose_form(camera: Camera, entry: CalibrationCheck,
     m[:3, :3], m[:3, 3] = roll, t
     pp = WrittenForm("principal_point", pp_camera, invert_rigid(m), residual(k_pp, roll))
     rig = WrittenForm("rotation", scaled, rig.rig_from_cam, residual(k, rotation))
-    return pp if pp.residual_px < rig.residual_px else rig
+    return pp if pp.residual_px < rig.residual_px else rig  # type: ignore[operator]  # both set
 
 
 def significant_calibrations(shared: SharedChecks | None) -> dict[str, CalibrationCheck]:

@@ -65,11 +65,12 @@ def correct_frame(checker: Any, frame: Frame, m: FrameMeasurement | None, c: Cor
     checked pose, ``c.rounds`` rounds each (``refine_pose``; ``c``: the run's ``correct``
     section). ``references``: frames the run vouches for, whose photos enhance the rounds'
     renders."""
-    start = kind = None
+    start: np.ndarray | None = None
+    kind = ""
     if m is not None and m.pose is not None and m.pose.world_from_cam is not None:
         start, kind = np.asarray(m.pose.world_from_cam, float), f"pnp_{m.verdict_path or 'raw'}"
-    opts = {"rounds": c.rounds, "bootstrap": c.bootstrap, "threshold_px": threshold_px,
-            "references": tuple(references)}
+    opts: dict[str, Any] = {"rounds": c.rounds, "bootstrap": c.bootstrap,
+                            "threshold_px": threshold_px, "references": tuple(references)}
     if start is not None:
         res = refine_pose(checker, frame, start, start_kind=kind, **opts)
         if res.success:
@@ -157,7 +158,8 @@ def corrected_trajectory(trajectory: Trajectory, corrections: dict[str, Correcti
     frames = []
     for f in trajectory.frames:
         c = corrections.get(f.frame_id)
-        frames.append(f.with_pose(c.pose) if c is not None and c.applied else f)
+        pose = None if c is None or not c.applied else c.pose
+        frames.append(f if pose is None else f.with_pose(pose))
     return Trajectory(tuple(frames), trajectory.source, trajectory.format,
                       dict(trajectory.metadata))
 

@@ -245,7 +245,7 @@ def _round(target: _Target, pose: np.ndarray, references: Sequence[Frame] = ()) 
     return _Round(
         path.corner_error_px,
         corr.world_from_cam if corr.success else None,
-        "" if corr.success else corr.reason.value,
+        "" if corr.success or corr.reason is None else corr.reason.value,
         corr.n_inliers,
         points,
         kpts_photo,
@@ -285,7 +285,7 @@ def _bootstrap(
             points[idx], kpts_photo[idx], cam_w, start,
             max_error_px=cfg.pose.max_error_px, min_inliers=cfg.pose.min_inliers,
         )
-        if c.success:
+        if c.success and c.world_from_cam is not None:
             dt, dr = pose_difference(final, c.world_from_cam)
             rots.append(dr)
             dts.append(dt)

@@ -261,6 +261,7 @@ def _run_rounds(
             # the last update moved the poses further from what the evidence says: the
             # estimate does not converge (an ill-posed split); keep the one before it
             kept = max(k - 2, 0)
+            assert prev is not None and rnd.effect_px is not None  # ``_grew`` compared them
             return history[kept], done, _not_converging(prev, rnd.effect_px, k), kept
         if reg.corrected_world_from_world is None:
             stopped = f"round {k}: no residual fit ({reg.reason or reg.status})"

@@ -111,7 +111,7 @@ def _write_frame(path: Path, frame: Any, size: tuple[int, int], renderers: dict)
     for k, r in renderers.items():
         data[k] = _to_uint8(r.render(cam_w, frame.world_from_cam).rgb)
     tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez(tmp, **data)
+    np.savez(tmp, **data)  # type: ignore[arg-type]  # numpy's stub: named arrays are fine
     tmp.replace(path)
 
 

@@ -159,7 +159,7 @@ class UniqueKeys:
     def __init__(self, path: Path | str, expected: str) -> None:
         self.path = path
         self.expected = expected
-        self.first: dict[Hashable, int | str] = {}
+        self.first: dict[Hashable, int | str | None] = {}
 
     def add(self, key: Hashable, shown: str, line: int | None, where: str | None = None) -> None:
         """Record ``key`` at ``line`` (or at ``where``, for files without lines, e.g. JSON).

@@ -82,7 +82,7 @@ def _cam_from_world(image: object, quats: QuaternionCounter | None = None) -> np
     if quats is not None and quat is not None:
         x, y, z, w = (float(v) for v in np.asarray(quat, dtype=np.float64))  # Eigen: xyzw
         try:
-            matrix[:3, :3] = quats.rotation(None, (w, x, y, z))
+            matrix[:3, :3] = quats.rotation(None, (w, x, y, z))  # type: ignore[arg-type]  # no line
         except FormatError as err:
             raise FormatError(
                 quats.path, None, f"image {getattr(image, 'name', '?')!r}: {err.message}"

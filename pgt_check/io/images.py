@@ -106,7 +106,7 @@ def load_image(path: str | Path, max_pixels: int | None = DEFAULT_MAX_IMAGE_PIXE
     else:
         raise InputError(f"{path}: expected 1, 3 or 4 channels; got {image.shape[2]}")
     if np.issubdtype(image.dtype, np.integer):
-        out = image.astype(np.float32) / np.float32(np.iinfo(image.dtype).max)
+        out = image.astype(np.float32) / np.float32(np.iinfo(image.dtype).max)  # type: ignore[operator, type-var]
     else:
         out = np.clip(np.nan_to_num(image.astype(np.float32)), 0.0, 1.0)
     return np.ascontiguousarray(out)

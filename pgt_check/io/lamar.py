@@ -82,20 +82,22 @@ def find_lamar_files(
     directory = path.parent
     tried = f"sensors{suffix}.txt" + (" or sensors.txt" if suffix else "")
     if sensors is not None:
-        sensors_file: Path | None = Path(sensors)
+        sensors_file = Path(sensors)
         if not sensors_file.is_file():
             raise InputError(f"{sensors_file}: sensors file not found")
     else:
-        sensors_file = _sibling(directory, "sensors", suffix)
-        if sensors_file is None:
+        found = _sibling(directory, "sensors", suffix)
+        if found is None:
             raise FormatError(path, None, f"expected a sensors file ({tried}) beside it; got none")
+        sensors_file = found
     if images is not None and Path(images).is_file():
-        images_file: Path | None = Path(images)
+        images_file = Path(images)
     else:
-        images_file = _sibling(directory, "images", suffix)
-        if images_file is None:
+        found = _sibling(directory, "images", suffix)
+        if found is None:
             tried = f"images{suffix}.txt" + (" or images.txt" if suffix else "")
             raise FormatError(path, None, f"expected an images file ({tried}) beside it; got none")
+        images_file = found
     return LamarFiles(path, sensors_file, images_file, _sibling(directory, "rigs", suffix), suffix)
 
 
@@ -128,7 +130,7 @@ def read_sensors(path: Path) -> tuple[dict[str, Camera], set[str]]:
         height = parse_float(path, line, fields[5], "height")
         params = [parse_float(path, line, p, "camera parameter") for p in fields[6:]]
         cameras[sensor_id] = camera_from_colmap(path, line, fields[3], width, height, params)
-    return cameras, set(seen.first)
+    return cameras, {str(k) for k in seen.first}
 
 
 def read_rigs(path: Path, sensor_ids: set[str]) -> dict[tuple[str, str], np.ndarray]:

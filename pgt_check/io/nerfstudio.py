@@ -154,6 +154,7 @@ def _camera_from_intrinsics(
 ) -> Camera:
     """The simplest Camera that holds the distortion: FULL_OPENCV with k3, OPENCV with k1, k2,
     p1 or p2, else a pinhole; ValueError for an invalid camera."""
+    params: tuple[float, ...]
     if dist["k3"]:
         params = (
             fx,

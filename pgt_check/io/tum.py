@@ -151,7 +151,7 @@ def read_tum(
             f"{path}: no pose matched an image in {images} (tolerance {max_time_diff} s)"
         )
     frames = _frames_with_images(path, camera, rows, matched, images)
-    frames.sort(key=lambda f: f.timestamp)
+    frames.sort(key=lambda f: f.timestamp)  # type: ignore[arg-type, return-value]  # all set
     logger.info("read %d frames from %s", len(frames), path)
     return Trajectory(
         tuple(frames), source=str(path), format="tum", metadata={"images": str(images)}

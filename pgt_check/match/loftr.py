@@ -78,8 +78,9 @@ class LoFTRMatcher(_torch.PicklesWithoutModels):
 
             _torch.set_threads(self.num_threads)
             cfg = copy.deepcopy(default_cfg)
-            cfg["coarse"]["temp_bug_fix"] = self.temp_bug_fix
+            cfg["coarse"]["temp_bug_fix"] = self.temp_bug_fix  # type: ignore[index]
             model = kf.LoFTR(pretrained=None, config=cfg)
+            assert self.weights is not None  # resolved in __post_init__
             sd = loftr_state_dict(_torch.load_weights(self.weights))
             _torch.load_strict(model, sd, str(self.weights))
             self._model = model.to(self.device)

@@ -152,16 +152,18 @@ class OpenCVMatcher:
         _, norm = self._detector_and_norm()
         bf = cv2.BFMatcher(norm)
         knn = bf.knnMatch(d0, d1, k=2)
-        i0, i1, dist = [], [], []
+        q0: list[int] = []
+        q1: list[int] = []
+        qd: list[float] = []
         for pair in knn:
             if len(pair) < 2:
                 continue
             m, second = pair
             if m.distance < self.ratio * second.distance:
-                i0.append(m.queryIdx)
-                i1.append(m.trainIdx)
-                dist.append(m.distance)
-        i0, i1, dist = np.array(i0, int), np.array(i1, int), np.array(dist, float)
+                q0.append(m.queryIdx)
+                q1.append(m.trainIdx)
+                qd.append(m.distance)
+        i0, i1, dist = np.array(q0, int), np.array(q1, int), np.array(qd, float)
         if self.mutual and len(i0):
             back = bf.match(d1, d0)
             nn10 = np.full(len(k1), -1)

@@ -90,6 +90,7 @@ class PathResult:
 
         h = dx = dy = zoom = None
         if self.success:
+            assert self.photo_from_render is not None
             h = tuple(tuple(map(float, r)) for r in self.photo_from_render)
             dx, dy, zoom = corner_shift_and_zoom(
                 self.photo_from_render, camera.width, camera.height

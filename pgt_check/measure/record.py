@@ -263,7 +263,7 @@ class AbsoluteEvidence:
         return cls(
             tuple(d.get("sources") or ()),
             tuple((float(u), float(v)) for u, v in d.get("pts2d") or ()),
-            tuple(tuple(float(c) for c in p) for p in d.get("pts_cam") or ()),
+            tuple(tuple(float(c) for c in p) for p in d.get("pts_cam") or ()),  # type: ignore[misc]
             tuple(int(n) for n in d.get("counts") or ()),
         )
 
@@ -377,7 +377,7 @@ class FrameMeasurement:
             image_path=d.get("image_path"),
             width=int(d["width"]),
             height=int(d["height"]),
-            center=tuple(float(c) for c in d["center"]),
+            center=tuple(float(c) for c in d["center"]),  # type: ignore[arg-type]  # (3,)
             error=MeasureReason(d.get("error") or ""),
             error_detail=str(d.get("error_detail") or ""),
             coverage=_num(d.get("coverage")),
@@ -400,7 +400,8 @@ class FrameMeasurement:
             auto_threshold_px=_num(d.get("auto_threshold_px")),
             timings=Timings.from_json(d.get("timings") or {}),
             world_from_cam=_matrix(d.get("world_from_cam")),
-            intrinsics=None if d.get("intrinsics") is None else tuple(map(float, d["intrinsics"])),
+            intrinsics=(None if d.get("intrinsics") is None  # (4,): fx, fy, cx, cy
+                        else tuple(map(float, d["intrinsics"]))),  # type: ignore[arg-type]
             camera_id=str(d.get("camera_id") or ""),
             evidence=None
             if d.get("evidence") is None
@@ -428,7 +429,7 @@ def failed_measurement(frame: Any, reason: MeasureReason, detail: str = "") -> F
         image_path=frame.image_path,
         width=cam.width,
         height=cam.height,
-        center=tuple(float(c) for c in frame.center),
+        center=tuple(float(c) for c in frame.center),  # type: ignore[arg-type]  # (3,)
         error=reason,
         error_detail=detail,
         world_from_cam=tuple(tuple(map(float, r)) for r in frame.world_from_cam),

@@ -111,6 +111,7 @@ def enhance_decision(raw: PathResult, threshold: float, e: EnhanceConfig) -> tup
         return EnhanceWhy.RAW_FAILED, raw.reason
     if raw.n_inliers < e.auto_min_inliers:
         return EnhanceWhy.RAW_FEW_INLIERS, ""
+    assert raw.corner_error_px is not None  # a successful path has one
     if abs(raw.corner_error_px - threshold) <= e.auto_margin * threshold:
         return EnhanceWhy.RAW_NEAR_THRESHOLD, ""
     return EnhanceWhy.RAW_DECISIVE, ""
@@ -163,7 +164,7 @@ def match_path(
     homography: HomographyConfig,
     image: np.ndarray,
     photo_w: np.ndarray,
-    mask: np.ndarray,
+    mask: np.ndarray | None,
     size: tuple[int, int],
     scale: tuple[float, float],
     camera: Camera,
@@ -196,17 +197,19 @@ def match_path(
     t_h = time.perf_counter() - t
     clock.add("match", t_match)
     clock.add("homography", t_h)
-    h = err = None
+    photo_from_render: np.ndarray | None = None
+    err: float | None = None
     if res.success:
-        h = scale_homography(res.photo_from_render, *scale)
-        err = corner_error(h, camera.width, camera.height)
+        assert res.photo_from_render is not None  # a successful estimate has one
+        photo_from_render = scale_homography(res.photo_from_render, *scale)
+        err = corner_error(photo_from_render, camera.width, camera.height)
     n = len(matches)
     return PathResult(
         n,
         res.n_inliers,
         res.n_inliers / n if n else 0.0,
-        "" if res.success else res.reason.value,
-        h,
+        "" if res.success or res.reason is None else res.reason.value,
+        photo_from_render,
         err,
         matches.kpts0,
         matches.kpts1,
@@ -231,11 +234,12 @@ def _match_smaller(
 
     small = (max(1, round(size[0] * f)), max(1, round(size[1] * f)))
     fx, fy = small[0] / size[0], small[1] / size[1]
-    area = [cv2.resize(a, small, interpolation=cv2.INTER_AREA) for a in (image, photo_w)]
+    image_s, photo_s = (cv2.resize(a, small, interpolation=cv2.INTER_AREA)
+                        for a in (image, photo_w))
     if mask is not None:
         mask = cv2.resize(mask.astype(np.uint8), small, interpolation=cv2.INTER_NEAREST) > 0
-    res = match_path(matcher, homography, *area, mask, small, (scale[0] * fx, scale[1] * fy),
-                     camera, clock)
+    res = match_path(matcher, homography, image_s, photo_s, mask, small,
+                     (scale[0] * fx, scale[1] * fy), camera, clock)
     up = np.array([1.0 / fx, 1.0 / fy])
     return replace(res, kpts_render=np.asarray(res.kpts_render) * up,
                    kpts_photo=np.asarray(res.kpts_photo) * up)
@@ -258,8 +262,8 @@ def pose_estimate(
         min_inliers=p.min_inliers,
     )
     clock.add("pose", time.perf_counter() - t)
-    if not corr.success:
-        return PoseEstimate(corr.n_inliers, corr.reason.value)
+    if not corr.success or corr.world_from_cam is None:
+        return PoseEstimate(corr.n_inliers, "" if corr.reason is None else corr.reason.value)
     return PoseEstimate(
         corr.n_inliers,
         "",

@@ -171,6 +171,7 @@ class MeshData:
                 self.vertex_colours_from_texture() if self.shading == "texture" else self.colors
             )
             _, nearest = cKDTree(centred).query(new_v)
+            assert source is not None  # a vertex-coloured or textured mesh has colours
             colors = source[nearest]
             shading = "vertex"
         return MeshData(
@@ -357,7 +358,7 @@ def _merge_parts(parts: list[_Part]) -> MeshData:
         faces=np.concatenate(faces),
         shading="texture" if has_texture else ("vertex" if has_colour else "shaded"),
         colors=np.concatenate(colors) if (has_colour or has_texture) else None,
-        uv=np.concatenate(uvs) if has_texture else None,
+        uv=np.concatenate(uvs) if has_texture else None,  # type: ignore[arg-type]  # all set
         textures=tuple(textures),
         face_texture=np.concatenate(face_tex) if has_texture else None,
         offset=offset,

@@ -107,7 +107,7 @@ class ModernGLRenderer:
     def _init_gl(self) -> None:
         import moderngl
 
-        ctx = moderngl.create_standalone_context(backend="egl", require=330)
+        ctx = moderngl.create_standalone_context(backend="egl", require=330)  # type: ignore[arg-type]
         self._ctx = ctx
         with ctx:
             self._upload()

@@ -38,7 +38,7 @@ def _max_ray_cos(camera: Camera) -> float:
     cx, cy = camera.principal_point
     xs = (np.array([-0.5, camera.width - 0.5]) - cx) / fx
     ys = (np.array([-0.5, camera.height - 0.5]) - cy) / fy
-    r2 = np.max(xs**2)[None] + np.max(ys**2)
+    r2 = np.max(xs**2)[None] + np.max(ys**2)  # type: ignore[index]  # a numpy scalar indexes
     return float(1.0 / np.sqrt(1.0 + r2[0]))
 
 

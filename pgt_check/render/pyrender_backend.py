@@ -97,7 +97,7 @@ def _headlight_cache(pyrender: Any) -> Any:
     """A pyrender shader cache that serves ``HEADLIGHT_SHADER`` wherever flat.frag is asked."""
     from pyrender.shader_program import ShaderProgramCache
 
-    class HeadlightShaderCache(ShaderProgramCache):  # type: ignore[misc, valid-type]
+    class HeadlightShaderCache(ShaderProgramCache):
         def get_program(
             self,
             vertex_shader: str,
@@ -190,7 +190,7 @@ class PyrenderRenderer:
                 pyrender.Primitive(
                     positions=pos[used],
                     indices=indices,
-                    color_0=None if shaded else colors[used],
+                    color_0=None if shaded else colors[used],  # type: ignore[index]  # not shaded: set
                     texcoord_0=uv,
                     material=material(texture),
                 )

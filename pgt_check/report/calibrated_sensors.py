@@ -183,13 +183,13 @@ def calibrated_sensors_text(
         sids = _sensor_ids(frames, n)
         n += 1
         tx, ty, tz = cc.translation
-        left = (f"the file leaves {cc.residual_px:.2f} px of the estimate's {cc.effect_px:.2f} px "
+        leaves = (f"the file leaves {cc.residual_px:.2f} px of the estimate's {cc.effect_px:.2f} px "
                 f"(mean over the image at depth {depth:.3g})"
                 + ("" if fitted is None else "; the principal point is the shift fitted on the "
                    "evidence, as in calibrated/"))
         lines.append(
             f"# {cam_id}: roll {cc.roll_deg:+.4f} deg and camera-to-sensor translation "
-            f"({tx:+.5g}, {ty:+.5g}, {tz:+.5g}) scene units are not expressible here; {left}"
+            f"({tx:+.5g}, {ty:+.5g}, {tz:+.5g}) scene units are not expressible here; {leaves}"
         )
         camera_arg = f"{cc.camera.model},{cc.camera.width},{cc.camera.height}," + ",".join(
             f"{p:.10g}" for p in params)

@@ -150,10 +150,11 @@ def page_context(
     err = stats.get("corner_error_px", {})
     columns = table_columns(records)
     inspect = [str(f) for f in select_detail_frames(records)]
+    assets_data = {str(k): dict(v) for k, v in assets.items()}
     data = {
         "columns": columns,
         "rows": table_rows(records, columns, absolute_paths),
-        "assets": {str(k): dict(v) for k, v in assets.items()},
+        "assets": assets_data,
         "extra": _error_details(records, absolute_paths),
         "inspect": inspect,
         "kinds": list(ASSET_KINDS),
@@ -169,7 +170,7 @@ def page_context(
         "run_info": _run_info_rows(summary),
         "plots": list(plots),
         "n_detail": len(inspect),
-        "n_with_assets": sum(1 for f in inspect if f in data["assets"]),
+        "n_with_assets": sum(1 for f in inspect if f in assets_data),
         "columns": columns,
         "settings": _settings_rows(summary.get("settings") or {}, absolute_paths),
         "timing": _timing_rows(summary),

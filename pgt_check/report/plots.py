@@ -19,7 +19,7 @@ import io
 import logging
 import math
 import re
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from html import escape
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -39,7 +39,7 @@ VERDICT_COLOURS = {"PASS": "#2e7d32", "FAIL": "#c62828", "UNVERIFIABLE": "#9e9e9
 #: bins of the corner-error histogram (log-spaced; the threshold is one of the edges)
 HIST_BINS = 39
 #: what the SVG writer reads at save time: text kept as <text>, ids the same at every run
-_SVG_RC = {"svg.fonttype": "none", "svg.hashsalt": "pgt-check"}
+_SVG_RC: dict[Any, Any] = {"svg.fonttype": "none", "svg.hashsalt": "pgt-check"}
 TITLE_SIZE = 10
 LEGEND_SIZE = 8
 
@@ -404,7 +404,7 @@ def write_plots(
     """Write every applicable plot; returns [{name, title, path}] (paths relative to out_dir)."""
     out_dir = Path(out_dir)
     plots: list[dict[str, str]] = []
-    specs = [
+    specs: list[tuple[str, str, Callable[[Any, Any, Path], str | None]]] = [
         ("error_hist", "Corner-error histogram", plot_histogram),
         ("error_time", "Corner error along the trajectory", plot_error_along_trajectory),
     ]

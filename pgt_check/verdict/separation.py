@@ -100,7 +100,8 @@ class Probe:
     @classmethod
     def from_json(cls, d: Mapping[str, Any]) -> Probe:
         job = ProbeJob(str(d["key"]), str(d["frame_id"]), int(d["sign"]),
-                       tuple(float(x) for x in d["axis"]), float(d["angle_deg"]),
+                       tuple(float(x) for x in d["axis"]),  # type: ignore[arg-type]  # (3,)
+                       float(d["angle_deg"]),
                        tuple(str(p) for p in d["paths"]), str(d.get("reference_id") or ""))
         return cls(job, FrameMeasurement.from_json(d["measurement"]))
 
@@ -293,7 +294,7 @@ def probe_plan(
 def _error(m: FrameMeasurement | None, name: str, config: VerdictConfig) -> float | None:
     """The path's corner error as a probe reads it: None when the path did not run, inf when
     it ran without a usable homography (flagged), else the error."""
-    p = None if m is None else getattr(m, name, None)
+    p = None if m is None else m.path(name)
     if p is None:
         return None
     if p.reason or p.n_inliers < config.min_inliers or p.corner_error_px is None or \
@@ -325,11 +326,13 @@ def path_separation(
                   for s in (1, -1)]
             # a moved copy the path cannot align ranks above any error; the null accounts for
             # the path failing as often at any pose (``failure_rate``)
-            if e0 is None or not math.isfinite(e0) or any(e is None for e in ep):
+            pair = [e for e in ep if e is not None]
+            if e0 is None or not math.isfinite(e0) or len(pair) < len(ep):
                 continue
-            ranks.append(1 + sum(e <= e0 for e in ep))  # a tie counts against the path
+            assert m is not None  # it has an error
+            ranks.append(1 + sum(e <= e0 for e in pair))  # a tie counts against the path
             given.append(e0)
-            moved_e.extend(ep)
+            moved_e.extend(pair)
             used.append(fid)
             f = _focal(m)
             if f:

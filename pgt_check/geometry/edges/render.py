@@ -25,7 +25,7 @@ def _structure_orientation(points: np.ndarray, width: int, height: int) -> np.nd
 
     xi = np.clip(np.floor(points[:, 0] + 0.5).astype(np.int64), 0, width - 1)
     yi = np.clip(np.floor(points[:, 1] + 0.5).astype(np.int64), 0, height - 1)
-    img = np.zeros((height, width), dtype=np.float32)
+    img: np.ndarray = np.zeros((height, width), dtype=np.float32)
     img[yi, xi] = 1.0
     img = cv2.GaussianBlur(img, (0, 0), 1.0)
     gx = cv2.Sobel(img, cv2.CV_32F, 1, 0, ksize=3)
@@ -129,7 +129,8 @@ def _crease_pixels(
     horizontal = sh >= sv
     keep_h = horizontal & (s >= pad[1:-1, :-2]) & (s > pad[1:-1, 2:])
     keep_v = ~horizontal & (s >= pad[:-2, 1:-1]) & (s > pad[2:, 1:-1])
-    return np.nonzero(cand & (keep_h | keep_v))
+    rows, cols = np.nonzero(cand & (keep_h | keep_v))
+    return rows, cols
 
 
 def _pair_edges(

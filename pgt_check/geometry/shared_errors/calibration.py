@@ -94,7 +94,7 @@ def _camera_estimate(p, fit, g, cid, deltas, off, sel, base) -> CalibrationEstim
         translation_ci=_ci(tc[1:]).T if boot else np.full((3, 2), np.nan),
         translation_fitted=p.n_cal == 7,
         effect_px=float(np.median(eff_f[0])),
-        effect_px_ci=ci(eff_b) if boot else _NAN_CI,
+        effect_px_ci=ci(eff_b) if boot else _NAN_CI,  # type: ignore[arg-type]  # set with boot
         **base,
     )
 
@@ -119,6 +119,7 @@ def _choose_calibration_fit(
 ) -> tuple[_Fit, bool]:
     """(fit, world fitted jointly): "auto" uses the joint fit when it lowers the robust cost
     significantly over the calibration-only fit and the attribution is not ambiguous."""
+    assert sel.joint is not None and sel.calib is not None  # ``_select`` fits all three
     if registration == "joint":
         return sel.joint, True
     if registration == "auto" and _use_joint(sel, sel.calib, 6, scale, penalty):

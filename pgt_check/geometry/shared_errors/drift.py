@@ -142,7 +142,8 @@ def _evaluate(p: _Problem, bounds, ref: _State, ref_deltas, opt: _DriftOptions, 
 def _segments(candidate: np.ndarray, member: np.ndarray, bounds, wins, opt: _DriftOptions):
     """Runs of candidate frames (positions); kept when long enough or spanning enough flagged
     windows. Returns (kept runs, rejected runs) as lists of (first, last) positions."""
-    kept, rejected = [], []
+    kept: list[tuple[int, int]] = []
+    rejected: list[tuple[int, int]] = []
     i, n = 0, len(candidate)
     while i < n:
         if not candidate[i]:
@@ -279,7 +280,7 @@ def _compare_windows(
     if res[3].any() and (~res[3]).sum() >= 2 * opt.min_frames:
         # refit the reference on the unflagged frames and compare again
         ref = _reference(p, ref_state, np.flatnonzero(~res[3]), opt, calib)
-        res2 = None if ref is None else _compare(p, bounds, *ref, opt, calib)
+        res2 = None if ref is None else _compare(p, bounds, ref[0], ref[1], opt, calib)
         if res2 is not None:
             ref_state, res = ref[0], res2
     return ref_state, bounds, res

@@ -207,6 +207,7 @@ def _choose_world_fit(
         p, similarity=similarity, loss_scale_px=loss_scale_px, max_correlation=max_correlation,
         model_penalty=model_penalty, ambiguity_margin=ambiguity_margin,
     )  # fmt: skip
+    assert sel.joint is not None and sel.world is not None  # ``_select`` fits all three
     if calibration == "joint":
         return sel.joint, True, sel
     if _use_joint(sel, sel.world, p.n_cal * p.n_cams, loss_scale_px, model_penalty):

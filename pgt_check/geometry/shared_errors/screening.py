@@ -115,7 +115,7 @@ class FrameScreen:
         return np.array([f.statistic / self.cut for f in self.frames], np.float64)
 
 
-def _chi2_ppf(q: float, dof: int) -> float:
+def _chi2_ppf(q: float, dof: float) -> float:
     from scipy.stats import chi2
 
     return float(chi2.ppf(q, dof))
@@ -166,6 +166,7 @@ def _own_corrections(p: _Problem, st: _State, loss_scale_px: float, iters: int =
     """Per frame: own correction delta (F, 6), its Hessian H (F, 6, 6), the noise variance per
     coordinate s2 (F,), the Wald statistic (F,) and the mean image effect (F,) px."""
     r, jm = _residuals(p, st, jac=True, world=True, similarity=False, calib=False)
+    assert jm is not None
     ends = np.append(p.starts[1:], len(r))
     nf = p.n_frames
     deltas, hs = np.zeros((nf, OWN_DOF)), np.zeros((nf, OWN_DOF, OWN_DOF))
@@ -257,6 +258,7 @@ def screen_frames(
             break
         kept = new
     nbs = _neighbour_statistic(p, deltas, hs, s2)
+    assert stat is not None and eff is not None  # max_rounds >= 1
     cut = lam * q_null
     frames = tuple(
         ScreenedFrame(

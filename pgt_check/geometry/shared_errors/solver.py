@@ -58,6 +58,7 @@ def _solve(
     it = 0
     while True:
         r, jm = _residuals(p, st, jac=True, world=world, similarity=similarity, calib=calib)
+        assert jm is not None  # asked for
         wgt = _cauchy_weights(r, scale) * fw[p.fidx]
         h, gvec = _normal_equations(jm, wgt, r)
         dg = np.diag(h).copy()
@@ -74,6 +75,7 @@ def _solve(
         if small or it >= max_iter:
             break
     r, jm = _residuals(p, st, jac=True, world=world, similarity=similarity, calib=calib)
+    assert jm is not None
     wgt = _cauchy_weights(r, scale) * fw[p.fidx]
     h, _ = _normal_equations(jm, wgt, r)
     d = np.sqrt(np.diag(h))
@@ -163,5 +165,6 @@ def _fit_at(
 ) -> _Fit:
     """A ``_Fit`` evaluated at a given state (no iterations), for CIs about that state."""
     r, jm = _residuals(p, st, jac=True, world=world, similarity=similarity, calib=calib)
+    assert jm is not None
     wgt = _cauchy_weights(r, scale)
     return _Fit(st, wgt, r, jm, _normal_equations(jm, wgt, r)[0], True)
