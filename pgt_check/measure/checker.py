@@ -13,7 +13,7 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -62,6 +62,32 @@ __all__ = [
     "format_exception",
     "pick_references",
 ]
+
+
+class EnhancedPath(NamedTuple):
+    """``FrameChecker._enhanced_path``: the result with the most inliers, its reference id and
+    enhanced image, how many references were tried, and the other references' aligned results
+    as (reference id, result): the verdict may prefer one whose reference the run vouches
+    for."""
+
+    result: PathResult | None
+    reference_id: str | None
+    image: np.ndarray | None
+    n_tried: int
+    others: list[tuple[str, PathResult]]
+
+
+class Enhancement(NamedTuple):
+    """``FrameChecker._enhancement``: the edge path, the enhanced path (``EnhancedPath``'s
+    result, reference id and the other references' results) and the enhancement decision
+    (why, detail)."""
+
+    edges: EdgePath | None
+    enhanced: PathResult | None
+    reference_id: str | None
+    others: list[tuple[str, PathResult]]
+    why: EnhanceWhy
+    detail: str
 
 
 @dataclass
@@ -252,10 +278,9 @@ class FrameChecker:
     def _enhancement(
         self, frame: Frame, w: Working, raw: PathResult, edges: EdgePath | None,
         threshold: float, keep: FrameImages | None, clock: Clock,
-    ) -> tuple[EdgePath | None, PathResult | None, str | None, list[tuple[str, PathResult]],
-               EnhanceWhy, str]:
-        """After the raw path: the edge path (where it did not lead), the enhancement decision, the
-        enhanced path: (edges, enhanced, reference id, other references' results, why, detail)."""
+    ) -> Enhancement:
+        """After the raw path: the edge path (where it did not lead), the enhancement decision,
+        the enhanced path."""
         why, detail = self._enhance_decision(raw, threshold)
         if edges is None:
             edges = self._edge_path(w, raw, threshold, clock)
@@ -279,7 +304,7 @@ class FrameChecker:
                 why, detail = EnhanceWhy.NO_REFERENCE, ""
             if keep is not None:
                 keep.enhanced = enh_img
-        return edges, enh, ref_id, others, why, detail
+        return Enhancement(edges, enh, ref_id, others, why, detail)
 
     def _edges_lead(self, w: Working) -> bool:
         """The edge path runs first: a render without colours (the raw path matches shading,
@@ -378,15 +403,10 @@ class FrameChecker:
 
     def _enhanced_path(
         self, frame: Frame, view: View, w: Working, threshold: float, clock: Clock,
-    ) -> tuple[PathResult | None, str | None, np.ndarray | None, int, list[tuple[str, PathResult]]]:
+    ) -> EnhancedPath:
         """Enhance with each reference in turn and match again; keep the result with the most
         inliers. The references after one whose result is a clear PASS (``clear_pass``) are
-        left out: another reference could only add a result the verdict does not need.
-
-        Returns (result, reference id, enhanced image, number of references tried, the other
-        references' aligned results as (reference id, result): the verdict may prefer one
-        whose reference the run vouches for).
-        """
+        left out: another reference could only add a result the verdict does not need."""
         refs = [
             r
             for r in self.references.get(frame.frame_id, ())
@@ -414,7 +434,7 @@ class FrameChecker:
             if clear_pass(res, threshold, self.config.enhance):
                 break
         others = [(rid, r) for rid, r in tried if rid != best_id and r.success]
-        return best, best_id, best_img, len(tried), others
+        return EnhancedPath(best, best_id, best_img, len(tried), others)
 
 
 def _chosen_path(raw: PathResult, enh: PathResult | None, edges: EdgePath | None,

@@ -220,7 +220,7 @@ def test_a_stored_refinement_of_another_start_or_settings_is_stale(moved_case, t
     assert load_refinement(tmp_path, shared, refine_fingerprint(config)) is not None
     assert load_refinement(tmp_path, shared, "other") is None
     c = np.asarray(shared.registration.corrected_world_from_world)
-    other = replace(shared, registration=replace(
+    other = shared.with_entries(registration=replace(
         shared.registration, corrected_world_from_world=(c @ invert_rigid(c)).tolist()))
     assert load_refinement(tmp_path, other) is None
     (tmp_path / "registration_refined.json").write_text("{not json")
