@@ -17,7 +17,7 @@ import time
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from pgt_check.config import RunConfig
 from pgt_check.errors import InputError, RunInterrupted
@@ -46,6 +46,9 @@ from pgt_check.threads import run_threads
 from pgt_check.types import Frame, Trajectory
 from pgt_check.verdict import RunResult, judge_run
 from pgt_check.verdict.outcome import RunOutcome, judge_outcome
+
+if TYPE_CHECKING:
+    from pgt_check.report.assets import PanelWriter
 
 logger = logging.getLogger(__name__)
 
@@ -139,7 +142,7 @@ def _side_files(checker: Any) -> tuple[str, ...]:
     return tuple(getattr(mesh, "side_files", ()) or ())
 
 
-def panel_writer(config: RunConfig, fingerprint: str):
+def panel_writer(config: RunConfig, fingerprint: str) -> PanelWriter | None:
     """The checker's panel sink: report panels of likely detail frames from the main pass."""
     if config.report_details <= 0:
         return None

@@ -124,7 +124,7 @@ def versions() -> dict[str, str]:
     return out
 
 
-def timing_summary(records: list[dict[str, Any]]) -> dict[str, dict[str, float]]:
+def timing_summary(records: Sequence[Mapping[str, Any]]) -> dict[str, dict[str, float]]:
     out = {}
     for key in TIMING_COLUMNS:
         vals = sorted(r[key] for r in records if isinstance(r.get(key), (int, float)))

@@ -19,7 +19,7 @@ import logging
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, field
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -175,9 +175,10 @@ def shared_sizes(
     d = shared.drift
     if d.status != NOT_CHECKED:
         worst = max((p for p in d.per_frame if _num(p.effect_px) is not None),
-                    key=lambda p: p.effect_px, default=None)
+                    key=lambda p: cast(float, p.effect_px), default=None)
         if worst is not None:
             px, lo = _num(worst.effect_px), _num(worst.lo_px)
+            assert px is not None  # a finite effect (filtered above)
             ci = None if lo is None else (lo, px + (px - lo))
             out.append(
                 SharedSize(

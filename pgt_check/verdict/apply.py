@@ -91,7 +91,8 @@ def judge_run(
         drift = None if shared is None else shared.drift_px.get(m.frame_id)
         b, thr = bounds[m.frame_id], v.threshold_for(m.width, m.height)
         # a PASS and its 95 % bound agree, or the frame is UNVERIFIABLE
-        j = bounded_pass(j, b.accuracy.effect_bound_px if b.bounded else None, thr)
+        bound = b.accuracy.effect_bound_px if b.bounded and b.accuracy is not None else None
+        j = bounded_pass(j, bound, thr)
         frames.append(FrameResult(m, j, thr, drift, b))
     n_barred = sum(f.reason.startswith(CANNOT_SEPARATE) for f in frames)
     separation = replace(sep, barred_frames=n_barred) if sep.paths else None

@@ -182,10 +182,11 @@ def own_outcome(
     def ok(o: PathOutcome | None) -> bool:
         return o is not None and o[0] is not Verdict.UNVERIFIABLE
 
-    if ok(raw) and m.raw is not None and m.raw.n_inliers >= config.confident_inliers:
+    if raw is not None and ok(raw) and m.raw is not None \
+            and m.raw.n_inliers >= config.confident_inliers:
         return raw[0], raw[1], "raw"
     for name, o in (("edges", edges), ("raw", raw)):
-        if ok(o):
+        if o is not None and ok(o):
             return o[0], o[1], name
     return Verdict.UNVERIFIABLE, "no_absolute_path", ""
 
@@ -274,7 +275,7 @@ def judge(
     enh_v = "" if out["enhanced"] is None else out["enhanced"][0].value
     ref_off = _reference_off(m, own)
     (verdict, reason, evidence, path), final = _paths_decision(
-        m, config, shared, out, ref_off, (base, why)
+        m, config, shared, out, ref_off, PathOutcome(base, why)
     )
     err = path_error_px(m, path, config, shared)
     if final or verdict is not Verdict.PASS:
@@ -310,11 +311,12 @@ def _confident_fail(
 ) -> Decision | None:
     """A FAIL of a feature path with ``confident_inliers`` (None when there is none)."""
     for name in ("raw", "enhanced"):
-        p = getattr(m, name)
-        if out[name] and out[name][0] is Verdict.FAIL and p.n_inliers >= config.confident_inliers:
+        p, o = m.path(name), out[name]
+        if o and o[0] is Verdict.FAIL and p is not None \
+                and p.n_inliers >= config.confident_inliers:
             if ref_off and p.evidence is Evidence.RELATIVE:
                 continue  # the reference's own error explains it
-            return Decision(Verdict.FAIL, out[name][1], p.evidence.value, name)
+            return Decision(Verdict.FAIL, o[1], p.evidence.value, name)
     return None
 
 
@@ -368,7 +370,8 @@ def _settle_disagreement(
     """(decision, final) of a FAIL that another absolute path's PASS contradicts."""
     base, why, evidence, path = d
     passing = [
-        n for n in ("raw", "edges") if n != path and out[n] is not None and out[n][0] is Verdict.PASS
+        n for n in ("raw", "edges")
+        if n != path and (o := out[n]) is not None and o[0] is Verdict.PASS
     ]
     if base is not Verdict.FAIL or not passing:
         return d, False
@@ -384,7 +387,9 @@ def _settle_disagreement(
     if not clear:
         reason = f"paths_disagree ({why} on the {path} path; an absolute path passes)"
         return Decision(Verdict.UNVERIFIABLE, reason, evidence, path), True
-    base, why = out[clear[0]]
+    chosen = out[clear[0]]
+    assert chosen is not None  # it passes
+    base, why = chosen
     return Decision(base, why, Evidence.ABSOLUTE.value, clear[0]), False
 
 
@@ -472,6 +477,7 @@ def _run_level(
         return Verdict.FAIL, f"drift: this segment moves {px:.1f} px off the mesh", evidence
     reg = NOT_CHECKED if shared is None else shared.registration_status
     if reg == FAILED:
+        assert shared is not None  # it was checked
         e = shared.registration if shared.registration.status == FAILED else shared.similarity
         return (
             Verdict.FAIL,
@@ -492,9 +498,10 @@ def _run_level(
     if absolute_pass:  # an absolute path confirms the relative PASS
         return Verdict.PASS, "", Evidence.ABSOLUTE.value
     drift = np.nan if shared is None else shared.drift_px.get(frame_id, np.nan)
-    if reg == PASSED and frame_id not in shared.left_out and not drift > shared.drift_threshold_px:
+    if reg == PASSED and shared is not None and frame_id not in shared.left_out \
+            and not drift > shared.drift_threshold_px:
         return Verdict.PASS, "", "relative+registration"
-    if reg == PASSED and drift > shared.drift_threshold_px:
+    if reg == PASSED and shared is not None and drift > shared.drift_threshold_px:
         # the run-level checks do not vouch for this part of the trajectory: its drift score
         # is above the threshold, only not significantly
         reg = f"passed, but the trajectory here drifts by {drift:.1f} px, not confirmed"

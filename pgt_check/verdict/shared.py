@@ -24,7 +24,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -205,12 +205,14 @@ def frame_evidence(
     keep_paths = [p for p in ("raw", "enhanced", "edges") if p not in set(exclude_paths)]
     for i, m in usable:
         wfc = np.asarray(m.world_from_cam, np.float64)
+        ev = m.evidence
+        assert ev is not None and m.intrinsics is not None  # usable
         if exclude_paths:
-            pts2d, pts_cam = m.evidence.points_of(keep_paths)
+            pts2d, pts_cam = ev.points_of(keep_paths)
             if not len(pts2d):
                 continue
         else:
-            pts_cam, pts2d = m.evidence.pts_cam, m.evidence.pts2d
+            pts_cam, pts2d = ev.pts_cam, ev.pts2d
         pts_cam = np.asarray(pts_cam, np.float64).reshape(-1, 3)
         pts2d = np.asarray(pts2d, np.float64).reshape(-1, 2)
         if len(pts2d) > cap:
@@ -250,7 +252,7 @@ def run_shared_checks(
     ctx = CheckContext(measurements, config, thr, frame_thr,
                        frame_evidence(measurements, exclude_paths))
     entries = {c.KEY: e for c in CHECKS if (e := c.run(ctx)) is not None}
-    drift = entries.get("drift")
+    drift = cast("DriftCheck | None", entries.get("drift"))  # the drift check's entry
     homs, frame_homs = ctx.homographies
     return SharedChecks(
         thr, entries,

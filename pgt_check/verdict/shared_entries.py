@@ -255,8 +255,8 @@ def drift_entry(
             frozenset(),
         )
     score, low, runs, interpolated = drift_coverage(est, ids, threshold)
-    flagged = {fid for fid, f in zip(est.frame_ids, est.frame_flagged, strict=True) if f}
-    flagged = frozenset(flagged.union(*({ids[i] for i in range(a, b + 1)} for a, b in runs)))
+    own = {fid for fid, f in zip(est.frame_ids, est.frame_flagged, strict=True) if f}
+    flagged = frozenset(own.union(*({ids[i] for i in range(a, b + 1)} for a, b in runs)))
     segments = tuple((ids[a], ids[b]) for a, b in runs)
     check = DriftCheck(
         status=FAILED if flagged else PASSED,
