@@ -13,7 +13,7 @@ import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, cast
 
 import numpy as np
 
@@ -109,7 +109,7 @@ class FrameChecker:
     _enhancer: Any = field(default=None, init=False, repr=False)
 
     @property
-    def mesh(self):
+    def mesh(self) -> Any:
         if self._mesh is None:
             from pgt_check.render import load_mesh
 
@@ -117,7 +117,7 @@ class FrameChecker:
         return self._mesh
 
     @property
-    def renderer(self):
+    def renderer(self) -> Any:
         if self._renderer is None:
             from pgt_check.render import make_renderer
             from pgt_check.render.cache import CachedRenderer
@@ -129,7 +129,7 @@ class FrameChecker:
         return self._renderer
 
     @property
-    def matcher(self):
+    def matcher(self) -> Any:
         if self._matcher is None:
             from pgt_check.match import make_matcher
 
@@ -141,7 +141,7 @@ class FrameChecker:
         return self._matcher
 
     @property
-    def enhancer(self):
+    def enhancer(self) -> Any:
         """The enhancement method of the config (built on first use: torch only for MaRINeR)."""
         if self._enhancer is None:
             from pgt_check.enhance import make_enhancer
@@ -177,6 +177,7 @@ class FrameChecker:
             m = failed_measurement(frame, MeasureReason.INTERNAL_ERROR, format_exception(err))
         m = m.with_timings(clock.timings(time.perf_counter() - t_start))
         if self.panel_sink is not None:
+            assert keep is not None  # made above for the sink
             try:
                 self.panel_sink(m, keep)
             except Exception as err:  # panels are a convenience: the run goes on without them
@@ -214,6 +215,7 @@ class FrameChecker:
         )
         if keep is not None:
             keep.photo, keep.render = photo_w, render.rgb
+        assert m.coverage is not None  # set above
         if m.coverage < self.config.verdict.min_coverage:
             return replace_measurement(m, error=MeasureReason.LOW_COVERAGE)
 
@@ -346,6 +348,7 @@ class FrameChecker:
             decisive = (
                 raw.success
                 and raw.n_inliers >= self.config.enhance.auto_min_inliers
+                and raw.corner_error_px is not None  # set where it succeeded
                 and abs(raw.corner_error_px - threshold)
                 > self.config.enhance.auto_margin * threshold
             )
@@ -357,7 +360,9 @@ class FrameChecker:
         clock.add("edges", time.perf_counter() - t)
         return out
 
-    def _edge_images(self, w: Working, clock: Clock) -> tuple[Any, np.ndarray, Camera, tuple]:
+    def _edge_images(
+        self, w: Working, clock: Clock
+    ) -> tuple[Any, np.ndarray, Camera, tuple[float, float]]:
         """(render, photo, working camera, scale) of the edge path: the matching ones, or a
         finer render and photo where ``edges.resize_max`` is larger than the matching size."""
         from pgt_check.io.images import resize_image
@@ -379,7 +384,9 @@ class FrameChecker:
         from pgt_check.io.photo import prepare_photo
 
         return prepare_photo(
-            load_image(frame.image_file, max_pixels=self.config.input.max_image_pixels),
+            # a frame without an image fails in load_image (the caller checks its own frame)
+            load_image(cast(Path, frame.image_file),
+                       max_pixels=self.config.input.max_image_pixels),
             frame.camera,
         )
 
