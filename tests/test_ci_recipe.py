@@ -169,3 +169,26 @@ def test_minimal_parser_agrees_with_yaml():
     minimal = _minimal_steps(text)
     for key in ("run", "uses", "if"):
         assert [s.get(key) for s in minimal] == [s.get(key) for s in full], key
+
+
+def test_ci_runs_the_type_check_that_setup_installs():
+    """.ci/run runs mypy (a failure fails CI, the tests still run), pyproject.toml states what
+    it checks and how strictly, and the [dev] extra that scripts/setup.sh installs holds mypy."""
+    import tomllib
+
+    ci = (REPO / ".ci" / "run").read_text()
+    lines = [ln.strip() for ln in ci.splitlines() if not ln.strip().startswith("#")]
+    assert "python3 -m mypy" in lines
+    assert lines.index("python3 -m mypy") < lines.index("python3 -m pytest")
+    assert "mypy_rc" in ci and 'exit 1; fi' in ci.split("mypy_rc=$?")[1]
+    project = tomllib.loads((REPO / "pyproject.toml").read_text())
+    mypy = project["tool"]["mypy"]
+    assert set(mypy["files"]) == {"pgt_check", "mariner_core"}
+    strict = [o for o in mypy.get("overrides", []) if o.get("disallow_untyped_defs")]
+    assert strict and all(o.get("disallow_any_generics") for o in strict)
+    entries = {m for o in strict for m in o["module"]}
+    assert {"pgt_check.runner", "pgt_check.measure.checker", "pgt_check.verdict.apply",
+            "pgt_check.correct.frames", "pgt_check.report.outputs"} <= entries
+    assert any(d.startswith("mypy") for d in project["project"]["optional-dependencies"]["dev"])
+    setup = (REPO / "scripts" / "setup.sh").read_text()
+    assert re.search(r"pip install[^\n]*-e \"\.\[[^\]]*\bdev\b", setup)
