@@ -9,12 +9,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Literal
+from typing import Literal, Protocol
 
 from pgt_check.config_load import check_range as _check_range
 
-__all__ = ["MAX_UNVERIFIABLE_DEFAULT", "MOVED_KEYS", "CorrectConfig", "GateConfig", "RunChecksConfig",
-           "VerdictConfig"]
+__all__ = ["MAX_UNVERIFIABLE_DEFAULT", "MOVED_KEYS", "CorrectConfig", "GateConfig",
+           "JudgingConfig", "RunChecksConfig", "VerdictConfig"]
 
 
 #: default gate limit on the UNVERIFIABLE share: wide of what the shared real datasets give
@@ -166,6 +166,21 @@ class CorrectConfig:
         _check_range("correct.rounds", self.rounds, 1, 1000)
         _check_range("correct.bootstrap", self.bootstrap, 0, 10_000)
         _check_range("correct.budget", self.budget, 0, 1e6)
+
+
+class JudgingConfig(Protocol):
+    """What the verdict stage reads of the settings: its judging sections, and nothing else
+    (``verdict.judge_run``, ``run_shared_checks``, the run-level checks, ``judge_outcome``).
+    ``RunConfig`` has them; a type checker refuses a judging function that reads more."""
+
+    @property
+    def verdict(self) -> VerdictConfig: ...
+
+    @property
+    def gate(self) -> GateConfig: ...
+
+    @property
+    def run_checks(self) -> RunChecksConfig: ...
 
 
 #: settings of the layout before the gate and the run-level checks had sections of their own

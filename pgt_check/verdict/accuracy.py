@@ -23,7 +23,8 @@ from typing import Any, cast
 
 import numpy as np
 
-from pgt_check.config import GateConfig, RunConfig
+from pgt_check.config import GateConfig
+from pgt_check.config_judge import JudgingConfig
 from pgt_check.verdict.accuracy_text import _fmt, _need, accuracy_sentences  # re-exported
 from pgt_check.verdict.result import RunResult
 from pgt_check.verdict.shared import SharedChecks
@@ -306,7 +307,7 @@ def detection_limits(
 
 
 def run_accuracy(
-    result: RunResult, shared: SharedChecks | None, config: RunConfig, threshold_px: float
+    result: RunResult, shared: SharedChecks | None, config: JudgingConfig, threshold_px: float
 ) -> RunAccuracy:
     """The run's accuracy statement from its verdicts (each frame's verdict, threshold and
     ``FrameBound``) and the run-level checks as reported (``shared``)."""
@@ -320,7 +321,7 @@ def run_accuracy(
 def accuracy_of_rows(
     rows: Sequence[Mapping[str, Any]],
     shared: SharedChecks | None,
-    config: RunConfig,
+    config: JudgingConfig,
     threshold_px: float,
 ) -> RunAccuracy:
     """``run_accuracy`` over the frames' columns (``verdict``, ``threshold_px`` and the

@@ -7,7 +7,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import replace
 from typing import Any
 
-from pgt_check.config import RunConfig
+from pgt_check.config_judge import JudgingConfig
 from pgt_check.enhance.base import Evidence
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.verdict.decide import (
@@ -36,7 +36,7 @@ from pgt_check.verdict.status import NOT_CHECKED
 
 def judge_run(
     measurements: Iterable[FrameMeasurement],
-    config: RunConfig,
+    config: JudgingConfig,
     probes: Sequence[Probe] | None = None,
 ) -> RunResult:
     """Run-level checks on all measurements (trajectory order), then each frame's judgement;
@@ -100,7 +100,7 @@ def judge_run(
 
 
 def apply_verdicts(
-    measurements: Iterable[FrameMeasurement], config: RunConfig
+    measurements: Iterable[FrameMeasurement], config: JudgingConfig
 ) -> list[dict[str, Any]]:
     """The frames.csv rows of ``judge_run`` (for the pandas API and the comparison)."""
     return judge_run(measurements, config).rows()

@@ -9,7 +9,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from pgt_check.config import RunConfig
+from pgt_check.config_judge import JudgingConfig
 from pgt_check.verdict.accuracy import RunAccuracy, run_accuracy
 from pgt_check.verdict.decide import resolve_threshold_px
 from pgt_check.verdict.result import RunResult
@@ -64,7 +64,7 @@ class RunOutcome:
 def decide_gate(
     statistics: RunStatistics,
     accuracy: RunAccuracy,
-    config: RunConfig,
+    config: JudgingConfig,
     inputs_changed: InputsChanged | None = None,
 ) -> Gate:
     """The gate over the verdict counts (``Gate.of``), then the accuracy gate
@@ -81,7 +81,7 @@ def decide_gate(
     return gate
 
 
-def run_threshold(result: RunResult, config: RunConfig) -> float:
+def run_threshold(result: RunResult, config: JudgingConfig) -> float:
     """The per-frame threshold of the run's (first frame's) image size; 0 x 0 without frames."""
     m = result.frames[0].measurement if result.frames else None
     w, h = (int(m.width), int(m.height)) if m is not None else (0, 0)
@@ -89,7 +89,7 @@ def run_threshold(result: RunResult, config: RunConfig) -> float:
 
 
 def judge_outcome(
-    result: RunResult, config: RunConfig, inputs_changed: InputsChanged | None = None
+    result: RunResult, config: JudgingConfig, inputs_changed: InputsChanged | None = None
 ) -> RunOutcome:
     """The outcome of a judged (and corrected) run: statistics over its frames, the accuracy
     statement with the run-level checks as reported, and the gate."""
@@ -103,7 +103,7 @@ def judge_outcome(
 def outcome_parts_of_rows(
     rows: Sequence[Mapping[str, Any]],
     shared: SharedChecks | None,
-    config: RunConfig,
+    config: JudgingConfig,
     inputs_changed: InputsChanged | None = None,
 ) -> tuple[float, RunStatistics, RunAccuracy, Gate]:
     """``judge_outcome``'s threshold, statistics, accuracy and gate over judged frames.csv rows

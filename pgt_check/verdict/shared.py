@@ -28,7 +28,7 @@ from typing import Any, cast
 
 import numpy as np
 
-from pgt_check.config import RunConfig
+from pgt_check.config_judge import JudgingConfig
 from pgt_check.constants import (  # re-exported: callers and tests use them here
     DRIFT_THRESHOLD_FACTOR,
     MAX_FRAME_EVIDENCE_POINTS,
@@ -172,7 +172,7 @@ class SharedChecks:
         return e if e is not None and e.status == FAILED else None
 
 
-def shared_threshold(measurements: Sequence[FrameMeasurement], config: RunConfig) -> float:
+def shared_threshold(measurements: Sequence[FrameMeasurement], config: JudgingConfig) -> float:
     """The shared-error threshold in photo pixels (median over the frames' image sizes)."""
     rc = config.run_checks
     if rc.threshold_px is not None:
@@ -235,7 +235,7 @@ def frame_evidence(
 
 
 def run_shared_checks(
-    measurements: Sequence[FrameMeasurement], config: RunConfig,
+    measurements: Sequence[FrameMeasurement], config: JudgingConfig,
     exclude_paths: Collection[str] = (),
 ) -> SharedChecks:
     """All run-level checks (``verdict.checks.CHECKS``, in registry order) on the measurements

@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from pgt_check.config import RunConfig
+from pgt_check.config_judge import JudgingConfig
 from pgt_check.constants import OWN_ERROR_FRACTION
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.verdict.calibration import CameraCalibration, frame_homographies, trusted_calibration
@@ -103,7 +103,7 @@ class CheckContext:
     per camera and the evidence with it removed (``--remove-calibration``)."""
 
     measurements: Sequence[FrameMeasurement]
-    config: RunConfig
+    config: JudgingConfig
     #: the shared-error threshold (``shared.shared_threshold``) and the median per-frame one
     threshold_px: float
     frame_threshold_px: float
@@ -188,7 +188,7 @@ class CheckContext:
 
 
 def _calibration_checks(
-    ev: Sequence[Any], measurements: Sequence[FrameMeasurement], config: RunConfig,
+    ev: Sequence[Any], measurements: Sequence[FrameMeasurement], config: JudgingConfig,
     thr: float, frame_thr: float,
 ) -> Calibrations:
     """Per camera: the calibration entry, the calibration to remove (this run's estimate, or the
