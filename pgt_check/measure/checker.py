@@ -17,7 +17,6 @@ from typing import Any, NamedTuple, cast
 
 import numpy as np
 
-from pgt_check.config import RunConfig
 from pgt_check.enhance.base import Evidence, ReferenceView, View
 from pgt_check.errors import InputError, ReferenceUnreadableError
 from pgt_check.measure.edge_path import EdgePath, edge_extra, measure_edges
@@ -38,6 +37,7 @@ from pgt_check.measure.steps import (  # format_exception, pick_references: re-e
     INPUT_ERROR_REASONS,
     NO_ENHANCE,
     Clock,
+    MeasuringConfig,
     Working,
     clear_pass,
     edges_decisive,
@@ -98,7 +98,7 @@ class FrameChecker:
     best first (see ``pick_references``).
     """
 
-    config: RunConfig
+    config: MeasuringConfig
     references: Mapping[str, tuple[Frame, ...]] = field(default_factory=dict)
     #: called as ``panel_sink(measurement, images)`` after each frame (images kept for it; it
     #: decides which frames get report panels, e.g. ``report.assets.PanelWriter``)
@@ -462,7 +462,7 @@ def _chosen_path(raw: PathResult, enh: PathResult | None, edges: EdgePath | None
 
 
 def build_frame_checker(
-    config: RunConfig,
+    config: MeasuringConfig,
     references: Mapping[str, tuple[Frame, ...]] | None = None,
     panel_sink: Callable[[FrameMeasurement, FrameImages], Any] | None = None,
 ) -> FrameChecker:

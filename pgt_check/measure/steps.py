@@ -11,11 +11,20 @@ import time
 import traceback
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
-from pgt_check.config import EnhanceConfig, HomographyConfig, PoseConfig, RunConfig
+from pgt_check.config import (
+    EdgeConfig,
+    EnhanceConfig,
+    HomographyConfig,
+    InputConfig,
+    MatchConfig,
+    PoseConfig,
+    RenderConfig,
+    VerdictConfig,
+)
 from pgt_check.constants import EDGES_DECISIVE_SUPPORT
 from pgt_check.errors import ImageSizeMismatchError, PixelCapError, ReferenceUnreadableError
 from pgt_check.measure.paths import PathResult
@@ -29,6 +38,34 @@ from pgt_check.measure.record import (
 from pgt_check.types import Camera, Frame, Trajectory
 
 logger = logging.getLogger(__name__)
+
+
+class MeasuringConfig(Protocol):
+    """What the measure stage reads of the settings (``FrameChecker``, ``pick_references``):
+    the measurement sections, the verdict's coverage and threshold (the auto-enhance decision),
+    ``fail_fast`` and the threads per process; never the gate, the run-level checks, the
+    corrections or the outputs. ``RunConfig`` has them; a type checker refuses more."""
+
+    @property
+    def input(self) -> InputConfig: ...
+    @property
+    def render(self) -> RenderConfig: ...
+    @property
+    def match(self) -> MatchConfig: ...
+    @property
+    def homography(self) -> HomographyConfig: ...
+    @property
+    def enhance(self) -> EnhanceConfig: ...
+    @property
+    def edges(self) -> EdgeConfig: ...
+    @property
+    def pose(self) -> PoseConfig: ...
+    @property
+    def verdict(self) -> VerdictConfig: ...
+    @property
+    def fail_fast(self) -> bool: ...
+    @property
+    def threads(self) -> int | None: ...
 
 
 #: reasons for which the enhanced path runs / does not run
@@ -137,7 +174,7 @@ def format_exception(err: BaseException) -> str:
 
 
 def pick_references(
-    traj: Trajectory, frames: Sequence[Frame], config: RunConfig
+    traj: Trajectory, frames: Sequence[Frame], config: MeasuringConfig
 ) -> dict[str, tuple[Frame, ...]]:
     """Reference frames per checked frame, best first (any frame of the trajectory may serve)."""
     if config.enhance.mode == "never":
