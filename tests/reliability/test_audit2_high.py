@@ -177,7 +177,7 @@ def test_run_lock_held_until_outputs_complete(cli, base_args, tmp_path, monkeypa
 
     out = tmp_path / "out"
     seen: list[str] = []
-    real = outputs.write_outputs
+    real = outputs.write_summary  # what a run's write_outcome (and write_outputs) write through
 
     def probing(*args, **kwargs):  # a second run arriving while the outputs are written
         try:
@@ -187,7 +187,7 @@ def test_run_lock_held_until_outputs_complete(cli, base_args, tmp_path, monkeypa
             seen.append(str(err))
         return real(*args, **kwargs)
 
-    monkeypatch.setattr(outputs, "write_outputs", probing)
+    monkeypatch.setattr(outputs, "write_summary", probing)
     rc, _, _ = cli(*base_args("--correct", "all"))
     case("a second run opens --out while the first writes its outputs", "refused (locked)",
          f"{rc}: {seen[0][-70:] if seen else 'not probed'}")
