@@ -46,7 +46,7 @@ def _old_summary(path: Path) -> dict:
     if not path.exists():
         return {}
     try:
-        old = load_json_limited(path, MAX_SMALL_JSON_BYTES, "summary.json")
+        old = load_json_limited(path, MAX_SMALL_JSON_BYTES, OUTPUTS.summary_json)
     except InputError:
         print(f"pgt-check report: note: {path} is unreadable; rebuilding it", file=sys.stderr)
         return {}
@@ -164,7 +164,7 @@ def _inputs_changed(out: Path, cfg: dict, rejudge: bool) -> InputsChanged | None
     its explanation is the gate's (``build_summary`` fails the gate on it)."""
     from pgt_check.store import RUN_FILE, changed_inputs
 
-    info = load_json_limited(out / RUN_FILE, MAX_SMALL_JSON_BYTES, "run.json")
+    info = load_json_limited(out / RUN_FILE, MAX_SMALL_JSON_BYTES, RUN_FILE)
     inp = cfg.get("input") if isinstance(cfg, dict) else None
     changed, unreadable = changed_inputs(info if isinstance(info, dict) else {},
                                          inp if isinstance(inp, dict) else None)

@@ -30,8 +30,8 @@ def load_run(out_dir: Path) -> tuple[list[FrameMeasurement], dict]:
         if not p.exists():
             raise InputError(f"{p} not found: is {out_dir} a pgt-check output directory?")
     regular_file_size(rec_path, "record store")
-    info = load_json_limited(run_path, MAX_SMALL_JSON_BYTES, "run.json")
-    cfg = load_json_limited(cfg_path, MAX_SMALL_JSON_BYTES, "config.json")
+    info = load_json_limited(run_path, MAX_SMALL_JSON_BYTES, OUTPUTS.run)
+    cfg = load_json_limited(cfg_path, MAX_SMALL_JSON_BYTES, OUTPUTS.config_json)
     if not isinstance(info, dict):
         raise InputError(f"{run_path}: expected a JSON object; got {type(info).__name__}")
     if not isinstance(cfg, dict):
