@@ -59,6 +59,7 @@ from pgt_check.files import (
     check_inputs_not_outputs,
     safe_text,
 )
+from pgt_check.output_layout import ENHANCE_OUTPUTS
 from pgt_check.types import Camera, Frame
 
 __all__ = [
@@ -284,7 +285,7 @@ def check_enhance_options(args: argparse.Namespace) -> None:
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError(f"--out {out}: exists and is not a folder")
-    outputs = [out / "images", out / "references.csv", out / "metrics.csv", out / "metrics.md"]
+    outputs = ENHANCE_OUTPUTS.paths(out)
     check_inputs_not_outputs(
         [("renders folder", args.renders), ("model", args.model), ("images", args.images),
          ("sensors file", args.sensors), ("render poses", args.render_poses),
@@ -306,7 +307,7 @@ def _enhance_item(it: RenderItem, method: Any, out: Path, gt_dir: Path | None,
     render = load_image(it.file)
     photo = load_image(it.reference.image_file)
     enhanced = method(render, it.frame, photo, it.reference)
-    _save_png(out / "images" / f"{it.name}.png", enhanced)
+    _save_png(out / ENHANCE_OUTPUTS.images_dir / f"{it.name}.png", enhanced)
     gt_file = find_gt(gt_dir, it.name) if gt_dir is not None else None
     if gt_dir is not None and gt_file is None:
         status = "enhanced_no_gt"
@@ -385,14 +386,15 @@ def enhance_folder(args: argparse.Namespace) -> dict[str, Any]:
     finally:
         method.close()
     out.mkdir(parents=True, exist_ok=True)
-    atomic_write_text(out / "references.csv", _csv_text(REFERENCE_COLUMNS, ref_rows))
+    atomic_write_text(out / ENHANCE_OUTPUTS.references_csv, _csv_text(REFERENCE_COLUMNS, ref_rows))
     summary: dict[str, Any] = {
         "renders": len(items), "enhanced": sum(it.reference is not None for it in items),
         "method": args.method, "with_gt": len(metric_rows),
     }
     if metric_rows:
-        atomic_write_text(out / "metrics.csv", _csv_text(METRIC_COLUMNS, metric_rows))
-        atomic_write_text(out / "metrics.md", metrics_markdown(metric_rows, args.method))
+        atomic_write_text(out / ENHANCE_OUTPUTS.metrics_csv, _csv_text(METRIC_COLUMNS, metric_rows))
+        atomic_write_text(out / ENHANCE_OUTPUTS.metrics_md,
+                          metrics_markdown(metric_rows, args.method))
         for k in METRIC_COLUMNS[2:]:
             summary[k] = _mean([float(r[k]) if r[k] else None for r in metric_rows])
     return summary

@@ -6,6 +6,7 @@ One frozen ``OutputLayout`` (the module-level ``OUTPUTS``); every writer, the co
 the ownership check (``store.check_outputs_owned``) and the input-vs-output check
 (``inputs.run_output_paths``) read their names from it. Names are relative to the output folder,
 ``/``-separated. A new output file is one field here (with its group) and the line that writes it.
+The other commands' outputs are named here too (``COMPARE_OUTPUTS``, ``ENHANCE_OUTPUTS``).
 
 Groups (the ``group`` of each field):
 
@@ -26,7 +27,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field, fields
 from pathlib import Path
 
-__all__ = ["OUTPUTS", "OutputLayout"]
+__all__ = ["COMPARE_OUTPUTS", "ENHANCE_OUTPUTS", "OUTPUTS", "CompareLayout", "EnhanceLayout",
+           "OutputLayout"]
 
 STORE, MARKER, REPORT, CORRECT, VERDICT = "store", "marker", "report", "correct", "verdict"
 #: the groups the completion marker lists, in the order it lists them
@@ -120,3 +122,32 @@ class OutputLayout:
 
 
 OUTPUTS = OutputLayout()
+
+
+@dataclass(frozen=True)
+class CompareLayout:
+    """What ``pgt-check compare`` writes in its ``--out``."""
+
+    rows_csv: str = "compare.csv"
+    summary_json: str = "compare.json"
+
+    def paths(self, out: str | Path) -> list[Path]:
+        return [Path(out) / self.rows_csv, Path(out) / self.summary_json]
+
+
+@dataclass(frozen=True)
+class EnhanceLayout:
+    """What ``pgt-check enhance`` writes in its ``--out`` (metrics only with ground truth)."""
+
+    images_dir: str = "images"
+    references_csv: str = "references.csv"
+    metrics_csv: str = "metrics.csv"
+    metrics_md: str = "metrics.md"
+
+    def paths(self, out: str | Path) -> list[Path]:
+        return [Path(out) / n for n in (self.images_dir, self.references_csv, self.metrics_csv,
+                                        self.metrics_md)]
+
+
+COMPARE_OUTPUTS = CompareLayout()
+ENHANCE_OUTPUTS = EnhanceLayout()

@@ -29,6 +29,7 @@ from pgt_check.compare import (
 )
 from pgt_check.errors import InputError
 from pgt_check.files import atomic_write_text, check_inputs_not_outputs, safe_text
+from pgt_check.output_layout import COMPARE_OUTPUTS
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -108,7 +109,7 @@ def _compare(args: argparse.Namespace) -> int:
         [("pose source A", args.a), ("pose source B", args.b), ("mesh", args.mesh),
          ("sensors file of A", args.sensors_a), ("sensors file of B", args.sensors_b),
          ("images", args.images)],
-        [out / "compare.csv", out / "compare.json"], "--out",
+        COMPARE_OUTPUTS.paths(out), "--out",
     )
     cam = {"camera": args.camera} if args.camera else {}
     a = read_trajectory(args.a, args.format_a, images=args.images, sensors=args.sensors_a, **cam)
@@ -119,10 +120,11 @@ def _compare(args: argparse.Namespace) -> int:
         out.mkdir(parents=True, exist_ok=True)
     except OSError as err:
         raise InputError(f"--out {out}: cannot create the folder ({err.strerror or err})") from None
-    atomic_write_text(out / "compare.csv", rows_csv_text(res.rows))
+    atomic_write_text(out / COMPARE_OUTPUTS.rows_csv, rows_csv_text(res.rows))
     summary = json_safe(res.summary)  # non-finite numbers become null (counted in the stats)
-    atomic_write_text(out / "compare.json", json.dumps(summary, indent=2, default=str) + "\n")
+    atomic_write_text(out / COMPARE_OUTPUTS.summary_json,
+                      json.dumps(summary, indent=2, default=str) + "\n")
     for line in summary_lines(res.summary):
         print(safe_text(line))
-    print(f"pgt-check compare: wrote {safe_text(out / 'compare.csv')}")
+    print(f"pgt-check compare: wrote {safe_text(out / COMPARE_OUTPUTS.rows_csv)}")
     return 0

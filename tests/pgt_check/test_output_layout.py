@@ -74,3 +74,11 @@ def test_no_module_spells_an_output_name_of_its_own():
                     bad.append(f"{path.relative_to(PKG)}:{node.lineno}")
     assert not bad, bad
     assert re.fullmatch(r"[\w.]+", OUTPUTS.completion_marker)
+
+
+def test_the_other_commands_outputs_are_named_here_too():
+    from pgt_check.output_layout import COMPARE_OUTPUTS, ENHANCE_OUTPUTS
+
+    assert [p.name for p in COMPARE_OUTPUTS.paths("/o")] == ["compare.csv", "compare.json"]
+    assert [p.name for p in ENHANCE_OUTPUTS.paths("/o")] == [
+        "images", "references.csv", "metrics.csv", "metrics.md"]
