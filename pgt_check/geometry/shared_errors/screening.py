@@ -267,7 +267,7 @@ def screen_frames(
     lam, dof, q_null, majority, rounds = float("nan"), float(OWN_DOF), float("nan"), False, 0
     eff_cut = float("nan")
     stat = eff = nbs = None
-    for rounds in range(1, max_rounds + 1):
+    for rounds in range(1, max_rounds + 1):  # noqa: B007 (the count is reported)
         fit = _shared_fit(p, kept.astype(np.float64), s.loss_scale_px)
         if fit is None:
             return FrameScreen(False, "ill_conditioned")
