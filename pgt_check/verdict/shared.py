@@ -350,8 +350,9 @@ def run_shared_checks(
         # by 3 px on bm_mictlantecuhli and failed every frame outside it). Refitted only while
         # the frames outside are the majority of the evidence.
         outside = [e for e in ev if e.frame_id not in flagged]
-        if 2 * len(outside) > len(ev):
-            reg, sim = world_checks(outside)
+        refit = world_checks(outside) if 2 * len(outside) > len(ev) else None
+        if refit is not None and refit[0].status != NOT_CHECKED:  # else: too few outside
+            reg, sim = refit
             fit_left_out = left_out + sorted({e.frame_id for e in ev if e.frame_id in flagged})
     reg, sim = (replace(e, frames_left_out=tuple(fit_left_out)) for e in (reg, sim))
     return SharedChecks(

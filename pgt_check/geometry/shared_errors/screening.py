@@ -285,10 +285,11 @@ def screen_frames(
         kept = new
     nbs, nb_eff = _neighbour_statistic(p, deltas, hs, s2, jacs)
     cut = lam * q_null
-    # shared with its neighbours in both measures: what they leave of the frame's own
+    # shared with its neighbours in either measure: what they leave of the frame's own
     # correction is within the cut, or a small part of it (NEIGHBOUR_SHARE of the statistic,
-    # its square root of the image effect)
-    shared = (nbs <= np.maximum(cut, NEIGHBOUR_SHARE * stat)) & (
+    # its square root of the image effect); an isolated frame is left out of the drift check
+    # too, so the doubt goes to the drift check, which exists to find shared errors
+    shared = (nbs <= np.maximum(cut, NEIGHBOUR_SHARE * stat)) | (
         nb_eff <= np.maximum(eff_cut, np.sqrt(NEIGHBOUR_SHARE) * eff)
     )
     frames = tuple(
