@@ -64,17 +64,25 @@ CACHE = Path("/tmp/pgt-check-bench-cache")
 
 @functools.lru_cache(maxsize=1)
 def _code_version() -> str:
-    """A hash of the pgt_check sources (read once per process): a cached measurement is reused
-    only by the code that made it (a measurement cached by another working tree once served a
-    later run)."""
+    """A hash of the pgt_check sources a measurement depends on (read once per process; all but
+    ``JUDGING_ONLY``): a cached measurement is reused only by the code that made it (a
+    measurement cached by another working tree once served a later run)."""
     import hashlib
 
     import pgt_check
 
     h = hashlib.blake2b(digest_size=6)
-    for f in sorted(Path(pgt_check.__file__).parent.rglob("*.py")):
-        h.update(f.read_bytes())
+    root = Path(pgt_check.__file__).parent
+    for f in sorted(root.rglob("*.py")):
+        if not f.relative_to(root).as_posix().startswith(JUDGING_ONLY):
+            h.update(f.read_bytes())
     return h.hexdigest()
+
+
+#: packages that only judge stored measurements (the measurement stack - measure, render,
+#: match, enhance, io, geometry - never imports them): a change there re-judges the cached
+#: measurements instead of measuring again
+JUDGING_ONLY = ("verdict/", "geometry/shared_errors/", "report/", "correct/", "commands/")
 
 
 def _cached(key: str, cfg: RunConfig) -> Path:

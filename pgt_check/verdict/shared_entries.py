@@ -330,14 +330,16 @@ def frame_screen_entry(screen: Any) -> FrameScreenCheck:
     rule = (
         f"own pose correction significant at {screen.alpha:.0%}: Wald statistic above "
         f"{screen.cut:.3g} = {screen.inflation:.3g} x the 99 % quantile of chi-square"
-        f"({screen.dof:.1f}), the null fitted to the lower half of the frames' statistics"
+        f"({screen.dof:.1f}), or an image effect above {screen.effect_cut_px:.3g} px; each "
+        "null fitted to the lower half of the frames' values"
     )
+    eff_cut = finite_or_none(screen.effect_cut_px)
     if not out:
         return FrameScreenCheck(
             PASSED, "", f"run-level checks: all {n} frames with absolute evidence agree with "
             f"the shared model (none with an {rule})",
             n, 0, screen.inflation, screen.cut, screen.alpha, screen.dof, screen.chi2_quantile,
-            screen.rounds,
+            screen.rounds, effect_cut_px=eff_cut,
         )  # fmt: skip
     errs = np.array([f.own_error_px for f in out])
     nb = sum(f.shared_with_neighbours for f in out)
@@ -352,5 +354,5 @@ def frame_screen_entry(screen: Any) -> FrameScreenCheck:
     )
     return FrameScreenCheck(
         FINDING, "", message, n, len(out), screen.inflation, screen.cut, screen.alpha,
-        screen.dof, screen.chi2_quantile, screen.rounds, screen.majority_kept, out,
+        screen.dof, screen.chi2_quantile, screen.rounds, screen.majority_kept, out, eff_cut,
     )  # fmt: skip

@@ -309,6 +309,8 @@ class FrameScreenCheck:
     rounds: int = 0
     majority_kept: bool = False
     left_out: tuple[LeftOutFrame, ...] = ()
+    #: the cut on a frame's own image effect (px), its null fitted to the frames' effects
+    effect_cut_px: float | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The summary.json entry (``shared_errors.frame_screen``)."""
@@ -322,6 +324,7 @@ class FrameScreenCheck:
             "alpha": self.alpha,
             "dof": self.dof,
             "chi2_quantile": self.chi2_quantile,
+            "effect_cut_px": self.effect_cut_px,
             "rounds": self.rounds,
             "majority_kept": self.majority_kept,
             "left_out": [asdict(f) for f in self.left_out],

@@ -86,6 +86,8 @@ class ScreenedFrame:
     neighbour_statistic: float
     left_out: bool
     shared_with_neighbours: bool = False
+    #: the image effect (px) of what its neighbours' corrections leave of its own
+    neighbour_effect_px: float = float("inf")
 
 
 @dataclass(frozen=True)
@@ -104,6 +106,8 @@ class FrameScreen:
     rounds: int = 0
     majority_kept: bool = False
     left_out: tuple[str, ...] = field(default=())
+    #: the cut on a frame's own image effect (px; ``_effect_cut``)
+    effect_cut_px: float = float("nan")
 
     @property
     def isolated(self) -> tuple[str, ...]:
@@ -111,8 +115,11 @@ class FrameScreen:
         return tuple(f.frame_id for f in self.frames if f.left_out and not f.shared_with_neighbours)
 
     def agreement(self) -> np.ndarray:
-        """Per tested frame: statistic / cut (<= 1: agrees with the shared model)."""
-        return np.array([f.statistic / self.cut for f in self.frames], np.float64)
+        """Per tested frame: the larger of statistic / cut and image effect / effect cut
+        (<= 1: agrees with the shared model in both)."""
+        eff_cut = self.effect_cut_px if np.isfinite(self.effect_cut_px) else np.inf
+        return np.array([max(f.statistic / self.cut, f.effect_px / eff_cut)
+                         for f in self.frames], np.float64)
 
 
 def _chi2_ppf(q: float, dof: float) -> float:
@@ -150,6 +157,19 @@ def _null(stat: np.ndarray) -> tuple[float, float]:
     return max(scale, 1e-12), dof
 
 
+def _effect_cut(eff: np.ndarray, alpha: float) -> float:
+    """The cut on a frame's own image effect (px): ``sqrt(scale * chi2_k^-1(1 - alpha))`` with
+    the null ``scale * chi2_k`` fitted to the squared effects like the statistics
+    (``_null``: their lower half). The Wald test measures an error against the frame's own
+    point noise; where the given poses themselves scatter from frame to frame more than their
+    points do (7-Scenes' depth-camera poses: 0.3-2 deg), its null is inflated by the frames
+    with many points, and a wrong frame with few points hides under it. The image effect of
+    the frame's own correction is what the run-level fits are pulled by, and the frames'
+    spread of it is the scene's pose noise: a frame far out in it is left out as well."""
+    lam, dof = _null(np.maximum(eff, 1e-9) ** 2)
+    return float(np.sqrt(lam * _chi2_ppf(1.0 - alpha, dof)))
+
+
 def _shared_fit(p: _Problem, fw: np.ndarray, loss_scale_px: float):
     """The shared model on the frames with weight 1: similarity + calibration, or less where
     that is ill-conditioned (few frames or cameras)."""
@@ -164,13 +184,15 @@ def _shared_fit(p: _Problem, fw: np.ndarray, loss_scale_px: float):
 
 def _own_corrections(p: _Problem, st: _State, loss_scale_px: float, iters: int = 4):
     """Per frame: own correction delta (F, 6), its Hessian H (F, 6, 6), the noise variance per
-    coordinate s2 (F,), the Wald statistic (F,) and the mean image effect (F,) px."""
+    coordinate s2 (F,), the Wald statistic (F,), the mean image effect (F,) px and the image
+    Jacobian of its points (F arrays (n, 2, 6))."""
     r, jm = _residuals(p, st, jac=True, world=True, similarity=False, calib=False)
     assert jm is not None
     ends = np.append(p.starts[1:], len(r))
     nf = p.n_frames
     deltas, hs = np.zeros((nf, OWN_DOF)), np.zeros((nf, OWN_DOF, OWN_DOF))
     s2, stat, eff = np.zeros(nf), np.zeros(nf), np.zeros(nf)
+    jacs = []
     for f, (a, b) in enumerate(zip(p.starts, ends, strict=True)):
         j, rr = jm[a:b], r[a:b]
         jf = j.reshape(-1, OWN_DOF)
@@ -189,7 +211,8 @@ def _own_corrections(p: _Problem, st: _State, loss_scale_px: float, iters: int =
         deltas[f], hs[f] = d, h
         stat[f] = float(d @ h @ d) / s2[f]
         eff[f] = float(np.mean(np.linalg.norm(j @ d, axis=1)))
-    return deltas, hs, s2, stat, eff
+        jacs.append(j)
+    return deltas, hs, s2, stat, eff, jacs
 
 
 def _neighbour_predictions(p: _Problem, deltas: np.ndarray, f: int) -> list[np.ndarray]:
@@ -214,15 +237,17 @@ def _neighbour_predictions(p: _Problem, deltas: np.ndarray, f: int) -> list[np.n
     return out
 
 
-def _neighbour_statistic(p: _Problem, deltas, hs, s2) -> np.ndarray:
-    """Per frame: the smallest Wald statistic of its own correction minus a prediction from its
-    neighbours' (``_neighbour_predictions``; inf without neighbours)."""
-    out = np.full(p.n_frames, np.inf)
+def _neighbour_statistic(p: _Problem, deltas, hs, s2, jacs) -> tuple[np.ndarray, np.ndarray]:
+    """Per frame: the smallest Wald statistic and the smallest image effect (px, mean over its
+    points) of its own correction minus a prediction from its neighbours'
+    (``_neighbour_predictions``; inf without neighbours)."""
+    out, out_eff = np.full(p.n_frames, np.inf), np.full(p.n_frames, np.inf)
     for f in range(p.n_frames):
         for pred in _neighbour_predictions(p, deltas, f):
             diff = deltas[f] - pred
             out[f] = min(out[f], float(diff @ hs[f] @ diff) / s2[f])
-    return out
+            out_eff[f] = min(out_eff[f], float(np.mean(np.linalg.norm(jacs[f] @ diff, axis=1))))
+    return out, out_eff
 
 
 def screen_frames(
@@ -241,15 +266,17 @@ def screen_frames(
     nf = p.n_frames
     kept = np.ones(nf, bool)
     lam, dof, q_null, majority, rounds = float("nan"), float(OWN_DOF), float("nan"), False, 0
+    eff_cut = float("nan")
     stat = eff = nbs = None
-    for rounds in range(1, max_rounds + 1):
+    for rounds in range(1, max_rounds + 1):  # noqa: B007 (the count is reported)
         fit = _shared_fit(p, kept.astype(np.float64), s.loss_scale_px)
         if fit is None:
             return FrameScreen(False, "ill_conditioned")
-        deltas, hs, s2, stat, eff = _own_corrections(p, fit.state, s.loss_scale_px)
+        deltas, hs, s2, stat, eff, jacs = _own_corrections(p, fit.state, s.loss_scale_px)
         lam, dof = _null(stat)
         q_null = _chi2_ppf(1.0 - alpha, dof)
-        new = stat <= lam * q_null
+        eff_cut = _effect_cut(eff, alpha)
+        new = (stat <= lam * q_null) & (eff <= eff_cut)
         majority = int(new.sum()) < (nf + 1) // 2
         if majority:
             new = np.zeros(nf, bool)
@@ -257,19 +284,25 @@ def screen_frames(
         if np.array_equal(new, kept):  # round 1: none left out, the fit used them all
             break
         kept = new
-    nbs = _neighbour_statistic(p, deltas, hs, s2)
     assert stat is not None and eff is not None  # max_rounds >= 1
+    nbs, nb_eff = _neighbour_statistic(p, deltas, hs, s2, jacs)
     cut = lam * q_null
+    # shared with its neighbours in either measure: what they leave of the frame's own
+    # correction is within the cut, or a small part of it (NEIGHBOUR_SHARE of the statistic,
+    # its square root of the image effect); an isolated frame is left out of the drift check
+    # too, so the doubt goes to the drift check, which exists to find shared errors
+    shared = (nbs <= np.maximum(cut, NEIGHBOUR_SHARE * stat)) | (
+        nb_eff <= np.maximum(eff_cut, np.sqrt(NEIGHBOUR_SHARE) * eff)
+    )
     frames = tuple(
         ScreenedFrame(
             fid, float(eff[f]), float(stat[f]), float(nbs[f]), not bool(kept[f]),
-            shared_with_neighbours=bool(
-                not kept[f] and nbs[f] <= max(cut, NEIGHBOUR_SHARE * stat[f])
-            ),
+            shared_with_neighbours=bool(not kept[f] and shared[f]),
+            neighbour_effect_px=float(nb_eff[f]),
         )
         for f, fid in enumerate(p.frame_ids)
     )
     return FrameScreen(
         True, "", frames, lam, q_null, cut, alpha, dof, rounds, majority,
-        tuple(f.frame_id for f in frames if f.left_out),
+        tuple(f.frame_id for f in frames if f.left_out), eff_cut,
     )

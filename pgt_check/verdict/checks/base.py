@@ -10,7 +10,7 @@ A check module (``pgt_check.verdict.checks``) turns the context into its entry; 
 from __future__ import annotations
 
 import logging
-from collections.abc import Collection, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from typing import Any
@@ -181,6 +181,46 @@ class CheckContext:
         the tolerance), else None (each fit's residuals decide)."""
         return (self.screen.agreement(), 1.0) if self.screen.tested else None
 
+    def agreement_of(self, ev: Sequence[Any]) -> tuple[Any, float] | None:
+        """``agreement`` of the frames a fit used (``ev``): the frames left out disagree by
+        construction and do not count."""
+        if self.agreement is None:
+            return None
+        used = {e.frame_id for e in ev}
+        mask = np.array([f.frame_id in used for f in self.screen.frames], bool)
+        return self.agreement[0][mask], self.agreement[1]
+
+    @cached_property
+    def drift(self) -> tuple[Any, dict[str, float], frozenset[str]]:
+        """The drift check's (entry, per-frame scores, flagged frame ids): windows along the
+        trajectory on every frame's evidence but those with an isolated error of their own
+        (a drifting segment's neighbours share its error)."""
+        from pgt_check.constants import DRIFT_THRESHOLD_FACTOR
+        from pgt_check.geometry import shared_errors as se
+        from pgt_check.verdict.shared_entries import drift_entry
+
+        thr = DRIFT_THRESHOLD_FACTOR * self.threshold_px
+        isolated = set(self.screen.isolated)
+        est = se.estimate_drift(
+            [e for e in self.all_fitted if e.frame_id not in isolated],
+            se.DriftSettings(calibration_translation=self.translation), threshold_px=thr,
+            calibration=self.mode,
+        )  # fmt: skip
+        return drift_entry(est, [m.frame_id for m in self.measurements], thr)
+
+    @cached_property
+    def outside_drift(self) -> list[Any] | None:
+        """The registration fits' evidence without a flagged drifting segment (None when none
+        was flagged or the frames outside it are not the majority of the evidence): the segment
+        is an error of its own, and the registration is what the frames outside it share
+        (pooled with it, a segment of 40 % of the run pulled the fit by 3 px on
+        bm_mictlantecuhli and failed every frame outside it)."""
+        flagged = self.drift[2]
+        if not flagged:
+            return None
+        outside = [e for e in self.fitted if e.frame_id not in flagged]
+        return outside if 2 * len(outside) > len(self.fitted) else None
+
     @property
     def own_error_px(self) -> float:
         """Fallback tolerance where too few frames to test them."""
@@ -232,8 +272,3 @@ def _calibration_checks(
                 change[cam_id] = calibration_change_entry(est, thr)
     return Calibrations(calib, cals, change)
 
-
-def exclude(ev: Sequence[Any], frame_ids: Collection[str]) -> list[Any]:
-    """``ev`` without the frames ``frame_ids``."""
-    drop = set(frame_ids)
-    return [e for e in ev if e.frame_id not in drop]

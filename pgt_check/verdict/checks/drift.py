@@ -11,8 +11,7 @@ from dataclasses import replace
 from typing import Any
 
 from pgt_check.constants import DRIFT_THRESHOLD_FACTOR
-from pgt_check.verdict.checks.base import CheckContext, exclude, single_row, status_lines
-from pgt_check.verdict.shared_entries import drift_entry
+from pgt_check.verdict.checks.base import CheckContext, single_row, status_lines
 from pgt_check.verdict.shared_results import DriftCheck
 
 KEY = "drift"
@@ -24,15 +23,7 @@ def threshold(ctx: CheckContext) -> float:
 
 
 def run(ctx: CheckContext) -> DriftCheck:
-    from pgt_check.geometry import shared_errors as se
-
-    thr = threshold(ctx)
-    est = se.estimate_drift(
-        exclude(ctx.all_fitted, ctx.screen.isolated),
-        se.DriftSettings(calibration_translation=ctx.translation), threshold_px=thr,
-        calibration=ctx.mode,
-    )  # fmt: skip
-    entry, scores, flagged = drift_entry(est, [m.frame_id for m in ctx.measurements], thr)
+    entry, scores, flagged = ctx.drift  # computed once: the registration fits read it too
     return replace(entry, scores=scores, flagged_ids=flagged)
 
 

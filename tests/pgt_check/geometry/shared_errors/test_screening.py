@@ -130,3 +130,26 @@ def test_a_drifting_segment_is_shared_with_neighbours_and_random_errors_are_isol
 def test_too_few_frames_are_not_tested():
     sc = screen_frames(make_evidence(0, n_frames=3))
     assert not sc.tested and sc.reason == "too_few_frames" and sc.left_out == ()
+
+
+def test_a_wrong_frame_with_few_points_is_left_out_where_the_given_poses_scatter():
+    """7-Scenes-like: every given pose scatters (0.2-0.4 deg, random) more than its points do,
+    which inflates the Wald test's null by the frames with many points; a wrong frame (1 deg)
+    with 15 points hides under that cut, not under the cut on the image effect, whose null is
+    the frames' own pose scatter (``_effect_cut``)."""
+    rng = np.random.default_rng(4)
+    ev = [replace(e, world_from_cam=perturb_pose(e.world_from_cam, rng.uniform(0.2, 0.4),
+                                                 0.005, rng))
+          for e in make_evidence(3, noise_px=0.3, outliers=0.05)]
+    i = 17
+    e = ev[i]
+    sub = rng.choice(len(e.pts2d), 15, replace=False)
+    ev[i] = replace(e, world_from_cam=perturb_pose(e.world_from_cam, 1.0, 0.005, rng),
+                    pts2d=e.pts2d[sub], pts3d=e.pts3d[sub])
+    sc = screen_frames(ev)
+    by = {f.frame_id: f for f in sc.frames}
+    bad = by[e.frame_id]
+    assert bad.statistic < sc.cut  # the Wald test alone keeps it
+    assert bad.effect_px > sc.effect_cut_px and bad.left_out
+    assert len(sc.left_out) <= 3  # the scatter itself is the null: few correct frames out
+    assert sc.agreement()[list(by).index(e.frame_id)] > 1.0
