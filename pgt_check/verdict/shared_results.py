@@ -168,8 +168,17 @@ class DriftCheck:
             str(d.get("message", "")), float(d.get("threshold_px", float("nan"))),
             tuple((str(a), str(b)) for a, b in d.get("segments") or ()),
             int(d.get("n_windows", 0)),
-            tuple(DriftFrame(**f) for f in d.get("per_frame") or ()),
+            tuple(_drift_frame(f) for f in d.get("per_frame") or ()),
         )  # fmt: skip
+
+
+def _drift_frame(f: Mapping[str, Any]) -> DriftFrame:
+    """A ``per_frame`` item of a drift entry; keys an older or hand-made summary lacks get
+    their defaults (no score, not flagged, evidence of its own)."""
+    return DriftFrame(
+        str(f.get("frame_id", "")), int(f.get("index", 0)), f.get("effect_px"), f.get("lo_px"),
+        bool(f.get("flagged", False)), bool(f.get("own_evidence", True)),
+    )
 
 
 @dataclass(frozen=True)
