@@ -63,20 +63,20 @@ PNG = REPORTS / "scenes_loso.png"
 #: constants that were fitted / chosen on the shared scenes (grep of ``pgt_check`` for the
 #: comments that say so); the ones with a grid are fitted leave-one-scene-out here
 FITTED = [
-    ("verdict.threshold_rel_diag", "0.02 (x image diagonal = threshold px)", "config_judge.py",
+    ("verdict.threshold_rel_diag", "0.02 (x image diagonal = threshold px)", "config/judge.py",
      "grid"),
-    ("run_checks.threshold_rel", "0.15 (x per-frame threshold)", "config_judge.py", "grid"),
-    ("gate.max_unverifiable_fraction", "0.5", "config_judge.py (README 'CI gate')", ""),
-    ("verdict.confident_inliers", "40", "config_judge.py", ""),
-    ("verdict.min_inliers", "15", "config_judge.py", ""),
-    ("enhance.auto_margin / CLEAR_MARGIN", "0.5", "constants.py, config.py", ""),
+    ("run_checks.threshold_rel", "0.15 (x per-frame threshold)", "config/judge.py", "grid"),
+    ("gate.max_unverifiable_fraction", "0.5", "config/judge.py (README 'CI gate')", ""),
+    ("verdict.confident_inliers", "40", "config/judge.py", ""),
+    ("verdict.min_inliers", "15", "config/judge.py", ""),
+    ("enhance.auto_margin / CLEAR_MARGIN", "0.5", "constants.py, config/run_config.py", ""),
     ("EDGES_DECISIVE_SUPPORT", "0.5", "constants.py (reports/edge_pipeline.md)", ""),
     ("OWN_ERROR_FRACTION", "0.5", "constants.py", ""),
     ("DRIFT_THRESHOLD_FACTOR", "2.0", "constants.py (7-Scenes near views)", ""),
     ("OFF_MESH_RATIO / MIN_NEIGHBOUR_FACTOR", "0.25 / 2.0", "constants.py", ""),
     ("FEATURE_ONLY_MIN_POINTS", "40", "constants.py (reports/accuracy.md)", ""),
     ("MIN_RELATIVE_PNP_INLIERS", "50", "correct/frames.py (castle colourless)", ""),
-    ("match.resize_max / correct.resize_max", "320 / 640 px", "config.py "
+    ("match.resize_max / correct.resize_max", "320 / 640 px", "config/run_config.py "
      "(reports/error_vs_runtime.md)", ""),
 ]
 GRIDS = {

@@ -4,7 +4,7 @@ claims before it starts (an input among them would be overwritten).
 
 One frozen ``OutputLayout`` (the module-level ``OUTPUTS``); every writer, the completion marker,
 the ownership check (``store.check_outputs_owned``) and the input-vs-output check
-(``inputs.run_output_paths``) read their names from it. Names are relative to the output folder,
+(``stages.inputs.run_output_paths``) read their names from it. Names are relative to the output folder,
 ``/``-separated. A new output file is one field here (with its group) and the line that writes it.
 The other commands' outputs are named here too (``COMPARE_OUTPUTS``, ``ENHANCE_OUTPUTS``).
 
@@ -111,7 +111,7 @@ class OutputLayout:
 
     def top_level(self) -> tuple[str, ...]:
         """Every name directly in the output folder a run writes (files and folders, sorted):
-        an input there would be overwritten (``inputs.run_output_paths``)."""
+        an input there would be overwritten (``stages.inputs.run_output_paths``)."""
         names = {n.split("/")[0] for n in (*self.group(STORE), *self.group(MARKER),
                                             *self.marked_files())}
         return tuple(sorted(names))

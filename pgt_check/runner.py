@@ -21,16 +21,6 @@ from typing import TYPE_CHECKING, Any
 
 from pgt_check.config import RunConfig
 from pgt_check.errors import InputError, RunInterrupted
-from pgt_check.inputs import (  # re-exported: tests and callers patch / import them here
-    check_side_inputs,
-    content_hash,
-    frame_input_keys,
-    images_outside_dataset,
-    input_file_hashes,
-    load_trajectory,
-    measurement_fingerprint,
-    preflight,
-)
 from pgt_check.io import check_frame_ids
 from pgt_check.measure import (
     FrameImages,
@@ -40,7 +30,22 @@ from pgt_check.measure import (
     pick_references,
 )
 from pgt_check.progress import frame_progress, log_progress
-from pgt_check.remeasure import PlainMeasure, correct_stage, self_test_stage, separation_stage
+from pgt_check.stages.inputs import (  # re-exported: tests and callers patch / import them here
+    check_side_inputs,
+    content_hash,
+    frame_input_keys,
+    images_outside_dataset,
+    input_file_hashes,
+    load_trajectory,
+    measurement_fingerprint,
+    preflight,
+)
+from pgt_check.stages.remeasure import (
+    PlainMeasure,
+    correct_stage,
+    self_test_stage,
+    separation_stage,
+)
 from pgt_check.store import mesh_content_hash
 from pgt_check.threads import run_threads
 from pgt_check.types import Frame, Trajectory
@@ -174,7 +179,7 @@ class PreparedRun:
     fingerprint: str
     trajectory_format: str = "in-memory"
     outside_dataset: tuple[str, ...] = ()
-    #: absolute path -> content hash of every input file (``inputs.input_file_hashes``: run.json
+    #: absolute path -> content hash of every input file (``stages.inputs.input_file_hashes``: run.json
     #: keeps them for ``pgt-check report``, which says which input changed since)
     input_files: Mapping[str, str] = field(default_factory=dict)
 
@@ -261,11 +266,11 @@ def _reference_pass(
 ) -> list[FrameMeasurement]:
     """Frames whose enhanced path leaned on a reference whose own absolute evidence did not
     pass are measured again with references among the frames whose evidence did
-    (``enhance_refs.verified_references``, on a first judgement of the main pass): a wrong
+    (``enhance.refs.verified_references``, on a first judgement of the main pass): a wrong
     neighbour must not decide, or starve, a correct frame. Their records are appended to the
     store (the latest one counts, so ``pgt-check report`` judges them too; ``--resume``
     measures them again from the first choice)."""
-    from pgt_check.enhance_refs import verified_references
+    from pgt_check.enhance.refs import verified_references
 
     if config.enhance.mode == "never" or not measurements:
         return measurements
@@ -284,9 +289,7 @@ def _reference_pass(
     keys = frame_input_keys(frames, refs)
     for f in frames:
         if f.frame_id in got:
-            rec = got[f.frame_id].to_json()
-            rec["input_key"] = keys.get(f.frame_id, "")
-            store.append(rec)
+            store.append_measurement(got[f.frame_id].to_json(), keys.get(f.frame_id, ""))
     return [got.get(m.frame_id, m) for m in measurements]
 
 
@@ -345,9 +348,7 @@ def _measure_into_store(
     with stop_on_sigint() as stop:
         results = iter_results(todo, checker_factory, config, stop=stop, stats=stats)
         for m in frame_progress(results, len(frames) - len(done), "pgt-check"):
-            rec = m.to_json()
-            rec["input_key"] = input_keys.get(m.frame_id, "")
-            store.append(rec)
+            store.append_measurement(m.to_json(), input_keys.get(m.frame_id, ""))
         interrupted = stop.is_set()
     if interrupted:
         n_done = len(_done_ids(store, ids, input_keys))
@@ -359,8 +360,8 @@ def _measure_into_store(
 
 def _done_ids(store: Any, ids: Sequence[str], input_keys: Mapping[str, str]) -> set[str]:
     """Frames of ``ids`` whose latest current record also has the current input key."""
-    latest = store.latest(ids)
-    return {fid for fid, rec in latest.items() if rec.get("input_key") == input_keys.get(fid)}
+    latest = store.latest_records(ids)
+    return {fid for fid, rec in latest.items() if rec.input_key == input_keys.get(fid)}
 
 
 def write_report_assets(

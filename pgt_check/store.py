@@ -26,18 +26,19 @@ import logging
 import os
 import time
 from collections.abc import Iterable, Iterator, Mapping
+from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import IO, Any
 
 from pgt_check import __version__
-from pgt_check.errors import FormatError, InputError
-from pgt_check.files import (
+from pgt_check.common.files import (
     MAX_SMALL_JSON_BYTES,
     atomic_write_text,
     load_json_limited,
     open_append,
 )
+from pgt_check.errors import FormatError, InputError
 from pgt_check.output_layout import OUTPUTS
 
 logger = logging.getLogger(__name__)
@@ -243,6 +244,27 @@ RECORDS_FILE = OUTPUTS.records
 MAX_RECORD_LINE_BYTES = 16 * 1024**2
 RUN_FILE = OUTPUTS.run
 FINGERPRINT_KEY = "_fingerprint"
+#: a record's key of the frame's inputs (pose, camera, image content, reference photos:
+#: ``stages.inputs.frame_input_keys``); a stored record counts as done only with the same key
+INPUT_KEY = "input_key"
+
+
+@dataclass(frozen=True)
+class StoredRecord:
+    """One record of the store read as the store keys it: the frame, the fingerprint and the
+    input key it was measured with (None: a record without one), and the record itself (a
+    ``FrameMeasurement.to_json`` with those keys)."""
+
+    frame_id: str
+    fingerprint: str | None
+    input_key: str | None
+    data: Mapping[str, Any]
+
+    @classmethod
+    def of(cls, rec: Mapping[str, Any]) -> StoredRecord:
+        key, fp = rec.get(INPUT_KEY), rec.get(FINGERPRINT_KEY)
+        return cls(str(rec["frame_id"]), None if fp is None else str(fp),
+                   None if key is None else str(key), rec)
 
 
 def _json_default(value: Any) -> Any:
@@ -542,6 +564,10 @@ class RecordStore:
                 out[fid] = rec
         return out
 
+    def latest_records(self, frame_ids: Iterable[str] | None = None) -> dict[str, StoredRecord]:
+        """``latest`` read as typed ``StoredRecord``s."""
+        return {fid: StoredRecord.of(rec) for fid, rec in self.latest(frame_ids).items()}
+
     def records_in_order(self, frame_ids: Iterable[str]) -> list[dict[str, Any]]:
         """Current records of ``frame_ids`` in that order; KeyError names the first missing."""
         ids = list(frame_ids)
@@ -562,6 +588,10 @@ class RecordStore:
         now = time.monotonic()
         sync = self._unsynced >= self.sync_every or now - self._last_sync >= self.sync_interval_s
         self._flush(sync=sync)
+
+    def append_measurement(self, record: Mapping[str, Any], input_key: str) -> None:
+        """Append a frame's measurement (``FrameMeasurement.to_json``) with its input key."""
+        self.append({**record, INPUT_KEY: input_key})
 
     def _flush(self, *, sync: bool) -> None:
         if self._file is None:

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pgt_check._checks import check_shape
+from pgt_check.common.checks import check_shape
 
 __all__ = [
     "CAMERA_MODELS",

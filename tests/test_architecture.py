@@ -10,7 +10,7 @@ PKG = Path(__file__).resolve().parents[1] / "pgt_check"
 
 #: layer of each top-level part; a module may import only its own layer or lower ones
 LAYERS = {
-    "errors": 0, "_checks": 0, "files": 0, "types": 0, "config": 0, "constants": 0, "config_load": 0, "config_judge": 0, "registry": 0, "_cli": 0,
+    "errors": 0, "common": 0, "types": 0, "config": 0, "constants": 0, "registry": 0,
     "progress": 0, "threads": 0, "output_layout": 0,
     "io": 1, "render": 1, "match": 1, "geometry": 1, "enhance": 1,
     "measure": 2,
@@ -18,8 +18,7 @@ LAYERS = {
     "store": 3,
     "correct": 4,
     "report": 5,
-    "executor": 6, "inputs": 6, "runner": 6, "remeasure": 6, "rejudge": 6, "compare": 6,
-    "enhance_folder": 6, "enhance_refs": 6,
+    "executor": 6, "stages": 6, "runner": 6, "rejudge": 6,
     "cli": 7, "commands": 7, "__main__": 7, "api": 7,
 }
 

@@ -3,7 +3,7 @@
 ``pgt-check TRAJECTORY --mesh MESH`` (no subcommand) is :mod:`pgt_check.commands.check`; the
 subcommands are listed in :data:`SUBCOMMANDS`. Every command module follows one convention:
 
-* ``build_parser() -> argparse.ArgumentParser``: a ``_cli.OneLineErrorParser`` whose ``prog``
+* ``build_parser() -> argparse.ArgumentParser``: a ``commands.common.OneLineErrorParser`` whose ``prog``
   is ``pgt-check`` or ``pgt-check NAME`` (usage errors are one line and exit 2; ``--help``);
 * ``main(argv) -> int``: parse, run the library function it wraps, print, return the exit code
   (0 done / gate passed, 1 gate failed, 2 usage, input or setup error, 130 interrupted).

@@ -19,16 +19,16 @@ from pathlib import Path
 from typing import Any
 
 from pgt_check import __version__
-from pgt_check._cli import (
+from pgt_check.commands import subcommands_help
+from pgt_check.commands.common import (
     OneLineErrorParser,
     configure_logging,
     install_sigterm_handler,
     parse_args,
 )
-from pgt_check.commands import subcommands_help
+from pgt_check.common.files import safe_text
 from pgt_check.config import RunConfig, load_config_file, merge
 from pgt_check.errors import ConfigError, InputError
-from pgt_check.files import safe_text
 
 logger = logging.getLogger("pgt_check")
 

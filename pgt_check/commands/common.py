@@ -9,7 +9,7 @@ import sys
 from collections.abc import Sequence
 from typing import Any, NoReturn
 
-from pgt_check.files import safe_text
+from pgt_check.common.files import safe_text
 
 
 class OneLineErrorParser(argparse.ArgumentParser):

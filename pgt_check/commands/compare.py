@@ -1,5 +1,5 @@
 """``pgt-check compare A B``: two pose sources for the same images (what is compared and how:
-``pgt_check.compare``). Writes ``compare.csv`` and ``compare.json`` (``--out``) and prints a
+``pgt_check.stages.compare``). Writes ``compare.csv`` and ``compare.json`` (``--out``) and prints a
 summary. Exit codes: 0 done, 2 usage or input error, 130 interrupted.
 """
 
@@ -13,23 +13,23 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from pgt_check._cli import (
+from pgt_check.commands.common import (
     OneLineErrorParser,
     configure_logging,
     install_sigterm_handler,
     parse_args,
     path_arg,
 )
-from pgt_check.compare import (
+from pgt_check.common.files import atomic_write_text, check_inputs_not_outputs, safe_text
+from pgt_check.errors import InputError
+from pgt_check.output_layout import COMPARE_OUTPUTS
+from pgt_check.stages.compare import (
     check_compare_options,
     checker_config,
     compare_trajectories,
     rows_csv_text,
     summary_lines,
 )
-from pgt_check.errors import InputError
-from pgt_check.files import atomic_write_text, check_inputs_not_outputs, safe_text
-from pgt_check.output_layout import COMPARE_OUTPUTS
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -1,5 +1,5 @@
 """``pgt-check enhance RENDERS MODEL --out DIR``: enhance a folder of renders with the nearest
-training photos (the inputs, naming convention and outputs: ``pgt_check.enhance_folder``).
+training photos (the inputs, naming convention and outputs: ``pgt_check.stages.enhance_folder``).
 
 Exit codes: 0 done; 2 usage, input or setup error (one line, no traceback); 130 interrupted.
 """
@@ -11,16 +11,16 @@ import logging
 import sys
 from collections.abc import Sequence
 
-from pgt_check._cli import (
+from pgt_check.commands.common import (
     OneLineErrorParser,
     configure_logging,
     install_sigterm_handler,
     parse_args,
     path_arg,
 )
-from pgt_check.enhance_folder import enhance_folder, summary_lines
+from pgt_check.common.files import safe_text
 from pgt_check.errors import InputError
-from pgt_check.files import safe_text
+from pgt_check.stages.enhance_folder import enhance_folder, summary_lines
 
 
 def build_parser() -> argparse.ArgumentParser:

@@ -12,10 +12,15 @@ import sys
 from collections.abc import Sequence
 from pathlib import Path
 
-from pgt_check._cli import OneLineErrorParser, install_sigterm_handler, parse_args, path_arg
+from pgt_check.commands.common import (
+    OneLineErrorParser,
+    install_sigterm_handler,
+    parse_args,
+    path_arg,
+)
+from pgt_check.common.files import MAX_SMALL_JSON_BYTES, load_json_limited, safe_text
 from pgt_check.config import RunConfig
 from pgt_check.errors import InputError
-from pgt_check.files import MAX_SMALL_JSON_BYTES, load_json_limited, safe_text
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.output_layout import OUTPUTS
 from pgt_check.verdict.outcome import InputsChanged
@@ -90,7 +95,7 @@ def _verdict_fields() -> list[tuple[str, str, str, type, object]]:
 def _bool_arg(text: str) -> bool:
     """argparse type of the boolean flags: ``parse_bool``; any other word is a usage error
     (exit 2), never read as false."""
-    from pgt_check.config_load import parse_bool
+    from pgt_check.config.load import parse_bool
 
     try:
         return parse_bool(text)
@@ -194,8 +199,8 @@ def _check_trusted_summary_not_ours(out: Path, calibration_from: str | None) -> 
     summary.json): a run refuses that (``--out`` would overwrite it); ``report`` took the run's
     own estimate as the trusted calibration and then rewrote the file it names (third audit,
     #39)."""
-    from pgt_check.files import check_inputs_not_outputs
-    from pgt_check.inputs import run_output_paths
+    from pgt_check.common.files import check_inputs_not_outputs
+    from pgt_check.stages.inputs import run_output_paths
 
     try:
         check_inputs_not_outputs([("--calibration-from summary", calibration_from)],

@@ -11,7 +11,7 @@ import math
 from dataclasses import dataclass
 from typing import Literal, Protocol
 
-from pgt_check.config_load import check_range as _check_range
+from pgt_check.config.load import check_range as _check_range
 
 __all__ = ["MAX_UNVERIFIABLE_DEFAULT", "MOVED_KEYS", "CorrectConfig", "GateConfig",
            "JudgingConfig", "RunChecksConfig", "VerdictConfig"]

@@ -14,8 +14,8 @@ import typing
 from pathlib import Path
 from typing import Any, Literal
 
+from pgt_check.common.files import MAX_SMALL_JSON_BYTES, read_text_limited
 from pgt_check.errors import ConfigError, InputError
-from pgt_check.files import MAX_SMALL_JSON_BYTES, read_text_limited
 
 
 def check_range(

@@ -17,17 +17,17 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from pgt_check.config_judge import (  # re-exported
+from pgt_check.config.judge import (
     MOVED_KEYS,
     CorrectConfig,
     GateConfig,
     RunChecksConfig,
     VerdictConfig,
 )
-from pgt_check.config_load import check_name as _check_name
-from pgt_check.config_load import check_range as _check_range
-from pgt_check.config_load import from_dict, merge  # re-exported
-from pgt_check.config_load import load_config_file as _read_config_file
+from pgt_check.config.load import check_name as _check_name
+from pgt_check.config.load import check_range as _check_range
+from pgt_check.config.load import from_dict
+from pgt_check.config.load import load_config_file as _read_config_file
 from pgt_check.errors import ConfigError
 
 #: upper bounds of the size options (beyond them a run would allocate without bound or hang):
@@ -38,10 +38,10 @@ MAX_TILE_GRID = 16
 MAX_ITERATIONS = 10_000_000
 
 __all__ = [
-    "ACTION_KEYS", "MEASUREMENT_SECTIONS", "PRESETS", "CorrectConfig", "EdgeConfig",
-    "EnhanceConfig", "GateConfig", "HomographyConfig", "InputConfig", "MatchConfig",
-    "PoseConfig", "ReferenceConfig", "RenderConfig", "RunChecksConfig", "RunConfig",
-    "VerdictConfig", "from_dict", "load_config_file", "merge", "moved_to_sections",
+    "ACTION_KEYS", "MAX_IMAGE_SIDE", "MAX_ITERATIONS", "MAX_KEYPOINTS", "MAX_TILE_GRID",
+    "MEASUREMENT_SECTIONS", "PRESETS", "EdgeConfig", "EnhanceConfig", "HomographyConfig",
+    "InputConfig", "MatchConfig", "PoseConfig", "ReferenceConfig", "RenderConfig", "RunConfig",
+    "load_config_file", "moved_to_sections",
 ]
 
 logger = logging.getLogger(__name__)
@@ -52,7 +52,7 @@ ACTION_KEYS = ("resume", "overwrite")
 
 
 def load_config_file(path: str | Path) -> dict[str, Any]:
-    """A JSON or TOML config file as settings (``config_load.load_config_file``), without the
+    """A JSON or TOML config file as settings (``config.load.load_config_file``), without the
     one-shot actions of ``ACTION_KEYS``: replaying a run's config.json must neither discard
     its stored records (``overwrite``) nor fail as replay-and-resume (``resume``). An action
     set in the file is ignored with a WARNING naming the option to pass instead. Settings of

@@ -188,8 +188,8 @@ def correct_run(
 ) -> tuple[dict[str, Correction], CorrectionsSummary]:
     """Run the correction step on the verdict stage's ``result``; returns (frame id -> its
     correction, the step's summary)."""
+    from pgt_check.common.files import atomic_write_text
     from pgt_check.correct.registration import main_pass_seconds
-    from pgt_check.files import atomic_write_text
     from pgt_check.io.writers import write_trajectory_file
 
     out = Path(out)

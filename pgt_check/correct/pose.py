@@ -131,7 +131,7 @@ def save_corrections(
 ) -> Path:
     path = Path(out_dir) / OUTPUTS.corrections
     doc = {"fingerprint": fingerprint, "corrections": [c.to_json() for c in corrections]}
-    from pgt_check.files import atomic_write_text
+    from pgt_check.common.files import atomic_write_text
 
     atomic_write_text(path, json.dumps(doc, indent=1) + "\n")
     return path

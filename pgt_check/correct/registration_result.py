@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from pgt_check.files import atomic_write_text
+from pgt_check.common.files import atomic_write_text
 from pgt_check.geometry.transforms import move_pose, rotation_angle_deg
 from pgt_check.output_layout import OUTPUTS
 from pgt_check.types import Trajectory

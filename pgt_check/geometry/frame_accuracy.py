@@ -28,7 +28,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pgt_check._checks import check_shape
+from pgt_check.common.checks import check_shape
 
 logger = logging.getLogger(__name__)
 

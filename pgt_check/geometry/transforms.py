@@ -6,7 +6,7 @@ import logging
 
 import numpy as np
 
-from pgt_check._checks import check_shape
+from pgt_check.common.checks import check_shape
 
 logger = logging.getLogger(__name__)
 

@@ -10,8 +10,8 @@ from typing import Any
 
 import numpy as np
 
+from pgt_check.common.files import MAX_INPUT_TEXT_BYTES, first_unsafe_char, read_text_limited
 from pgt_check.errors import FormatError
-from pgt_check.files import MAX_INPUT_TEXT_BYTES, first_unsafe_char, read_text_limited
 from pgt_check.geometry.transforms import QuaternionError, make_rigid, quat_to_rotmat
 
 logger = logging.getLogger(__name__)

@@ -14,8 +14,8 @@ from typing import Any
 
 import numpy as np
 
+from pgt_check.common.files import regular_file_size
 from pgt_check.errors import FormatError, InputError
-from pgt_check.files import regular_file_size
 from pgt_check.geometry.transforms import invert_rigid
 from pgt_check.io._text import QuaternionCounter, check_frame_id
 from pgt_check.io.camera import camera_from_colmap

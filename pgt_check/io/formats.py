@@ -6,8 +6,8 @@ import logging
 from collections.abc import Callable
 from pathlib import Path
 
+from pgt_check.common.files import MAX_INPUT_TEXT_BYTES, load_json_limited
 from pgt_check.errors import InputError
-from pgt_check.files import MAX_INPUT_TEXT_BYTES, load_json_limited
 from pgt_check.io._text import check_frame_ids, read_text
 from pgt_check.io.colmap import colmap_model_dir, read_colmap
 from pgt_check.io.hloc import read_hloc

@@ -11,8 +11,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pgt_check.common.files import read_bytes_limited, regular_file_size
 from pgt_check.errors import InputError, PixelCapError
-from pgt_check.files import read_bytes_limited, regular_file_size
 
 logger = logging.getLogger(__name__)
 

@@ -10,8 +10,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pgt_check.common.files import atomic_write_text
 from pgt_check.errors import InputError
-from pgt_check.files import atomic_write_text
 from pgt_check.geometry.transforms import rotmat_to_quat
 from pgt_check.io.camera import opencv_to_colmap_params
 from pgt_check.io.lamar import POSE_LAYOUT

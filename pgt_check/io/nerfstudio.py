@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
+from pgt_check.common.files import MAX_INPUT_TEXT_BYTES, load_json_limited
 from pgt_check.errors import FormatError, InputError
-from pgt_check.files import MAX_INPUT_TEXT_BYTES, load_json_limited
 from pgt_check.io._text import UniqueKeys, check_frame_id
 from pgt_check.io.camera import COLMAP_PIXEL_OFFSET
 from pgt_check.io.images import image_size

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pgt_check.files import atomic_write_text
+from pgt_check.common.files import atomic_write_text
 from pgt_check.geometry.transforms import invert_rigid, rotmat_to_quat
 from pgt_check.types import Camera, Trajectory
 

@@ -34,9 +34,9 @@ from typing import Any
 
 import numpy as np
 
-from pgt_check._checks import check_shape
+from pgt_check.common.checks import check_shape
+from pgt_check.common.files import atomic_write_text
 from pgt_check.correct.calibration import with_focal_scale
-from pgt_check.files import atomic_write_text
 from pgt_check.output_layout import OUTPUTS
 from pgt_check.types import Camera, opencv_to_colmap_params
 from pgt_check.verdict.shared import SharedChecks

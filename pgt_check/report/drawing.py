@@ -257,7 +257,7 @@ def write_jpeg(path: Path, bgr: np.ndarray, quality: int = JPEG_QUALITY) -> None
     ok, buf = cv2.imencode(".jpg", bgr, [cv2.IMWRITE_JPEG_QUALITY, int(quality)])
     if not ok:  # pragma: no cover - encoding a valid uint8 image does not fail
         raise ValueError(f"could not encode {path.name}")
-    from pgt_check.files import atomic_write_bytes
+    from pgt_check.common.files import atomic_write_bytes
 
     atomic_write_bytes(path, buf.tobytes())
 

@@ -1,7 +1,7 @@
-"""File writing shared by the output writers (``pgt_check.files``, re-exported here)."""
+"""File writing shared by the output writers (``pgt_check.common.files``, re-exported here)."""
 
 from __future__ import annotations
 
-from pgt_check.files import atomic_write_bytes, atomic_write_text
+from pgt_check.common.files import atomic_write_bytes, atomic_write_text
 
 __all__ = ["atomic_write_bytes", "atomic_write_text"]

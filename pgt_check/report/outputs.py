@@ -17,9 +17,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from pgt_check import __version__
+from pgt_check.common.files import safe_text
 from pgt_check.config import RunConfig
 from pgt_check.correct.pose import CORRECTION_COLUMNS
-from pgt_check.files import safe_text
 from pgt_check.measure.columns import MEASUREMENT_COLUMNS, TIMING_COLUMNS
 from pgt_check.output_layout import OUTPUTS
 from pgt_check.report.files import atomic_write_text

@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from pgt_check.files import atomic_write_text
+from pgt_check.common.files import atomic_write_text
 from pgt_check.output_layout import OUTPUTS
 
 if TYPE_CHECKING:

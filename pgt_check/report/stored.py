@@ -5,9 +5,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from pgt_check.common.files import MAX_SMALL_JSON_BYTES, load_json_limited, regular_file_size
 from pgt_check.config import moved_to_sections
 from pgt_check.errors import InputError
-from pgt_check.files import MAX_SMALL_JSON_BYTES, load_json_limited, regular_file_size
 from pgt_check.measure.record import FrameMeasurement, OldRecordError
 from pgt_check.store import FINGERPRINT_KEY
 

@@ -198,7 +198,7 @@ def _check_compare_args(a: Any, b: Any, mesh: Any, settings: Any) -> None:
 
 def check_compare_options(tie_px: float, limit: int | None) -> None:
     """InputError for a tie width that is not a finite number >= 0 or a limit below 1."""
-    from pgt_check.config_load import check_range
+    from pgt_check.config.load import check_range
 
     try:
         check_range("--tie-px", tie_px, 0)

@@ -44,7 +44,13 @@ from typing import Any
 
 import numpy as np
 
-from pgt_check.enhance_refs import (  # re-exported: the folder enhancement's public helpers
+from pgt_check.common.files import (
+    atomic_write_bytes,
+    atomic_write_text,
+    check_inputs_not_outputs,
+    safe_text,
+)
+from pgt_check.enhance.refs import (  # re-exported: the folder enhancement's public helpers
     IMAGE_SUFFIXES,
     RenderItem,
     find_renders,
@@ -53,12 +59,6 @@ from pgt_check.enhance_refs import (  # re-exported: the folder enhancement's pu
     pose_renders,
 )
 from pgt_check.errors import InputError, SetupError
-from pgt_check.files import (
-    atomic_write_bytes,
-    atomic_write_text,
-    check_inputs_not_outputs,
-    safe_text,
-)
 from pgt_check.output_layout import ENHANCE_OUTPUTS
 from pgt_check.types import Camera, Frame
 
@@ -271,7 +271,7 @@ def check_enhance_options(args: argparse.Namespace) -> None:
     """Every numeric option in range, and ``--out`` a folder that holds none of the inputs
     (InputError naming the option)."""
     from pgt_check.config import MAX_IMAGE_SIDE
-    from pgt_check.config_load import check_range
+    from pgt_check.config.load import check_range
 
     checks = [("--limit", args.limit, 1, None, False), ("--short-side", args.short_side, 1,
               MAX_IMAGE_SIDE, False), ("--iterations", args.iterations, 1, 1000, False),

@@ -16,9 +16,9 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from pgt_check.common.files import check_inputs_not_outputs
 from pgt_check.config import RunConfig
 from pgt_check.errors import InputError, MissingExtraError, SetupError
-from pgt_check.files import check_inputs_not_outputs
 from pgt_check.measure import SCHEMA_VERSION
 from pgt_check.store import content_hash
 from pgt_check.types import Frame, Trajectory

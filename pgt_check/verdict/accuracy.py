@@ -24,7 +24,7 @@ from typing import Any, cast
 import numpy as np
 
 from pgt_check.config import GateConfig
-from pgt_check.config_judge import JudgingConfig
+from pgt_check.config.judge import JudgingConfig
 from pgt_check.verdict.accuracy_text import _fmt, _need, accuracy_sentences  # re-exported
 from pgt_check.verdict.result import RunResult
 from pgt_check.verdict.shared import SharedChecks

@@ -7,7 +7,7 @@ from collections.abc import Iterable, Sequence
 from dataclasses import replace
 from typing import Any
 
-from pgt_check.config_judge import JudgingConfig
+from pgt_check.config.judge import JudgingConfig
 from pgt_check.enhance.base import Evidence
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.verdict.decide import (

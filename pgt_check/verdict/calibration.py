@@ -159,7 +159,7 @@ def load_trusted_calibrations(path: str) -> dict[str, CameraCalibration]:
     special, oversized or not JSON, a section of the wrong shape, a malformed estimate (a
     rotation that is not 3x3 orthonormal, a focal scale that is not a positive number,
     non-finite values) or no usable estimate at all."""
-    from pgt_check.files import MAX_SMALL_JSON_BYTES, load_json_limited
+    from pgt_check.common.files import MAX_SMALL_JSON_BYTES, load_json_limited
 
     try:
         doc = load_json_limited(path, MAX_SMALL_JSON_BYTES, "--calibration-from summary")

@@ -9,7 +9,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
-from pgt_check.config_judge import JudgingConfig
+from pgt_check.config.judge import JudgingConfig
 from pgt_check.verdict.accuracy import RunAccuracy, run_accuracy
 from pgt_check.verdict.decide import resolve_threshold_px
 from pgt_check.verdict.result import RunResult

@@ -10,7 +10,7 @@ constant fitted to a scene:
   along the run, chosen without looking at its error) are measured again at their pose rotated
   by +theta and -theta about one random axis in the image plane, theta moving the image centre
   by ``MOVE_MULTIPLE`` x the frame's threshold (``probe_plan``; the runner measures them,
-  ``remeasure.separation_stage``, with the path forced on and, for a reference path, the same
+  ``stages.remeasure.separation_stage``, with the path forced on and, for a reference path, the same
   reference).
 * **the statistic**: per frame the rank r of e0, the path's corner error at the given pose,
   among (e0, e+, e-), its errors at the given and the two moved poses (1 = smallest; a moved
@@ -356,7 +356,7 @@ def path_separation(
 
 def save_probes(out: str | Path, probes: Sequence[Probe], fingerprint: str = "") -> Path:
     """Write the probes to ``out / OUTPUTS.separation_probes`` (atomic); returns its path."""
-    from pgt_check.files import atomic_write_text
+    from pgt_check.common.files import atomic_write_text
 
     path = Path(out) / OUTPUTS.separation_probes
     doc = {"version": 1, "fingerprint": fingerprint, "probes": [p.to_json() for p in probes]}
@@ -370,7 +370,7 @@ def load_probes(out: str | Path, fingerprint: str | None = None) -> list[Probe]:
     path = Path(out) / OUTPUTS.separation_probes
     if not path.is_file():
         return []
-    from pgt_check.files import load_json_limited
+    from pgt_check.common.files import load_json_limited
 
     doc = load_json_limited(path, 256 * 1024 * 1024, OUTPUTS.separation_probes)
     if fingerprint is not None and doc.get("fingerprint") != fingerprint:

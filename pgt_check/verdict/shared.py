@@ -28,7 +28,7 @@ from typing import Any, cast
 
 import numpy as np
 
-from pgt_check.config_judge import JudgingConfig
+from pgt_check.config.judge import JudgingConfig
 from pgt_check.constants import (  # re-exported: callers and tests use them here
     DRIFT_THRESHOLD_FACTOR,
     MAX_FRAME_EVIDENCE_POINTS,

@@ -98,7 +98,7 @@ def test_report_rejudges_a_run_folder_of_the_older_config_layout(tmp_path, capsy
     """config.json of runs before the gate / run_checks sections (issue #26): `pgt-check report`
     reads the moved settings at their new place, its flags set the new sections, and the
     config.json it rewrites has the current layout."""
-    from pgt_check.config_judge import MOVED_KEYS
+    from pgt_check.config.judge import MOVED_KEYS
 
     out = tmp_path / "out"
     assert main([str(sample_scene / "trajectories.txt"), "--mesh",

@@ -12,14 +12,14 @@ import numpy as np
 import pytest
 
 from pgt_check.cli import main
-from pgt_check.enhance_folder import (
+from pgt_check.io import load_image, read_trajectory
+from pgt_check.stages.enhance_folder import (
     METRIC_COLUMNS,
     REFERENCE_COLUMNS,
     RenderItem,
     frame_index,
     nearest_references,
 )
-from pgt_check.io import load_image, read_trajectory
 from pgt_check.types import Camera, Frame
 
 #: frames whose own pose and whose neighbours' poses are unperturbed (perturbed.txt: 3, 7, 11)

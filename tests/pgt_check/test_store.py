@@ -143,3 +143,18 @@ def test_fsync_per_batch(tmp_path, monkeypatch):
         # but every record is already written to the OS (survives a SIGKILL)
         assert len((tmp_path / "records.jsonl").read_text().splitlines()) == 25
     assert len(calls) - n0 == 3  # the rest on close
+
+
+def test_records_read_as_typed_values_with_their_input_key(tmp_path):
+    """``append_measurement`` stamps a record with its input key; ``latest_records`` reads the
+    frame, fingerprint and input key back typed (None where a record has no input key)."""
+    from pgt_check.store import INPUT_KEY, StoredRecord
+
+    with RecordStore.open(tmp_path, "fp1", settings=SETTINGS) as store:
+        store.append_measurement(rec(0), "k0")
+        store.append(rec(1))
+        got = store.latest_records()
+        assert set(store.latest_records(["f001"])) == {"f001"}
+    assert got["f000"] == StoredRecord("f000", "fp1", "k0", got["f000"].data)
+    assert got["f000"].data[INPUT_KEY] == "k0" and got["f000"].data["corner_error_px"] == 0.0
+    assert got["f001"].input_key is None

@@ -163,8 +163,8 @@ def test_frames_dataframe_orders_columns():
     ],
 )
 def test_compare_api_wrong_types(args, kwargs, match, sample_scene):
-    from pgt_check.compare import compare_trajectories
     from pgt_check.io import read_trajectory
+    from pgt_check.stages.compare import compare_trajectories
 
     traj = read_trajectory(sample_scene / "trajectories.txt")
     mesh = Path(sample_scene / "mesh.glb")

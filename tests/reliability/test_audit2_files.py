@@ -81,13 +81,13 @@ def test_special_files_refused_by_every_loader(special, tmp_path):
 
 def test_reads_are_bounded(tmp_path, monkeypatch):
     """A file above the bound is refused from its size (never read)."""
-    from pgt_check import files
+    from pgt_check.common import files
     from pgt_check.config import load_config_file
 
     p = tmp_path / "c.json"
     p.write_text("{}" + " " * 5000)
     monkeypatch.setattr(files, "MAX_SMALL_JSON_BYTES", 1000)
-    from pgt_check import config_load
+    from pgt_check.config import load as config_load
 
     monkeypatch.setattr(config_load, "MAX_SMALL_JSON_BYTES", 1000)
     with pytest.raises(InputError, match="read at most"):

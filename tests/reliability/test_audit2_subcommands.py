@@ -60,7 +60,7 @@ def test_undecodable_and_control_character_names(scene, tmp_path, cli, case):
 def test_log_lines_stay_one_line():
     import logging
 
-    from pgt_check._cli import OneLineFormatter
+    from pgt_check.commands.common import OneLineFormatter
 
     rec = logging.LogRecord("pgt_check.x", logging.WARNING, __file__, 1, "image %s", ("a\nb\udcff",),
                             None)
@@ -180,8 +180,8 @@ def test_compare_numeric_options(argv, tmp_path, cli, case):
 
 
 def test_compare_api_checks_options():
-    from pgt_check.compare import compare_trajectories
     from pgt_check.errors import InputError
+    from pgt_check.stages.compare import compare_trajectories
     from pgt_check.types import Trajectory
 
     with pytest.raises(InputError):

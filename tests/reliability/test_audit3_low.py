@@ -258,7 +258,7 @@ def test_outputs_follow_the_umask(tmp_path, cli, base_args, umask, case):
 
 @pytest.mark.parametrize("mask", [0o077, 0o002, 0o027])
 def test_atomic_writer_follows_the_umask(mask, tmp_path, umask):
-    from pgt_check.files import atomic_write_text, current_umask
+    from pgt_check.common.files import atomic_write_text, current_umask
 
     umask(mask)
     assert current_umask() == mask

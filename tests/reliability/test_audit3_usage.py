@@ -66,7 +66,7 @@ def test_json_config_duplicate_top_level_key(tmp_path):
     cfg.write_text(json.dumps({"limit": 1})[:-1] + ', "limit": 2}')
     with pytest.raises(ConfigError, match="duplicate key 'limit'"):
         load_config_file(cfg)
-    from pgt_check.config_load import load_config_file as load_plain
+    from pgt_check.config.load import load_config_file as load_plain
 
     cfg.write_text('{"a": {"k": 0.5}, "b": {"k": 1}}')  # one name in two tables is fine
     assert load_plain(cfg) == {"a": {"k": 0.5}, "b": {"k": 1}}

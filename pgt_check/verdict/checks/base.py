@@ -17,7 +17,7 @@ from typing import Any
 
 import numpy as np
 
-from pgt_check.config_judge import JudgingConfig
+from pgt_check.config.judge import JudgingConfig
 from pgt_check.constants import OWN_ERROR_FRACTION
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.verdict.calibration import CameraCalibration, frame_homographies, trusted_calibration

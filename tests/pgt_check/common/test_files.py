@@ -1,4 +1,4 @@
-"""Reading and writing the user's files safely (``pgt_check/files.py``): size bounds, regular
+"""Reading and writing the user's files safely (``pgt_check/common/files.py``): size bounds, regular
 files only, UTF-8 and JSON as FormatErrors, one-line safe text, atomic writes that replace a
 symlink, and refusing outputs that are inputs."""
 
@@ -8,8 +8,7 @@ import os
 
 import pytest
 
-from pgt_check.errors import FormatError, InputError
-from pgt_check.files import (
+from pgt_check.common.files import (
     atomic_write_bytes,
     atomic_write_text,
     check_inputs_not_outputs,
@@ -19,6 +18,7 @@ from pgt_check.files import (
     regular_file_size,
     safe_text,
 )
+from pgt_check.errors import FormatError, InputError
 
 
 def test_regular_file_size_refuses_missing_paths_and_directories(tmp_path):

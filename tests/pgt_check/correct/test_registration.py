@@ -271,10 +271,10 @@ def test_a_deferred_refinement_is_said_and_writes_no_registered_trajectory(moved
 
 
 def test_the_runners_measure_keeps_one_serial_checker_over_the_rounds(monkeypatch):
-    """``remeasure.PlainMeasure`` (what a run hands the refinement): in serial mode the checker
+    """``stages.remeasure.PlainMeasure`` (what a run hands the refinement): in serial mode the checker
     (mesh, renderer) is built once for all rounds, closed once at the end, and each round's
     frames come back measured."""
-    from pgt_check import remeasure
+    from pgt_check.stages import remeasure
 
     built, closed = [], []
 

@@ -1,4 +1,4 @@
-"""``enhance_refs``: references chosen among the frames whose own absolute evidence passed
+"""``enhance.refs``: references chosen among the frames whose own absolute evidence passed
 (``absolute_passes``, ``verified_references``; issue 38), on judged runs built by hand. The
 render lookup of ``pgt-check enhance`` is tested with the subcommand
 (``tests/pgt_check/test_enhance_cli.py``)."""
@@ -12,7 +12,7 @@ from types import SimpleNamespace
 import numpy as np
 
 from pgt_check.config import RunConfig
-from pgt_check.enhance_refs import absolute_passes, verified_references
+from pgt_check.enhance.refs import absolute_passes, verified_references
 from pgt_check.geometry.transforms import make_rigid
 from pgt_check.types import Camera, Frame, Trajectory
 from pgt_check.verdict.decide import Verdict

@@ -56,7 +56,7 @@ def test_invert_and_apply():
 
 
 def test_transforms_do_not_import_types():
-    """No import circle: geometry.transforms needs only pgt_check._checks, and types imports it
+    """No import circle: geometry.transforms needs only pgt_check.common.checks, and types imports it
     at the top (check_shape stays importable from pgt_check.types)."""
     import subprocess
     import sys
@@ -65,7 +65,7 @@ def test_transforms_do_not_import_types():
         "import sys; import pgt_check.geometry.transforms; "
         "assert 'pgt_check.types' not in sys.modules, 'transforms imported types'; "
         "from pgt_check.types import check_shape; "
-        "from pgt_check._checks import check_shape as c; assert check_shape is c"
+        "from pgt_check.common.checks import check_shape as c; assert check_shape is c"
     )
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert res.returncode == 0, res.stderr

@@ -1,4 +1,4 @@
-"""The run's input checks (``pgt_check.inputs``): the memory pre-check before anything loads."""
+"""The run's input checks (``pgt_check.stages.inputs``): the memory pre-check before anything loads."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import pgt_check.render
 from pgt_check.cli import main
 from pgt_check.config import RunConfig
 from pgt_check.errors import SetupError
-from pgt_check.inputs import check_mesh_memory, load_trajectory
 from pgt_check.render import memory
+from pgt_check.stages.inputs import check_mesh_memory, load_trajectory
 
 
 def _no_mesh_load(*args, **kwargs):
@@ -56,7 +56,7 @@ def test_memory_estimate_uses_the_working_size_not_the_camera_size():
     from types import SimpleNamespace
 
     from pgt_check.config import RunConfig
-    from pgt_check.inputs import _largest_render
+    from pgt_check.stages.inputs import _largest_render
 
     def frame(w, h):
         return SimpleNamespace(camera=SimpleNamespace(width=w, height=h))

@@ -121,7 +121,7 @@ def test_the_null_holds_for_a_blind_path(q):
     for seed in range(200):
         rng = np.random.default_rng(100 + seed)
 
-        def blind(fid):
+        def blind(fid, rng=rng):
             m = _frame(fid, enhanced=float(rng.lognormal(2.5, 0.8)), verdict_path="enhanced")
             if rng.random() < q:
                 m = replace(m, enhanced=replace(m.enhanced, n_inliers=5))  # no alignment
