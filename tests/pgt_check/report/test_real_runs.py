@@ -11,7 +11,14 @@ from pgt_check.cli import main
 
 
 def _records(out):
-    return [json.loads(line) for line in (out / "records.jsonl").read_text().splitlines()]
+    """The store's current record of each frame, in trajectory order (run.json's frame ids): a
+    frame measured again (the reference pass: references whose own evidence passed) has a later
+    record in records.jsonl that replaces the first."""
+    latest = {}
+    for line in (out / "records.jsonl").read_text().splitlines():
+        rec = json.loads(line)
+        latest[rec["frame_id"]] = rec
+    return [latest[fid] for fid in json.loads((out / "run.json").read_text())["frame_ids"]]
 
 
 def test_report_of_a_sample_data_run(tmp_path, sample_scene):
