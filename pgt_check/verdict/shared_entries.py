@@ -330,8 +330,10 @@ def frame_screen_entry(screen: Any) -> FrameScreenCheck:
     rule = (
         f"own pose correction significant at {screen.alpha:.0%}: Wald statistic above "
         f"{screen.cut:.3g} = {screen.inflation:.3g} x the 99 % quantile of chi-square"
-        f"({screen.dof:.1f}), or an image effect above {screen.effect_cut_px:.3g} px; each "
-        "null fitted to the lower half of the frames' values"
+        f"({screen.dof:.1f})"
+        + (f", or an image effect above {screen.effect_cut_px:.3g} px; each null"
+           if np.isfinite(screen.effect_cut_px) else "; the null")
+        + " fitted to the lower half of the frames' values"
     )
     eff_cut = finite_or_none(screen.effect_cut_px)
     if not out:

@@ -215,7 +215,7 @@ def test_the_written_calibration_passes_its_own_recheck(kind, fmt, tmp_path, cap
     assert rc == 1 and cal["status"] in ("failed", "finding")
     assert "rig" in printed
     rig = _recheck([*printed["rig"], *extra], tmp_path / "rig", capsys)
-    assert _passes(rig), (kind, rig["counts"], rig["shared_errors"]["registration"])
+    assert _passes(rig), (kind, rig["rc"], rig["counts"], rig["shared_errors"]["registration"]["status"], {k: (v["status"], v.get("message")) for k, v in rig["shared_errors"]["calibration"].items()}, rig["shared_errors"].get("frame_screen", {}).get("n_left_out"))
     if kind == "translation":  # intrinsics cannot hold it: not written, not offered
         assert "intrinsics" not in printed
         assert not (tmp_path / "out" / "calibrated_sensors.txt").exists()
