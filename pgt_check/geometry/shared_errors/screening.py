@@ -111,8 +111,8 @@ class FrameScreen:
     rounds: int = 0
     majority_kept: bool = False
     left_out: tuple[str, ...] = field(default=())
-    #: the cut on a frame's own image effect (px; ``_effect_cut``)
-    effect_cut_px: float = float("nan")
+    #: the cut on a frame's own image effect (px; ``_effect_cut``; inf: not applied)
+    effect_cut_px: float = float("inf")
 
     @property
     def isolated(self) -> tuple[str, ...]:
@@ -122,8 +122,7 @@ class FrameScreen:
     def agreement(self) -> np.ndarray:
         """Per tested frame: the larger of statistic / cut and image effect / effect cut
         (<= 1: agrees with the shared model in both)."""
-        eff_cut = self.effect_cut_px if np.isfinite(self.effect_cut_px) else np.inf
-        return np.array([max(f.statistic / self.cut, f.effect_px / eff_cut)
+        return np.array([max(f.statistic / self.cut, f.effect_px / self.effect_cut_px)
                          for f in self.frames], np.float64)
 
 
@@ -160,6 +159,12 @@ def _null(stat: np.ndarray) -> tuple[float, float]:
         dof = 0.5 * (lo + hi)
     scale = float(np.median(low)) / _chi2_ppf(0.25, dof)
     return max(scale, 1e-12), dof
+
+
+def _image_effect(j: np.ndarray, d: np.ndarray) -> float:
+    """The image effect (px) of a pose change ``d`` (6,) on a frame's points: the mean length
+    of ``j @ d``, ``j`` the points' image Jacobian (n, 2, 6)."""
+    return float(np.mean(np.linalg.norm(j @ d, axis=1)))
 
 
 def _effect_cut(eff: np.ndarray, alpha: float) -> float:
@@ -215,7 +220,7 @@ def _own_corrections(p: _Problem, st: _State, loss_scale_px: float, iters: int =
         s2[f] = max(float(np.median(np.sum(ro * ro, axis=1)) / (2 * np.log(2))), 1e-12)
         deltas[f], hs[f] = d, h
         stat[f] = float(d @ h @ d) / s2[f]
-        eff[f] = float(np.mean(np.linalg.norm(j @ d, axis=1)))
+        eff[f] = _image_effect(j, d)
         jacs.append(j)
     return deltas, hs, s2, stat, eff, jacs
 
@@ -251,7 +256,7 @@ def _neighbour_statistic(p: _Problem, deltas, hs, s2, jacs) -> tuple[np.ndarray,
         for pred in _neighbour_predictions(p, deltas, f):
             diff = deltas[f] - pred
             out[f] = min(out[f], float(diff @ hs[f] @ diff) / s2[f])
-            out_eff[f] = min(out_eff[f], float(np.mean(np.linalg.norm(jacs[f] @ diff, axis=1))))
+            out_eff[f] = min(out_eff[f], _image_effect(jacs[f], diff))
     return out, out_eff
 
 
