@@ -2,7 +2,8 @@
 
 Public API (imported lazily, so ``import mariner_core`` does not import torch):
 ``MarinerConfig``, ``Mariner``, ``Enhancer``, ``EnhanceResult``, ``save_checkpoint``,
-``load_checkpoint``. Images are RGB float in [0, 1] everywhere.
+``load_checkpoint``, ``scene_check`` / ``SceneCheck`` (decoder or matching-only base for a
+scene, decided on the scene's own photos). Images are RGB float in [0, 1] everywhere.
 """
 
 from __future__ import annotations
@@ -15,8 +16,10 @@ __all__ = [
     "Enhancer",
     "Mariner",
     "MarinerConfig",
+    "SceneCheck",
     "load_checkpoint",
     "save_checkpoint",
+    "scene_check",
 ]
 
 _LAZY = {
@@ -26,6 +29,8 @@ _LAZY = {
     "EnhanceResult": "enhancer",
     "save_checkpoint": "enhancer",
     "load_checkpoint": "enhancer",
+    "SceneCheck": "scene_check",
+    "scene_check": "scene_check",
 }
 
 

@@ -30,7 +30,7 @@ import torch.nn.functional as F
 from .checkpoint import CHECKPOINT_KEYS, read_checkpoint  # noqa: F401  (re-exported)
 from .config import MarinerConfig
 from .frozen import ARCHITECTURE as FROZEN_ARCHITECTURE
-from .frozen import FrozenMariner, FrozenMarinerConfig
+from .frozen import OUTPUTS, FrozenMariner, FrozenMarinerConfig
 from .model import Mariner
 
 logger = logging.getLogger(__name__)
@@ -122,7 +122,8 @@ def _to_tensor(img: np.ndarray | torch.Tensor, name: str) -> tuple[torch.Tensor,
             raise ValueError(f"{name}: numpy images must be float32 RGB in [0, 1], got {img.dtype}")
         if img.ndim not in (3, 4) or img.shape[-1] != 3:
             raise ValueError(f"{name}: expected (H, W, 3) or (N, H, W, 3), got {img.shape}")
-        t = torch.from_numpy(np.ascontiguousarray(img))
+        img = np.ascontiguousarray(img) if img.flags.writeable else np.array(img)  # torch warns
+        t = torch.from_numpy(img)
         batched = img.ndim == 4
         t = (t if batched else t[None]).permute(0, 3, 1, 2)
         return t, "numpy", batched
@@ -210,32 +211,54 @@ class Enhancer:
                 "short_side=160), the method's native scale, or pass a larger max_match_pairs"
             )
 
+    def _check_output(self, output: str) -> None:
+        if output not in OUTPUTS:
+            raise ValueError(f"output must be one of {OUTPUTS}, got {output!r}")
+        if output != "model" and not isinstance(self.model, FrozenMariner):
+            raise ValueError(f"output={output!r} needs a frozen-matcher model (it has a "
+                             "matching-only base); this checkpoint is the spec network")
+
     @torch.inference_mode()
-    def _run(self, x: torch.Tensor, ref: torch.Tensor, iterations: int | None) -> torch.Tensor:
+    def _run_outputs(
+        self, x: torch.Tensor, ref: torch.Tensor, iterations: int | None, output: str
+    ) -> list[torch.Tensor]:
+        self._check_output(output)
         self.check_size((x.shape[-2], x.shape[-1]), (ref.shape[-2], ref.shape[-1]))
         x = x.to(self.device, torch.float32)
         ref = ref.to(self.device, torch.float32)
         if ref.shape[0] == 1 and x.shape[0] > 1:
             ref = ref.expand(x.shape[0], -1, -1, -1)
         with torch.autocast(self.device.type, dtype=torch.float16, enabled=self.fp16):
-            y = self.model(x, ref, iterations=iterations)[-1]
-        return y.float().clamp_(0.0, 1.0)
+            if isinstance(self.model, FrozenMariner):
+                ys = self.model(x, ref, iterations=iterations, output=output)
+            else:
+                ys = self.model(x, ref, iterations=iterations)[-1:]
+        return [y.float().clamp_(0.0, 1.0) for y in ys]
+
+    def _run(
+        self, x: torch.Tensor, ref: torch.Tensor, iterations: int | None, output: str = "model"
+    ) -> torch.Tensor:
+        return self._run_outputs(x, ref, iterations, output)[-1]
 
     def enhance(
         self,
         render: np.ndarray | torch.Tensor,
         reference: np.ndarray | torch.Tensor,
         iterations: int | None = None,
+        output: str = "model",
     ) -> np.ndarray | torch.Tensor:
         """Enhance at the given size; returns the render's type, layout and size, in [0, 1].
 
         The reference may differ in size (>= ``cfg.min_reference_size`` px per side); a single
         reference is broadcast over a batch of renders. Sizes whose matching exceeds
-        ``max_match_pairs`` raise ValueError naming :meth:`enhance_working`.
+        ``max_match_pairs`` raise ValueError naming :meth:`enhance_working`. ``output``: as
+        :meth:`enhance_working`.
         """
         x, kind, batched = _to_tensor(render, "render")
         ref, _, _ = _to_tensor(reference, "reference")
-        return _from_tensor(self._run(x, ref, iterations), kind, batched, render)
+        if output == "both":
+            raise ValueError("enhance returns one image: output 'model' or 'base'")
+        return _from_tensor(self._run(x, ref, iterations, output), kind, batched, render)
 
     def enhance_working(
         self,
@@ -243,12 +266,18 @@ class Enhancer:
         reference: np.ndarray | torch.Tensor,
         short_side: int = 160,
         iterations: int | None = None,
+        output: str = "model",
     ) -> EnhanceResult:
         """Resize both images to ``short_side`` (shorter side), enhance, return at working size.
 
         Returns an :class:`EnhanceResult` whose image has the render's type/layout at working
-        size and ``scale_x = W_in / W_work``, ``scale_y = H_in / H_work``.
+        size and ``scale_x = W_in / W_work``, ``scale_y = H_in / H_work``. ``output``: "model"
+        or "base" (the matching-only base of a frozen-matcher model; ``scene_check`` says
+        which one a scene should get).
         """
+        self._check_output(output)
+        if output == "both":
+            raise ValueError("enhance_working returns one image: output 'model' or 'base'")
         if short_side < self.model.cfg.min_reference_size:
             raise ValueError(
                 f"short_side {short_side} is below the minimum reference size "
@@ -259,7 +288,7 @@ class Enhancer:
         h, w = x.shape[-2:]
         xw = resize_short_side(x.float(), short_side)
         refw = resize_short_side(ref.float(), short_side)
-        y = self._run(xw, refw, iterations)
+        y = self._run(xw, refw, iterations, output)
         return EnhanceResult(
             _from_tensor(y, kind, batched, render),
             scale_x=w / xw.shape[-1],

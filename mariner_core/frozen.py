@@ -52,6 +52,8 @@ IMAGENET_STD = (0.229, 0.224, 0.225)
 PREPARED_KEYS = ("render", "warped", "score", "colour")
 #: relu3_3 is at 1/4 resolution: patches of 3x3 features cover 12x12 pixels
 STRIDE = 4
+#: what ``FrozenMariner.forward`` returns: the decoder's output, the matching-only base, or both
+OUTPUTS = ("model", "base", "both")
 #: initial gate logit of a gated decoder (sigmoid = 0.12)
 GATE_BIAS = -2.0
 
@@ -429,15 +431,27 @@ class FrozenMariner(nn.Module):
             )
 
     def forward(
-        self, render: torch.Tensor, reference: torch.Tensor, iterations: int | None = None
+        self, render: torch.Tensor, reference: torch.Tensor, iterations: int | None = None,
+        output: str = "model",
     ) -> list[torch.Tensor]:
-        """(N, 3, H, W) render + (N, 3, Hr, Wr) reference -> [(N, 3, H, W)] unclamped."""
+        """(N, 3, H, W) render + (N, 3, Hr, Wr) reference -> [(N, 3, H, W)] unclamped.
+
+        ``output``: "model" (the decoder's output), "base" (the matching-only base, no trained
+        weights: what ``scene_check`` falls back to on a scene the decoder does not improve) or
+        "both" ([model, base] from one matching)."""
+        if output not in OUTPUTS:
+            raise ValueError(f"output must be one of {OUTPUTS}, got {output!r}")
         self.check_inputs(render, reference)
         if iterations is not None and int(iterations) < 1:
             raise ValueError(f"iterations must be >= 1, got {iterations}")
         h, w = render.shape[-2:]
-        y = self.fuse(self.prepare(render, reference))
-        return [y[..., :h, :w]]
+        prep = self.prepare(render, reference)
+        if output == "base":
+            return [self.base(prep)[..., :h, :w]]
+        y = self.fuse(prep)[..., :h, :w]
+        if output == "both":
+            return [y, self.base(prep)[..., :h, :w]]
+        return [y]
 
     def num_trainable(self) -> int:
         return sum(p.numel() for p in self.parameters() if p.requires_grad)

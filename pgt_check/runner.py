@@ -46,6 +46,7 @@ from pgt_check.stages.remeasure import (
     self_test_stage,
     separation_stage,
 )
+from pgt_check.stages.scene_check import resolve_enhancer_output
 from pgt_check.store import mesh_content_hash
 from pgt_check.threads import run_threads
 from pgt_check.types import Frame, Trajectory
@@ -103,6 +104,9 @@ def _run_trajectory(traj: Trajectory, config: RunConfig, t0: float | None) -> Ru
     references = pick_references(traj, frames, config)
     checker = preflight(config, references)  # loads the mesh: its side files are known here
     try:
+        # MaRINeR's decoder or its matching-only base, from the scene's own photos: a setting
+        # of the whole run, so it is decided before the fingerprint
+        config = resolve_enhancer_output(config, frames, references, checker)
         t_hash = time.perf_counter()
         inputs = {"mesh": mesh_content_hash(config.input.mesh, _side_files(checker))}
         image_hashes: dict[str, str] = {}

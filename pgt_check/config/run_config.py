@@ -200,11 +200,20 @@ class EnhanceConfig:
     auto_min_inliers: int = 40
     auto_margin: float = 0.5
     reference: ReferenceConfig = field(default_factory=ReferenceConfig)
+    #: MaRINeR only: "model" (the trained decoder's output), "base" (the matching-only base, no
+    #: trained weights) or "auto": the scene check decides per run from a few of the run's own
+    #: frames (``stages.scene_check``; the decoder is kept only where it is significantly better
+    #: on them: a decoder can damage scenes unlike its training data, reports/mariner_scenes.md)
+    output: Literal["auto", "model", "base"] = "auto"
+    #: frames the scene check scores (spread along the trajectory); below 5 it cannot prefer
+    #: the decoder
+    scene_check_frames: int = 12
 
     def __post_init__(self) -> None:
         from pgt_check.registry import ENHANCERS
 
         _check_name("enhance", "method", self.method, ENHANCERS)
+        _check_range("enhance.scene_check_frames", self.scene_check_frames, 1, 1000)
         _check_range("enhance.iterations", self.iterations, 1, 1000)
         _check_range("enhance.short_side", self.short_side, 16, MAX_IMAGE_SIDE)
         _check_range("enhance.auto_min_inliers", self.auto_min_inliers, 0)

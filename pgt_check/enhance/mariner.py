@@ -30,6 +30,9 @@ class MarinerEnhancer:
     short_side: int = 160
     iterations: int | None = None
     threads: int | None = None
+    #: "model", "base" (the matching-only base) or "auto" (not decided yet: the decoder's
+    #: output until the run's scene check sets it, ``stages.scene_check``)
+    output: str = "model"
     _enhancer: Any = field(default=None, init=False, repr=False)
 
     def _load(self):
@@ -62,9 +65,9 @@ class MarinerEnhancer:
 
     @classmethod
     def from_config(cls, config: Any) -> MarinerEnhancer:
-        """From an ``EnhanceConfig`` (weights, device, short_side, iterations)."""
+        """From an ``EnhanceConfig`` (weights, device, short_side, iterations, output)."""
         return cls(weights=config.weights, device=config.device, short_side=config.short_side,
-                   iterations=config.iterations)
+                   iterations=config.iterations, output=getattr(config, "output", "model"))
 
     def enhance_image(self, render: np.ndarray, reference: np.ndarray) -> np.ndarray:
         """render: (h, w, 3) float32 RGB [0, 1]; reference: (hr, wr, 3). Returns (h, w, 3)."""
@@ -72,7 +75,8 @@ class MarinerEnhancer:
 
         enh = self._load()
         res = enh.enhance_working(render, reference, short_side=self.short_side,
-                                  iterations=self.iterations)
+                                  iterations=self.iterations,
+                                  output="base" if self.output == "base" else "model")
         img = np.asarray(res.image, dtype=np.float32)
         h, w = render.shape[:2]
         img = resize_image(img, (w, h), interpolation="cubic")
@@ -81,3 +85,18 @@ class MarinerEnhancer:
     def enhance(self, view: View, reference: ReferenceView, renderer: Any) -> EnhancedImage:
         image = self.enhance_image(view.render.rgb, reference.photo)
         return EnhancedImage(image, np.ones(image.shape[:2], bool))
+
+    def scene_scores(
+        self, render: np.ndarray, reference: np.ndarray, target: np.ndarray
+    ) -> tuple[float, float] | None:
+        """(decoder, matching-only base) PSNR-Y in dB of ``render`` enhanced with
+        ``reference`` against ``target`` (the render's own photo) at the working size, from one
+        matching (``mariner_core.scene_check.triple_scores``); None for a model without a base
+        (the spec network)."""
+        from mariner_core.frozen import FrozenMariner
+        from mariner_core.scene_check import triple_scores
+
+        enh = self._load()
+        if not isinstance(enh.model, FrozenMariner):
+            return None
+        return triple_scores(enh, render, reference, target, self.short_side, self.iterations)

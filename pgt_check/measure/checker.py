@@ -186,6 +186,30 @@ class FrameChecker:
                 logger.warning("frame %s: report panels not written: %s", frame.frame_id, err)
         return m
 
+    def scene_triple(self, frame: Frame) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
+        """(render, first reference's photo, the frame's own photo) at the frame's working
+        size, for the enhancer's scene check (``stages.scene_check``); None when the frame has
+        no readable photo, no usable reference or too little mesh in view."""
+        from pgt_check.io.images import resize_image
+        from pgt_check.io.photo import working_scale
+
+        refs = [r for r in self.references.get(frame.frame_id, ())
+                if r.image_file is not None and Path(r.image_file).is_file()]
+        if not refs or frame.image_file is None or not Path(frame.image_file).is_file():
+            return None
+        try:
+            photo, camera = self._load_photo(frame)
+            size = working_scale(camera.width, camera.height, self.config.match.resize_max)
+            cam_w = camera.scaled(size[0] / camera.width, size[1] / camera.height)
+            render = self.renderer.render(cam_w, frame.world_from_cam)
+            if render.coverage_fraction < self.config.verdict.min_coverage:
+                return None
+            ref = self._reference_view(frame, cam_w, refs[0])
+        except InputError as err:
+            logger.info("scene check: frame %s left out (%s)", frame.frame_id, err)
+            return None
+        return render.rgb, ref.photo, resize_image(photo, size)
+
     def _measure(self, frame: Frame, keep: FrameImages | None, clock: Clock) -> FrameMeasurement:
         base = failed_measurement(frame, MeasureReason.NONE)
         t = time.perf_counter()
