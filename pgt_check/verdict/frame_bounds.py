@@ -147,6 +147,33 @@ def frame_bounds(
     return out
 
 
+def pass_bound_px(
+    m: FrameMeasurement,
+    index: int,
+    bound: FrameBound,
+    calibration: CameraCalibration | None = None,
+    paths: Collection[str] | None = None,
+) -> float | None:
+    """The 95 % image-displacement bound a PASS is checked against (``decide.bounded_pass``):
+    the frame's bound (``frame_bounds``), or, where that rests on the feature points alone
+    while other agreeing evidence (the geometric edges) was left out of it, the bound from
+    every agreeing point. The feature-only rule guards the *pose* bound (edge points carry no
+    parallax, so their fit turns a shift into a rotation); the displacement at the points that
+    the PASS is checked against is what the edges measure directly, and a PASS that rests on
+    them must be checked against them (issue #38, 7-Scenes: PASS frames whose edges agree at
+    10-15 px were UNVERIFIABLE on a 22-53 px bound from 29-51 raw inliers). None: no bound."""
+    fa = bound.accuracy if bound.bounded else None
+    if fa is None or m.evidence is None or m.world_from_cam is None or not m.intrinsics:
+        return None
+    used = tuple(bound.evidence.replace("+calibration removed", "").split("+"))
+    if set(_all_sources(m.evidence, paths)) <= set(used):
+        return fa.effect_bound_px
+    every, sources = _fit(m, index, camera_matrix(m.intrinsics), calibration, False, paths)
+    if not every.success or not sources:
+        return fa.effect_bound_px
+    return every.effect_bound_px
+
+
 def _all_sources(evidence: Any, paths: Collection[str] | None) -> tuple[str, ...]:
     """The evidence's sources among ``paths`` (None: all)."""
     return tuple(s for s in evidence.sources if paths is None or source_path(s) in paths)

@@ -176,3 +176,63 @@ def test_a_pass_whose_own_bound_exceeds_the_threshold_is_unverifiable():
     assert noisy.reason.startswith("bound_above_threshold"), noisy.reason
     assert precise.verdict == "PASS"
     assert precise.bound.accuracy.effect_bound_px <= precise.threshold_px
+
+
+def test_a_pass_is_checked_against_every_point_it_rests_on():
+    """A PASS by raw features and the geometric edges together: the feature points alone (many
+    enough for the feature-only pose bound, but noisy) bound the displacement beyond the
+    threshold, the precise edge points that agree with the PASS do not. The PASS is checked
+    against all of them and stands (7-Scenes: edge-agreeing PASS frames were UNVERIFIABLE on a
+    22-53 px bound from 29-51 raw inliers); without the edges it is UNVERIFIABLE."""
+    from dataclasses import replace
+
+    from pgt_check.config import RunConfig
+    from pgt_check.enhance.base import Evidence
+    from pgt_check.measure import FrameMeasurement, PathMeasurement
+    from pgt_check.measure.record import AbsoluteEvidence
+    from pgt_check.verdict import judge_run
+    from pgt_check.verdict.frame_bounds import FEATURE_ONLY_MIN_POINTS
+
+    w, h, f = 320, 240, 288.0
+    k = np.array([[f, 0, (w - 1) / 2], [0, f, (h - 1) / 2], [0, 0, 1]])
+    rng = np.random.default_rng(3)
+    n_raw, n_edge = FEATURE_ONLY_MIN_POINTS + 5, 200
+
+    def cloud(n: int) -> np.ndarray:
+        return np.c_[rng.uniform(-1.5, 1.5, (n, 2)), rng.uniform(3.0, 5.0, n)]
+
+    def project(x: np.ndarray) -> np.ndarray:
+        return (x @ k.T)[:, :2] / x[:, 2:3]
+
+    raw_pts, edge_pts = cloud(n_raw), cloud(n_edge)
+    raw2d = project(raw_pts) + rng.normal(0, 6.0, (n_raw, 2))
+    edge2d = project(edge_pts) + rng.normal(0, 0.3, (n_edge, 2))
+
+    def path(kind: str, inl: int) -> PathMeasurement:
+        return PathMeasurement(
+            kind=kind, method=kind, evidence=Evidence.ABSOLUTE, n_kpts_render=500,
+            n_kpts_photo=500, n_matches=2 * inl, n_inliers=inl, inlier_ratio=0.5, reason="",
+            photo_from_render=tuple(map(tuple, np.eye(3))), corner_error_px=2.0)
+
+    def frame(fid: str, with_edges: bool) -> FrameMeasurement:
+        p2 = np.r_[raw2d, edge2d] if with_edges else raw2d
+        pc = np.r_[raw_pts, edge_pts] if with_edges else raw_pts
+        counts = (n_raw, n_edge) if with_edges else (n_raw,)
+        ev = AbsoluteEvidence(("raw", "edges") if with_edges else ("raw",),
+                              tuple(map(tuple, p2)), tuple(map(tuple, pc)), counts)
+        return FrameMeasurement(
+            frame_id=fid, timestamp=0, image_path=f"{fid}.png", width=w, height=h,
+            center=(0.0, 0.0, 0.0), coverage=0.8, camera_id="cam0",
+            world_from_cam=tuple(map(tuple, np.eye(4))),
+            intrinsics=(f, f, (w - 1) / 2, (h - 1) / 2), raw=path("raw", n_raw),
+            edges=path("edges", 900) if with_edges else None, evidence=ev, verdict_path="raw")
+
+    cfg = RunConfig()
+    cfg = replace(cfg, run_checks=replace(cfg.run_checks, enabled=False))
+    both, raw_only = judge_run([frame("both", True), frame("raw", False)], cfg).frames
+    # the frame's pose bound still rests on the feature points alone, and exceeds the threshold
+    assert both.bound.evidence == "raw"
+    assert both.bound.accuracy.effect_bound_px > both.threshold_px
+    assert both.verdict == "PASS", both.reason
+    assert raw_only.verdict == "UNVERIFIABLE"
+    assert raw_only.reason.startswith("bound_above_threshold")
