@@ -258,9 +258,11 @@ def main(argv: list[str] | None = None) -> int:
         "",
         "## Done-when criteria (near reference; the left-out model where there is one)",
         "",
-        "The model column is the decoder alone; 'with scene check' is what a run gets (each "
-        "half of the frames: the output the scene check chose on the other half, named in "
-        "brackets); the gains are those of the checked output.",
+        "The model column is the decoder alone; 'with scene check' is what a run gets: the "
+        "output the scene check chose (in brackets) from 12 other frames of the scene (bm_*: "
+        "the training pool, never seen by the left-out model; 7-Scenes: evaluation frames not "
+        "scored here), on the castle cross-fitted (each half of the frames gets the choice "
+        "made on the other half); the gains are those of the checked output.",
         "",
         md_table(["scene | render", "model", "raw", "base", "decoder alone", "with scene check",
                   "gain over raw", "vs base", "Ref = target > far > raw"],
