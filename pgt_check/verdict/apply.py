@@ -23,7 +23,7 @@ from pgt_check.verdict.decide import (
 from pgt_check.verdict.frame_bounds import (
     agreeing_paths,
     frame_bounds,
-    pass_bound_px,
+    pass_bound,
     trusted_calibrations,
     world_sensitivity,
 )
@@ -91,12 +91,13 @@ def judge_run(
     for i, (m, j, _) in enumerate(final):
         drift = None if shared is None else shared.drift_px.get(m.frame_id)
         b, thr = bounds[m.frame_id], v.threshold_for(m.width, m.height)
-        # a PASS and its 95 % bound agree, or the frame is UNVERIFIABLE; the bound from the
-        # evidence the PASS rests on (``pass_bound_px``)
+        # a PASS and its 95 % bound agree, or the frame is UNVERIFIABLE; the bound from all the
+        # evidence the PASS rests on (``pass_bound``)
+        if j.verdict is Verdict.PASS and b.bounded and b.accuracy is not None and (
+                b.accuracy.effect_bound_px > thr):
+            b = pass_bound(m, i, b, cals.get(m.camera_id) if cals else None,
+                           agree.get(m.frame_id))
         bound = b.accuracy.effect_bound_px if b.bounded and b.accuracy is not None else None
-        if j.verdict is Verdict.PASS and bound is not None and bound > thr:
-            bound = pass_bound_px(m, i, b, cals.get(m.camera_id) if cals else None,
-                                  agree.get(m.frame_id))
         j = bounded_pass(j, bound, thr)
         frames.append(FrameResult(m, j, thr, drift, b))
     n_barred = sum(f.reason.startswith(CANNOT_SEPARATE) for f in frames)

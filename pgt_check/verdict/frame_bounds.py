@@ -147,31 +147,31 @@ def frame_bounds(
     return out
 
 
-def pass_bound_px(
+def pass_bound(
     m: FrameMeasurement,
     index: int,
     bound: FrameBound,
     calibration: CameraCalibration | None = None,
     paths: Collection[str] | None = None,
-) -> float | None:
-    """The 95 % image-displacement bound a PASS is checked against (``decide.bounded_pass``):
-    the frame's bound (``frame_bounds``), or, where that rests on the feature points alone
-    while other agreeing evidence (the geometric edges) was left out of it, the bound from
-    every agreeing point. The feature-only rule guards the *pose* bound (edge points carry no
-    parallax, so their fit turns a shift into a rotation); the displacement at the points that
-    the PASS is checked against is what the edges measure directly, and a PASS that rests on
-    them must be checked against them (issue #38, 7-Scenes: PASS frames whose edges agree at
-    10-15 px were UNVERIFIABLE on a 22-53 px bound from 29-51 raw inliers). None: no bound."""
-    fa = bound.accuracy if bound.bounded else None
-    if fa is None or m.evidence is None or m.world_from_cam is None or not m.intrinsics:
-        return None
+) -> FrameBound:
+    """The bound of a PASS (``decide.bounded_pass`` checks its ``effect_bound_px``; frames.csv
+    and the accuracy statement read it): the frame's bound (``frame_bounds``), or, where that
+    rests on the feature points alone while other agreeing evidence (the geometric edges) was
+    left out of it, the bound from every agreeing point. The feature-only rule guards the pose
+    bound of frames in general (edge points carry no parallax, so their fit turns a shift into
+    a rotation); a PASS that rests on the edges too must be stated and checked on what it rests
+    on (issue #38, 7-Scenes: PASS frames whose edges agree at 10-15 px were UNVERIFIABLE on a
+    22-28 px bound from 44-51 raw inliers)."""
+    if not bound.bounded or m.evidence is None or m.world_from_cam is None or not m.intrinsics:
+        return bound
     used = tuple(bound.evidence.replace("+calibration removed", "").split("+"))
     if set(_all_sources(m.evidence, paths)) <= set(used):
-        return fa.effect_bound_px
+        return bound
     every, sources = _fit(m, index, camera_matrix(m.intrinsics), calibration, False, paths)
     if not every.success or not sources:
-        return fa.effect_bound_px
-    return every.effect_bound_px
+        return bound
+    return FrameBound(every, "+".join(sources) + ("+calibration removed" if calibration
+                                                   is not None else ""), "")
 
 
 def _all_sources(evidence: Any, paths: Collection[str] | None) -> tuple[str, ...]:

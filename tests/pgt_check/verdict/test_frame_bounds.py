@@ -230,9 +230,14 @@ def test_a_pass_is_checked_against_every_point_it_rests_on():
     cfg = RunConfig()
     cfg = replace(cfg, run_checks=replace(cfg.run_checks, enabled=False))
     both, raw_only = judge_run([frame("both", True), frame("raw", False)], cfg).frames
-    # the frame's pose bound still rests on the feature points alone, and exceeds the threshold
-    assert both.bound.evidence == "raw"
-    assert both.bound.accuracy.effect_bound_px > both.threshold_px
+    # the feature points alone bound the frame beyond the threshold ...
+    from pgt_check.verdict.frame_bounds import frame_bounds
+
+    alone = frame_bounds([frame("both", True)])["both"]
+    assert alone.evidence == "raw" and alone.accuracy.effect_bound_px > both.threshold_px
+    # ... the PASS is stated and checked on every point it rests on, within the threshold
     assert both.verdict == "PASS", both.reason
+    assert both.bound.evidence == "raw+edges"
+    assert both.bound.accuracy.effect_bound_px <= both.threshold_px
     assert raw_only.verdict == "UNVERIFIABLE"
     assert raw_only.reason.startswith("bound_above_threshold")
