@@ -190,17 +190,12 @@ class FrameChecker:
         """(render, first reference's photo, the frame's own photo) at the frame's working
         size, for the enhancer's scene check (``stages.scene_check``); None when the frame has
         no readable photo, no usable reference or too little mesh in view."""
-        from pgt_check.io.images import resize_image
-        from pgt_check.io.photo import working_scale
-
         refs = [r for r in self.references.get(frame.frame_id, ())
                 if r.image_file is not None and Path(r.image_file).is_file()]
         if not refs or frame.image_file is None or not Path(frame.image_file).is_file():
             return None
         try:
-            photo, camera = self._load_photo(frame)
-            size = working_scale(camera.width, camera.height, self.config.match.resize_max)
-            cam_w = camera.scaled(size[0] / camera.width, size[1] / camera.height)
+            photo, _, _, _, cam_w, photo_w = self._working_photo(frame)
             render = self.renderer.render(cam_w, frame.world_from_cam)
             if render.coverage_fraction < self.config.verdict.min_coverage:
                 return None
@@ -208,21 +203,27 @@ class FrameChecker:
         except InputError as err:
             logger.info("scene check: frame %s left out (%s)", frame.frame_id, err)
             return None
-        return render.rgb, ref.photo, resize_image(photo, size)
+        return render.rgb, ref.photo, photo_w
+
+    def _working_photo(
+        self, frame: Frame
+    ) -> tuple[np.ndarray, Camera, tuple[int, int], tuple[float, float], Camera, np.ndarray]:
+        """(photo, camera, working size, scale, working camera, photo at working size) of a
+        frame whose image exists (the matching size ``match.resize_max``)."""
+        from pgt_check.io.images import resize_image
+        from pgt_check.io.photo import working_scale
+
+        photo, camera = self._load_photo(frame)
+        size = working_scale(camera.width, camera.height, self.config.match.resize_max)
+        scale = (size[0] / camera.width, size[1] / camera.height)
+        return photo, camera, size, scale, camera.scaled(*scale), resize_image(photo, size)
 
     def _measure(self, frame: Frame, keep: FrameImages | None, clock: Clock) -> FrameMeasurement:
         base = failed_measurement(frame, MeasureReason.NONE)
         t = time.perf_counter()
         if frame.image_file is None or not Path(frame.image_file).is_file():
             return replace_measurement(base, error=MeasureReason.IMAGE_MISSING)
-        photo, camera = self._load_photo(frame)
-        from pgt_check.io.images import resize_image
-        from pgt_check.io.photo import working_scale
-
-        size = working_scale(camera.width, camera.height, self.config.match.resize_max)
-        scale = (size[0] / camera.width, size[1] / camera.height)
-        cam_w = camera.scaled(*scale)
-        photo_w = resize_image(photo, size)
+        photo, camera, size, scale, cam_w, photo_w = self._working_photo(frame)
         clock.add("load", time.perf_counter() - t)
         t = time.perf_counter()
         render = self.renderer.render(cam_w, frame.world_from_cam)

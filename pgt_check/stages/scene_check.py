@@ -17,30 +17,19 @@ from collections.abc import Mapping, Sequence
 from dataclasses import replace
 from typing import Any, Literal
 
-import numpy as np
-
+from pgt_check.common.sequences import evenly_spaced
 from pgt_check.config import RunConfig
 from pgt_check.types import Frame
 
 logger = logging.getLogger(__name__)
 
-__all__ = ["needs_scene_check", "resolve_enhancer_output", "spread"]
+__all__ = ["needs_scene_check", "resolve_enhancer_output"]
 
 
 def needs_scene_check(config: RunConfig) -> bool:
     """Whether the run enhances with MaRINeR and leaves its output to the scene check."""
     e = config.enhance
     return e.mode != "never" and e.method == "mariner" and e.output == "auto"
-
-
-def spread(frames: Sequence[Frame], n: int) -> list[Frame]:
-    """Up to ``n`` frames evenly spread over ``frames`` (in order)."""
-    if n <= 0 or not frames:
-        return []
-    if len(frames) <= n:
-        return list(frames)
-    idx = np.unique(np.round(np.linspace(0, len(frames) - 1, n)).astype(int))
-    return [frames[i] for i in idx]
 
 
 def resolve_enhancer_output(
@@ -62,7 +51,7 @@ def resolve_enhancer_output(
     candidates = [f for f in frames if references.get(f.frame_id)]
     model_db: list[float] = []
     base_db: list[float] = []
-    for frame in spread(candidates, config.enhance.scene_check_frames):
+    for frame in evenly_spaced(candidates, config.enhance.scene_check_frames):
         triple = checker.scene_triple(frame)
         if triple is None:
             continue

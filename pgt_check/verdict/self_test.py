@@ -44,6 +44,7 @@ from typing import Any
 
 import numpy as np
 
+from pgt_check.common.sequences import evenly_spaced
 from pgt_check.config import RunConfig
 from pgt_check.geometry.transforms import axis_angle_to_rotmat, move_pose
 from pgt_check.measure.record import FrameMeasurement
@@ -141,9 +142,7 @@ def choose_frames(results: Sequence[FrameResult], frames: Sequence[Frame],
     by_id = {f.frame_id: f for f in frames}
     ok = [r.frame_id for r in results
           if r.verdict == Verdict.PASS.value and r.bound.bounded and r.frame_id in by_id]
-    if len(ok) > n:
-        ok = [ok[i] for i in np.linspace(0, len(ok) - 1, n).round().astype(int)]
-    return [by_id[fid] for fid in ok]
+    return [by_id[fid] for fid in evenly_spaced(ok, n)]
 
 
 def evidence_config(config: RunConfig) -> RunConfig:

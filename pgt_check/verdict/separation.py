@@ -43,6 +43,7 @@ from typing import Any
 
 import numpy as np
 
+from pgt_check.common.sequences import evenly_spaced
 from pgt_check.config import VerdictConfig
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.output_layout import OUTPUTS
@@ -240,13 +241,6 @@ def _focal(m: FrameMeasurement) -> float | None:
     return f if f > 0 else None
 
 
-def _spread(ids: Sequence[str], n: int) -> list[str]:
-    """Up to ``n`` of ``ids``, evenly spaced."""
-    if len(ids) <= n:
-        return list(ids)
-    return [ids[i] for i in np.linspace(0, len(ids) - 1, n).round().astype(int)]
-
-
 def probe_plan(
     measurements: Sequence[FrameMeasurement],
     config: VerdictConfig,
@@ -268,9 +262,9 @@ def probe_plan(
         if len(ok) < MIN_PAIRS:
             continue
         reuse = [f for f in ok if f in chosen]
-        pick = _spread(reuse, n)
+        pick = evenly_spaced(reuse, n)
         if len(pick) < n:
-            pick += _spread([f for f in ok if f not in chosen], n - len(pick))
+            pick += evenly_spaced([f for f in ok if f not in chosen], n - len(pick))
         for fid in pick:
             chosen.setdefault(fid, []).append(name)
     rng = np.random.default_rng(SEED)

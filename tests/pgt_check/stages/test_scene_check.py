@@ -11,7 +11,7 @@ import pytest
 
 from pgt_check.config import RunConfig
 from pgt_check.errors import ConfigError
-from pgt_check.stages.scene_check import needs_scene_check, resolve_enhancer_output, spread
+from pgt_check.stages.scene_check import needs_scene_check, resolve_enhancer_output
 from pgt_check.types import Camera, Frame
 
 
@@ -66,13 +66,6 @@ def test_only_mariner_runs_with_auto_output_need_it() -> None:
     assert not needs_scene_check(_config(mode="never"))
     with pytest.raises(ConfigError, match="output"):
         _config(output="decoder")
-
-
-def test_spread_covers_the_trajectory() -> None:
-    frames = _frames(100)
-    got = spread(frames, 12)
-    assert len(got) == 12 and got[0] is frames[0] and got[-1] is frames[-1]
-    assert spread(frames[:5], 12) == frames[:5] and spread(frames, 0) == []
 
 
 @pytest.mark.parametrize(("gains", "want"), [([1.0, 1.2, 0.8, 1.5], "model"),
