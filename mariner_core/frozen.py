@@ -42,6 +42,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from .backbones import VGG16Features
+from .patch_match import patch_dots, patch_norm, repeat_last_rank
 
 __all__ = ["FrozenMariner", "FrozenMarinerConfig", "PREPARED_KEYS"]
 
@@ -162,44 +163,6 @@ def colour_transfer(render: torch.Tensor, reference: torch.Tensor) -> torch.Tens
     return (out * mask).clamp(0.0, 1.0)
 
 
-def _patch_norm(f: torch.Tensor, r: int, area: float) -> torch.Tensor:
-    """|patch|^2 by a box filter (zero padding, as the patches in ``_patch_dots``), square-rooted:
-    (N, C, H, W) -> (N, 1, H, W) norms of the (2r+1)^2-position patches."""
-    e = f.pow(2).sum(1, keepdim=True)
-    return (F.avg_pool2d(e, 2 * r + 1, 1, r, count_include_pad=True) * area).sqrt()
-
-
-def _patch_dots(
-    fr: torch.Tensor, fp: torch.Tensor, r: int, h: int, w4: int, hp: int, wp: int
-) -> torch.Tensor:
-    """Patch dot products of ``h`` render rows against every reference patch.
-
-    ``fr``: the padded render rows y0-r .. y1+r (N, C, h + 2r, w4 + 2r); ``fp``: the padded
-    reference (N, C, hp + 2r, wp + 2r). Returns (N, h * w4, hp * wp).
-    """
-    n = fr.shape[0]
-    # pointwise similarities of the padded rows y0-r .. y1+r against the padded reference
-    s = torch.einsum("ncyx,ncij->nyxij", fr, fp)
-    # patch dot product: sum over offsets d of S[p + d, q + d] (both indices shifted),
-    # separable: first along x, then along y
-    ax = s[:, :, 0:w4, :, 0:wp].clone()
-    for dx in range(1, 2 * r + 1):
-        ax += s[:, :, dx : dx + w4, :, dx : dx + wp]
-    acc = ax[:, 0:h, :, 0:hp].clone()
-    for dy in range(1, 2 * r + 1):
-        acc += ax[:, dy : dy + h, :, dy : dy + hp]
-    return acc.reshape(n, h * w4, hp * wp)
-
-
-def _repeat_last_rank(
-    sc: torch.Tensor, ix: torch.Tensor, rep: int
-) -> tuple[torch.Tensor, torch.Tensor]:
-    """Append ``rep`` copies of the last match rank to scores and indices (N, k, h, w)."""
-    sc = torch.cat([sc, sc[:, -1:].expand(-1, rep, -1, -1)], 1)
-    ix = torch.cat([ix, ix[:, -1:].expand(-1, rep, -1, -1)], 1)
-    return sc, ix
-
-
 class _Res(nn.Module):
     def __init__(self, c: int) -> None:
         super().__init__()
@@ -310,8 +273,8 @@ class FrozenMariner(nn.Module):
         hp, wp = f_p.shape[-2:]
         r = self.cfg.patch_size // 2
         area = float(self.cfg.patch_size**2)
-        norm_r = _patch_norm(f_r, r, area).flatten(1)  # (N, Lr)
-        norm_p = _patch_norm(f_p, r, area).flatten(1)  # (N, Lp)
+        norm_r = patch_norm(f_r, r, area).flatten(1)  # (N, Lr)
+        norm_p = patch_norm(f_p, r, area).flatten(1)  # (N, Lp)
         fr = F.pad(f_r, (r, r, r, r))
         fp = F.pad(f_p, (r, r, r, r))
         lp = hp * wp
@@ -322,7 +285,7 @@ class FrozenMariner(nn.Module):
         scores, idx = [], []
         for y0 in range(0, h4, rows):
             y1 = min(h4, y0 + rows)
-            acc = _patch_dots(fr[:, :, y0 : y1 + 2 * r], fp, r, y1 - y0, w4, hp, wp)
+            acc = patch_dots(fr[:, :, y0 : y1 + 2 * r], fp, r, y1 - y0, w4, hp, wp)
             den = norm_r[:, y0 * w4 : y1 * w4, None] * norm_p[:, None, :] + 1e-6
             v, i = (acc / den).topk(k, dim=2)
             scores.append(v)
@@ -330,7 +293,7 @@ class FrozenMariner(nn.Module):
         sc = torch.cat(scores, 1).transpose(1, 2).reshape(n, k, h4, w4)
         ix = torch.cat(idx, 1).transpose(1, 2).reshape(n, k, h4, w4)
         if k < self.cfg.top_k:  # tiny references: repeat the last rank
-            sc, ix = _repeat_last_rank(sc, ix, self.cfg.top_k - k)
+            sc, ix = repeat_last_rank(sc, ix, self.cfg.top_k - k)
         return sc, ix
 
     @staticmethod
