@@ -9,7 +9,7 @@ judged with ``--remove-calibration``). Prints one JSON line per scene: flagged f
 verdicts, the registration check, per-frame AUC, wrong / correct frames flagged. Measurements
 are cached as ``scenes_loso.py``'s are.
 
-    python benchmarks/scenes_loso_half.py [--scenes a,b]
+    python benchmarks/scenes_loso_half.py [--scenes a,b] [--reuse-measurements]
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ import json
 import time
 
 import scenes_loso as L
+import shared_errors
 from shared_errors import measure
 from shared_errors_cases import evaluate, scene_depth
 
@@ -28,7 +29,10 @@ from pgt_eval import perturb_runs
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--scenes", default=",".join(L.SCENES))
+    p.add_argument("--reuse-measurements", action="store_true",
+                   help="judge the newest cached measurements (as scenes_loso.py)")
     a = p.parse_args(argv)
+    shared_errors.REUSE_MEASUREMENTS = a.reuse_measurements
     for name in [s for s in a.scenes.split(",") if s]:
         traj, mesh, cfgd = L.load_scene(name, 30)
         _, given, _ = measure(traj, mesh, cfgd, f"loso-{name}-given")

@@ -5,14 +5,24 @@ render points ``p`` lifted to the checked camera's frame. If the checked pose is
 ``true_cam_from_checked_cam = (R, t)``, the photo sees ``u = pi(K (R p + t))``. This module fits
 ``(R, t)`` by robust Gauss-Newton (Cauchy loss, scale graduated down to ``loss_scale_px``) and
 bootstraps it by **image blocks**: the points are grouped into ``grid x grid`` cells of the
-photo and the cells are resampled with replacement (one Gauss-Newton step from the estimate per
-replicate, as the run-level estimators do). Block resampling keeps the spatially correlated part
-of the match noise (a mesh detail off by a few px moves all points near it) in the interval;
-resampling single points would treat them as independent and give too narrow a bound.
+photo and the cells are resampled with replacement. Block resampling keeps the spatially
+correlated part of the match noise (a mesh detail off by a few px moves all points near it) in
+the interval; resampling single points would treat them as independent and give too narrow a
+bound. Each replicate resamples the blocks' estimating-equation scores and solves them with the
+whole frame's matrix (the score bootstrap, the usual remedy with few clusters): resampling the
+matrix too made a replicate that dropped the few blocks fixing one direction take a step with a
+nearly singular matrix, and frames with ~40 points in ~10 blocks got bounds of 30-60 px around
+estimates of 4-10 px (reports/scenes_loso.md, seventh and eighth sessions).
+
+No bootstrap sees a bias of the estimate itself: on real frames the estimate of a large error
+is a few % low for rotations and up to 13 % low for translations (part of a camera shift is
+taken for a rotation; reports/accuracy.md). The bounds allow for it: the replicates' 95th
+percentile divided by ``1 - ESTIMATE_BIAS`` per measure.
 
 Reported per frame (``FrameAccuracy``): the rotation angle (deg) and camera-centre distance
 (scene units) of the correction, its mean image displacement at the frame's points (px); a
-one-sided 95 % upper bound of each (the 95th percentile of the bootstrap replicates' size); the
+one-sided 95 % upper bound of each (the 95th percentile of the bootstrap replicates' size, with
+the bias allowance above); the
 noise of each (95th percentile of the replicates' distance to the estimate: an error smaller
 than this cannot be told from zero on this frame); and the frame's sensitivities (px per degree
 of rotation and per scene unit of camera translation: at the evidence points, averaged over the
@@ -34,6 +44,13 @@ logger = logging.getLogger(__name__)
 
 #: quantile over error axes of the ``low_*`` sensitivities (95 % of axes move the corners more)
 LOW_AXIS_QUANTILE = 0.05
+
+#: relative shortfall of the estimate of a large error the bounds allow for, per measure
+#: (rotation, camera-centre distance, image effect): rotations measured 1-4 % low, translations
+#: up to 13 % low (reports/accuracy.md); the image effect is what the points measure directly,
+#: allowed as much as the rotation. Without it the score bootstrap covered 8-11 of 12 injected
+#: rotation errors on the bm_* scenes, with it 9-12 (the matrix-resampling bootstrap: 10-12)
+ESTIMATE_BIAS = (0.05, 0.15, 0.05)
 
 #: closed set of reasons a frame gets no bound
 ACCURACY_REASONS = ("too_few_points", "too_few_blocks", "ill_conditioned", "too_few_inliers")
@@ -244,9 +261,8 @@ def _block_equations(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Per-block estimating equations at the estimate: (H (nb, 6, 6), g (nb, 6)).
 
-    Replicate b = block counts c_b: delta_b = -(sum c H_c)^-1 (sum c g_c), g = sum J^T psi(r)
-    with psi(r) = w(r) r (Cauchy); ``jac`` (N, 2, 6), ``r0`` (N, 2) residuals (0 where not
-    ``ok``), ``w`` (N,) weights."""
+    g = sum J^T psi(r) with psi(r) = w(r) r (Cauchy), H its derivative; ``jac`` (N, 2, 6),
+    ``r0`` (N, 2) residuals (0 where not ``ok``), ``w`` (N,) weights."""
     # H is the derivative of g (w I - 2 w^2 r r^T / s^2 per point), not the IRLS J^T W J: the
     # IRLS matrix is larger and made the intervals ~1.5x too narrow on synthetic frames
     wmat = w[:, None, None] * np.eye(2) - (2 * w**2 / scale**2)[:, None, None] * (
@@ -270,15 +286,16 @@ def _ill_conditioned(h_all: np.ndarray) -> bool:
     return not np.all(d > 0) or not np.linalg.cond(h_all / np.outer(d, d)) < 1e10
 
 
-def _bootstrap_steps(
-    hb: np.ndarray, gb: np.ndarray, h_all: np.ndarray, n_bootstrap: int, seed: int
-) -> np.ndarray:
-    """(B, 6) one Gauss-Newton step from the estimate per block-resampled replicate."""
-    nb = len(hb)
+def _bootstrap_steps(gb: np.ndarray, h_all: np.ndarray, n_bootstrap: int, seed: int
+                     ) -> np.ndarray:
+    """(B, 6) the score bootstrap's replicates: block counts c_b resample the blocks' scores
+    ``gb`` (nb, 6), solved with the whole frame's matrix ``h_all``: delta_b = -H^-1 sum c g_c
+    (module docstring)."""
+    nb = len(gb)
     rng = np.random.default_rng(seed)
     counts = rng.multinomial(nb, np.full(nb, 1.0 / nb), size=n_bootstrap).astype(np.float64)
-    hs = np.einsum("bc,cij->bij", counts, hb) + 1e-9 * np.eye(6) * np.trace(h_all) / 6
-    return -np.linalg.solve(hs, (counts @ gb)[..., None])[..., 0]  # (B, 6)
+    h = h_all + 1e-9 * np.eye(6) * np.trace(h_all) / 6
+    return -np.linalg.solve(h, (counts @ gb).T).T  # (B, 6)
 
 
 def _sizes(
@@ -354,7 +371,7 @@ def _bounds(
 ) -> dict[str, float]:
     """The ``FrameAccuracy`` size, bound and noise fields from the estimate's sizes ``est``
     and the replicates' sizes ``reps`` (B, 3) and distances to it ``devs`` (B, 3)."""
-    bound = np.nanpercentile(reps, 95, axis=0)
+    bound = np.nanpercentile(reps, 95, axis=0) / (1.0 - np.asarray(ESTIMATE_BIAS))
     noise = np.nanpercentile(devs, 95, axis=0)
     return dict(
         rotation_deg=est[0],
@@ -430,7 +447,7 @@ def frame_accuracy(
     h_all = hb.sum(axis=0)
     if _ill_conditioned(h_all):
         return FrameAccuracy(False, "ill_conditioned", n_points=n, n_inliers=n_inl, n_blocks=nb)
-    steps = _bootstrap_steps(hb, gb, h_all, n_bootstrap, seed)
+    steps = _bootstrap_steps(gb, h_all, n_bootstrap, seed)
     # the image displacement of a correction is measured against the unmoved projection
     ref = _project(K, p)[inl]
     est = _sizes(K, p[inl], ref, r, t)
