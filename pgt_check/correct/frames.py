@@ -33,6 +33,7 @@ import numpy as np
 
 from pgt_check.config import CorrectConfig, RunConfig
 from pgt_check.correct.pose import Correction, refine_pose, save_corrections
+from pgt_check.enhance.base import Evidence
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.output_layout import OUTPUTS
 from pgt_check.types import Frame, Trajectory
@@ -121,11 +122,14 @@ def vouched_references(
     """Frame id -> up to ``CORRECTION_REFERENCES`` reference frames for its correction: the
     frame's own references (the one its enhanced path used first, then the run's picks, then
     the ``NEIGHBOUR_SPAN`` nearest frames on each side along the trajectory), only those the
-    run vouches for (their own verdict PASSed: a wrong neighbour's photo would pull the
-    correction towards its own error), never the frame itself; none where none passed."""
+    run vouches for (their own verdict PASSed on their own absolute evidence, as
+    ``verdict.apply.vouched_frames``: a wrong neighbour's photo would pull the correction
+    towards its own error, and a PASS through references says only that the two agree), never
+    the frame itself; none where none passed."""
     from pgt_check.measure import pick_references
 
-    passed = {f.frame_id for f in frames if f.verdict == "PASS"}
+    passed = {f.frame_id for f in frames
+              if f.verdict == "PASS" and f.judgement.evidence == Evidence.ABSOLUTE.value}
     by_id = trajectory.by_id()
     chosen = [by_id[i] for i in ids if i in by_id]
     ids_in_order = [f.frame_id for f in trajectory.frames]

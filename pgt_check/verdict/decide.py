@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Collection, Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from enum import Enum
 from typing import TYPE_CHECKING, Any, NamedTuple
@@ -424,13 +424,14 @@ def bounded_pass(j: Judgement, effect_bound_px: float | None, threshold_px: floa
 def vouched_reference(
     m: FrameMeasurement,
     judgement: Judgement,
-    verdicts: Mapping[str, Verdict],
+    vouched: Collection[str],
     config: VerdictConfig,
 ) -> FrameMeasurement | None:
     """``m`` judged through another reference, where the reprojected reference that decided
-    is not PASS itself and another tried reference is: a relative result says only that the
-    frame and its reference agree or not, and a reference the run does not pass cannot tell
-    which of the two is off (neighbours err together). The other reference's result must be
+    is not ``vouched`` for (the frames the run passes on their own absolute evidence) and
+    another tried reference is: a relative result says only that the frame and its reference
+    agree or not, and a reference the run does not pass on its own evidence cannot tell which
+    of the two is off (neighbours err together). The other reference's result must be
     verifiable and confident (``confident_inliers``: a weak result would hand the verdict to
     a path that merely does not contradict); the one with the most inliers is taken. None
     when nothing changes.
@@ -441,13 +442,13 @@ def vouched_reference(
         or p is None
         or p.evidence is not Evidence.RELATIVE
         or not m.enhanced_alternatives
-        or verdicts.get(p.reference_id or "") is Verdict.PASS
+        or (p.reference_id or "") in vouched
     ):
         return None
     usable = [
         a
         for a in m.enhanced_alternatives
-        if verdicts.get(a.reference_id or "") is Verdict.PASS
+        if (a.reference_id or "") in vouched
         and a.n_inliers >= config.confident_inliers
         and path_outcome(m, a, config)[0] is not Verdict.UNVERIFIABLE
     ]

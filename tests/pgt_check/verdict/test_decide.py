@@ -240,3 +240,35 @@ def test_a_reference_the_run_does_not_pass_gives_way_to_one_it_does(alt_inliers,
     if verdict == "PASS":
         assert rows["g"]["corner_error_px_enhanced"] == pytest.approx(3.0)
         assert rows["g"]["evidence"] == "absolute"  # the edge path confirms the relative PASS
+
+
+
+def test_a_reference_that_passed_only_through_its_own_references_vouches_for_nothing():
+    """7-Scenes, 40 % wrong: a correct frame FAILed at 44 px through a neighbour whose PASS
+    rested on that neighbour's own references (relative evidence confirmed by the
+    registration), and measured 14 px through a frame that passed on its own render. Only a
+    reference the run passes on its own absolute evidence vouches: q (PASS through its
+    references) does not, so g is judged through p."""
+    from pgt_check.verdict.apply import vouched_frames
+    from pgt_check.verdict.decide import Judgement, judge, vouched_reference
+
+    cfg = VerdictConfig()
+    p, q = _frame("p", 2.0), _frame("q", None, enh_err=3.0, ref="p")
+    passed = {
+        "p": Judgement(Verdict.PASS, "", "absolute", "PASS", "", decided_by="raw"),
+        "q": Judgement(Verdict.PASS, "", "relative+registration", "", "PASS",
+                       decided_by="enhanced"),
+    }
+    assert vouched_frames([p, q], [passed["p"], passed["q"]]) == {"p"}
+    g = _with(
+        _frame("g", None, enh_err=45.0, ref="q"),
+        edges=_path("edges", 3.0, 2000),
+        enhanced_alternatives=(_path("enhanced", 3.0, 60, "p", Evidence.RELATIVE),),
+    )
+    first = judge(g, cfg)
+    assert first.verdict is Verdict.FAIL and first.decided_by == "enhanced"
+    g2 = vouched_reference(g, first, {"p"}, cfg)
+    assert g2 is not None and g2.enhanced is not None and g2.enhanced.reference_id == "p"
+    assert judge(g2, cfg).verdict is Verdict.PASS
+    # q vouched for (its PASS counted whatever its evidence): nothing changes
+    assert vouched_reference(g, first, {"p", "q"}, cfg) is None
