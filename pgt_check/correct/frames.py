@@ -4,7 +4,7 @@ For the frames chosen by ``config.correct.frames`` ("fail": FAIL verdicts; "all"
 ``pgt_check.correct.pose.refine_pose`` iterates render -> raw match -> PnP from the
 measurement's PnP estimate (from the checked pose when there is none, or when the estimate's
 first round fails), each round's render also enhanced with a reference the run vouches for
-(``vouched_references``: a neighbour whose own verdict PASSed). Writes into the run directory:
+(``vouched_references``: a neighbour PASSed on its own evidence). Writes into the run directory:
 
 * ``corrected_trajectory.txt``: every frame of the trajectory in the input's own format (LaMAR
   -> LaMAR trajectories file, COLMAP -> images.txt, TUM -> TUM, others -> LaMAR trajectories
@@ -33,11 +33,11 @@ import numpy as np
 
 from pgt_check.config import CorrectConfig, RunConfig
 from pgt_check.correct.pose import Correction, refine_pose, save_corrections
-from pgt_check.enhance.base import Evidence
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.output_layout import OUTPUTS
 from pgt_check.types import Frame, Trajectory
 from pgt_check.verdict.result import FrameResult, RunResult
+from pgt_check.verdict.vouching import vouches
 
 logger = logging.getLogger(__name__)
 
@@ -122,14 +122,12 @@ def vouched_references(
     """Frame id -> up to ``CORRECTION_REFERENCES`` reference frames for its correction: the
     frame's own references (the one its enhanced path used first, then the run's picks, then
     the ``NEIGHBOUR_SPAN`` nearest frames on each side along the trajectory), only those the
-    run vouches for (their own verdict PASSed on their own absolute evidence, as
-    ``verdict.apply.vouched_frames``: a wrong neighbour's photo would pull the correction
-    towards its own error, and a PASS through references says only that the two agree), never
-    the frame itself; none where none passed."""
+    run vouches for (``verdict.vouching.vouches``: PASS on their own absolute evidence; a
+    wrong neighbour's photo would pull the correction towards its own error), never the frame
+    itself; none where none passed."""
     from pgt_check.measure import pick_references
 
-    passed = {f.frame_id for f in frames
-              if f.verdict == "PASS" and f.judgement.evidence == Evidence.ABSOLUTE.value}
+    passed = {f.frame_id for f in frames if vouches(f.judgement)}
     by_id = trajectory.by_id()
     chosen = [by_id[i] for i in ids if i in by_id]
     ids_in_order = [f.frame_id for f in trajectory.frames]

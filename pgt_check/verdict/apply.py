@@ -18,7 +18,6 @@ from pgt_check.verdict.decide import (
     judge,
     own_outcomes,
     path_outcomes,
-    vouched_reference,
 )
 from pgt_check.verdict.frame_bounds import (
     agreeing_paths,
@@ -33,6 +32,7 @@ from pgt_check.verdict.separation import Probe, path_separation
 from pgt_check.verdict.shared import run_shared_checks
 from pgt_check.verdict.shared_results import Sensitivity
 from pgt_check.verdict.status import NOT_CHECKED
+from pgt_check.verdict.vouching import vouched_frames, vouched_reference
 
 
 def judge_run(
@@ -70,11 +70,9 @@ def judge_run(
         if m.frame_id in off else j
         for m, j in zip(ms, judged, strict=True)
     ]
-    # second pass: a frame judged through a reference the run does not pass on the reference's
-    # own (absolute) evidence is judged through another tried reference that it so passes,
-    # where one aligned (``vouched_reference``). A reference that PASSed through its own
-    # references vouches for nothing: on 7-Scenes a correct frame FAILed at 44 px through
-    # such a reference, at 14 px through one whose own evidence passed
+    # second pass: a frame judged through a reference that does not vouch (``verdict.vouching``:
+    # PASS on its own absolute evidence) is judged through another tried reference that does,
+    # where one aligned
     vouched = vouched_frames(ms, judged)
     final = []
     for m, j, out in zip(ms, judged, outs, strict=True):
@@ -106,13 +104,6 @@ def judge_run(
     n_barred = sum(f.reason.startswith(CANNOT_SEPARATE) for f in frames)
     separation = replace(sep, barred_frames=n_barred) if sep.paths else None
     return RunResult(tuple(frames), shared, separation)
-
-
-def vouched_frames(ms: Sequence[FrameMeasurement], judged: Sequence[Judgement]) -> set[str]:
-    """The frames whose first-pass verdict is PASS on their own absolute evidence: the only
-    references that vouch for another frame's relative result (``vouched_reference``)."""
-    return {m.frame_id for m, j in zip(ms, judged, strict=True)
-            if j.verdict is Verdict.PASS and j.evidence == Evidence.ABSOLUTE.value}
 
 
 def apply_verdicts(

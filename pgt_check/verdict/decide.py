@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import math
-from collections.abc import Collection, Iterable, Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, replace
 from enum import Enum
 from typing import TYPE_CHECKING, Any, NamedTuple
@@ -419,50 +419,6 @@ def bounded_pass(j: Judgement, effect_bound_px: float | None, threshold_px: floa
               f"px at 95 %, above the {threshold_px:.1f} px threshold: it cannot tell an error "
               "above the threshold from none)")
     return replace(j, verdict=Verdict.UNVERIFIABLE, reason=reason)
-
-
-def vouched_reference(
-    m: FrameMeasurement,
-    judgement: Judgement,
-    vouched: Collection[str],
-    config: VerdictConfig,
-) -> FrameMeasurement | None:
-    """``m`` judged through another reference, where the reprojected reference that decided
-    is not ``vouched`` for (the frames the run passes on their own absolute evidence) and
-    another tried reference is: a relative result says only that the frame and its reference
-    agree or not, and a reference the run does not pass on its own evidence cannot tell which
-    of the two is off (neighbours err together). The other reference's result must be
-    verifiable and confident (``confident_inliers``: a weak result would hand the verdict to
-    a path that merely does not contradict); the one with the most inliers is taken. None
-    when nothing changes.
-    """
-    p = m.enhanced
-    if (
-        judgement.decided_by != "enhanced"
-        or p is None
-        or p.evidence is not Evidence.RELATIVE
-        or not m.enhanced_alternatives
-        or (p.reference_id or "") in vouched
-    ):
-        return None
-    usable = [
-        a
-        for a in m.enhanced_alternatives
-        if (a.reference_id or "") in vouched
-        and a.n_inliers >= config.confident_inliers
-        and path_outcome(m, a, config)[0] is not Verdict.UNVERIFIABLE
-    ]
-    if not usable:
-        return None
-    alt = max(usable, key=lambda a: a.n_inliers)
-    rest = tuple(a for a in m.enhanced_alternatives if a is not alt) + (p,)
-    raw_first = m.raw is not None and not m.raw.reason and m.raw.n_inliers > alt.n_inliers
-    return replace(
-        m,
-        enhanced=alt,
-        enhanced_alternatives=rest,
-        verdict_path="raw" if raw_first else "enhanced",
-    )
 
 
 def _run_level(
