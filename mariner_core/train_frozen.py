@@ -24,7 +24,7 @@ import csv
 import json
 import logging
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -152,6 +152,25 @@ def _load_triples(cache: Path, settings: TrainSettings) -> tuple[FrozenMarinerCo
     return cfg, scene
 
 
+#: gate logit of a gated model warm-started from an ungated one (sigmoid = 0.98): it starts as
+#: that model, and learns where to close
+OPEN_GATE_BIAS = 4.0
+
+
+def gated_state_dict(ungated: FrozenMariner) -> dict[str, torch.Tensor]:
+    """The weights of ``ungated`` for the gated variant of its config: the head gains a gate
+    channel with zero weights and bias ``OPEN_GATE_BIAS``, so the gated model starts as
+    ``base + 0.98 x`` the ungated correction (the shipped 7-Scenes weights as the start of an
+    all-scenes gated model, instead of the matching-only base)."""
+    if ungated.cfg.gated:
+        raise ValueError("the model is gated already")
+    sd = {k: v.clone() for k, v in ungated.state_dict().items()}
+    w, b = sd["head.weight"], sd["head.bias"]
+    sd["head.weight"] = torch.cat([w, torch.zeros_like(w[:1])], 0)
+    sd["head.bias"] = torch.cat([b, torch.full_like(b[:1], OPEN_GATE_BIAS)], 0)
+    return sd
+
+
 def _initial_model(
     cfg: FrozenMarinerConfig, out: Path, init: str | Path | None, resume: bool,
 ) -> FrozenMariner:
@@ -164,9 +183,14 @@ def _initial_model(
     model.load_vgg(backbone_state_dict("vgg16"))
     if init is not None and not (resume and (out / "last.pt").is_file()):
         start = load_checkpoint(init)
-        if not isinstance(start, FrozenMariner) or start.cfg != cfg:
-            raise ValueError(f"{init}: not a frozen-matcher checkpoint with config {cfg}")
-        model.load_state_dict(start.state_dict(), strict=True)
+        if not isinstance(start, FrozenMariner):
+            raise ValueError(f"{init}: not a frozen-matcher checkpoint")
+        if start.cfg == cfg:
+            model.load_state_dict(start.state_dict(), strict=True)
+        elif replace(start.cfg, gated=True) == cfg:
+            model.load_state_dict(gated_state_dict(start), strict=True)
+        else:
+            raise ValueError(f"{init}: config {start.cfg} does not match {cfg}")
         logger.info("initialised from %s", init)
     model.train()
     return model

@@ -174,3 +174,28 @@ def test_gated_decoder_starts_at_the_base_and_its_gate_bounds_the_correction(tmp
     # ungated models (the older weights) have no gate: confidence is one everywhere
     plain = FrozenMariner(SMALL)
     assert float(plain.confidence(plain.prepare(_textured(32, 32), _textured(32, 32))).min()) == 1
+
+
+def test_a_gated_model_warm_started_from_ungated_weights_starts_as_that_model() -> None:
+    """``train_frozen.gated_state_dict``: the shipped (ungated) weights as the start of a gated
+    model: same correction, gate open (0.98), so the output is the ungated model's up to 2 %
+    of its correction; a gated model cannot be converted again."""
+    from dataclasses import replace
+
+    from mariner_core.train_frozen import gated_state_dict
+
+    plain = FrozenMariner(SMALL).eval()
+    with torch.no_grad():
+        for p in plain.parameters():
+            if p.requires_grad:
+                p.normal_(0, 0.2)
+    gated = FrozenMariner(replace(SMALL, gated=True)).eval()
+    gated.load_state_dict(gated_state_dict(plain), strict=True)
+    prep = plain.prepare(_textured(32, 40, 1), _textured(32, 40, 2))
+    with torch.no_grad():
+        corr = plain.fuse(prep) - plain.base(prep)
+        assert float(corr.abs().max()) > 0.05
+        torch.testing.assert_close(gated.fuse(prep), plain.base(prep) + 0.982 * corr,
+                                   atol=2e-3 * float(corr.abs().max()) + 1e-6, rtol=0)
+    with pytest.raises(ValueError, match="gated already"):
+        gated_state_dict(gated)
