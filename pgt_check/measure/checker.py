@@ -19,7 +19,7 @@ import numpy as np
 
 from pgt_check.enhance.base import Evidence, ReferenceView, View
 from pgt_check.errors import InputError, ReferenceUnreadableError
-from pgt_check.measure.edge_path import EdgePath, edge_extra, measure_edges
+from pgt_check.measure.edge_path import EdgePath, edge_extra, edge_path, edges_lead, edges_only
 from pgt_check.measure.paths import (
     FrameImages,
     PathImages,
@@ -260,12 +260,12 @@ class FrameChecker:
         edge PASS leaves out the raw and enhanced paths."""
         threshold = self.config.verdict.threshold_for(w.camera.width, w.camera.height)
         edges = None
-        if self._edges_lead(w):
-            edges = self._edge_path(w, None, threshold, clock)
+        if edges_lead(self.config, w):
+            edges = edge_path(self.config, self.renderer, w, None, threshold, clock)
             if edges is not None and edges_decisive(
                 edges.measurement, threshold, self.config.enhance
             ):
-                return self._edges_only(m, w, edges, threshold)
+                return edges_only(m, w, edges, threshold, self.config.enhance.mode)
         raw = match_path(
             self.matcher, self.config.homography,
             w.render.rgb, w.photo, w.render.coverage, w.size, w.scale, w.camera, clock
@@ -310,7 +310,7 @@ class FrameChecker:
         the enhanced path."""
         why, detail = self._enhance_decision(raw, threshold)
         if edges is None:
-            edges = self._edge_path(w, raw, threshold, clock)
+            edges = edge_path(self.config, self.renderer, w, raw, threshold, clock)
         if (
             why in ENHANCE
             and why is not EnhanceWhy.MODE_ALWAYS
@@ -332,77 +332,6 @@ class FrameChecker:
             if keep is not None:
                 keep.enhanced = enh_img
         return Enhancement(edges, enh, ref_id, others, why, detail)
-
-    def _edges_lead(self, w: Working) -> bool:
-        """The edge path runs first: a render without colours (the raw path matches shading,
-        which on the shared colourless meshes never aligned: 0 homographies in 300 frames),
-        the edge path on, and the enhancement not forced."""
-        return (
-            w.render.shading == "shaded"
-            and self.config.edges.lead_on_shaded
-            and self.config.edges.mode != "never"
-            and self.config.enhance.mode != "always"
-        )
-
-    def _edges_only(
-        self, m: FrameMeasurement, w: Working, edges: EdgePath, threshold: float
-    ) -> FrameMeasurement:
-        """The measurement of a frame that the leading edge path decides clearly: raw and
-        enhanced paths left out (``enhance_why`` edges_decisive, detail ``raw_left_out``)."""
-        return replace_measurement(
-            m,
-            evidence=absolute_evidence(
-                [], w.render.depth, w.cam_w, w.scale, extra=edge_extra(edges)
-            ),
-            edges=edges.measurement,
-            enhance_why=EnhanceWhy.EDGES_DECISIVE,
-            enhance_why_detail="raw_left_out",
-            verdict_path="edges",
-            auto_threshold_px=threshold if self.config.enhance.mode == "auto" else None,
-        )
-
-    def _edge_path(
-        self, w: Working, raw: PathResult | None, threshold: float, clock: Clock
-    ) -> EdgePath | None:
-        """The geometric-edge path, where the config asks for it (auto: raw not decisive; with
-        ``raw`` None it runs before the raw path)."""
-        e = self.config.edges
-        if e.mode == "never":
-            return None
-        if e.mode == "auto" and raw is not None:
-            decisive = (
-                raw.success
-                and raw.n_inliers >= self.config.enhance.auto_min_inliers
-                and raw.corner_error_px is not None  # set where it succeeded
-                and abs(raw.corner_error_px - threshold)
-                > self.config.enhance.auto_margin * threshold
-            )
-            if decisive:
-                return None
-        render, photo, cam, scale = self._edge_images(w, clock)
-        t = time.perf_counter()
-        out = measure_edges(render, photo, cam, scale, w.camera, e, threshold)
-        clock.add("edges", time.perf_counter() - t)
-        return out
-
-    def _edge_images(
-        self, w: Working, clock: Clock
-    ) -> tuple[Any, np.ndarray, Camera, tuple[float, float]]:
-        """(render, photo, working camera, scale) of the edge path: the matching ones, or a
-        finer render and photo where ``edges.resize_max`` is larger than the matching size."""
-        from pgt_check.io.images import resize_image
-        from pgt_check.io.photo import working_scale
-
-        size = working_scale(w.camera.width, w.camera.height, self.config.edges.resize_max)
-        if size[0] <= w.size[0]:
-            return w.render, w.photo, w.cam_w, w.scale
-        t = time.perf_counter()
-        scale = (size[0] / w.camera.width, size[1] / w.camera.height)
-        cam = w.camera.scaled(*scale)
-        photo = resize_image(w.original, size)
-        render = self.renderer.render(cam, w.world_from_cam)
-        clock.add("render", time.perf_counter() - t)
-        return render, photo, cam, scale
 
     def _load_photo(self, frame: Frame) -> tuple[np.ndarray, Camera]:
         from pgt_check.io import load_image

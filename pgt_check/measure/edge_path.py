@@ -8,6 +8,7 @@ nothing, and it adds 2D-3D evidence to the run-level checks.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -15,8 +16,9 @@ import numpy as np
 
 from pgt_check.config import EdgeConfig
 from pgt_check.enhance.base import Evidence
-from pgt_check.measure.paths import MAX_EVIDENCE_POINTS
-from pgt_check.measure.record import PathMeasurement
+from pgt_check.measure.paths import MAX_EVIDENCE_POINTS, PathResult, absolute_evidence
+from pgt_check.measure.record import EnhanceWhy, FrameMeasurement, PathMeasurement
+from pgt_check.measure.steps import Clock, MeasuringConfig, Working, replace_measurement
 from pgt_check.render.base import Render
 from pgt_check.types import Camera
 
@@ -159,3 +161,78 @@ def edge_evidence(path: EdgePath, max_points: int) -> tuple[np.ndarray, np.ndarr
     pts_cam = np.stack([(rp[:, 0] - cx) / fx * z, (rp[:, 1] - cy) / fy * z, z], axis=1)
     pts2d = (pp + 0.5) / np.asarray(scale) - 0.5
     return pts2d, pts_cam
+
+
+def edges_lead(config: MeasuringConfig, w: Working) -> bool:
+    """The edge path runs first: a render without colours (the raw path matches shading,
+    which on the shared colourless meshes never aligned: 0 homographies in 300 frames),
+    the edge path on, and the enhancement not forced."""
+    return (
+        w.render.shading == "shaded"
+        and config.edges.lead_on_shaded
+        and config.edges.mode != "never"
+        and config.enhance.mode != "always"
+    )
+
+
+def edges_only(
+    m: FrameMeasurement, w: Working, edges: EdgePath, threshold: float, enhance_mode: str
+) -> FrameMeasurement:
+    """The measurement of a frame that the leading edge path decides clearly: raw and
+    enhanced paths left out (``enhance_why`` edges_decisive, detail ``raw_left_out``)."""
+    return replace_measurement(
+        m,
+        evidence=absolute_evidence(
+            [], w.render.depth, w.cam_w, w.scale, extra=edge_extra(edges)
+        ),
+        edges=edges.measurement,
+        enhance_why=EnhanceWhy.EDGES_DECISIVE,
+        enhance_why_detail="raw_left_out",
+        verdict_path="edges",
+        auto_threshold_px=threshold if enhance_mode == "auto" else None,
+    )
+
+
+def edge_path(
+    config: MeasuringConfig, renderer: Any, w: Working, raw: PathResult | None,
+    threshold: float, clock: Clock,
+) -> EdgePath | None:
+    """The geometric-edge path, where the config asks for it (auto: raw not decisive; with
+    ``raw`` None it runs before the raw path)."""
+    e = config.edges
+    if e.mode == "never":
+        return None
+    if e.mode == "auto" and raw is not None:
+        decisive = (
+            raw.success
+            and raw.n_inliers >= config.enhance.auto_min_inliers
+            and raw.corner_error_px is not None  # set where it succeeded
+            and abs(raw.corner_error_px - threshold) > config.enhance.auto_margin * threshold
+        )
+        if decisive:
+            return None
+    render, photo, cam, scale = _edge_images(config, renderer, w, clock)
+    t = time.perf_counter()
+    out = measure_edges(render, photo, cam, scale, w.camera, e, threshold)
+    clock.add("edges", time.perf_counter() - t)
+    return out
+
+
+def _edge_images(
+    config: MeasuringConfig, renderer: Any, w: Working, clock: Clock
+) -> tuple[Any, np.ndarray, Camera, tuple[float, float]]:
+    """(render, photo, working camera, scale) of the edge path: the matching ones, or a
+    finer render and photo where ``edges.resize_max`` is larger than the matching size."""
+    from pgt_check.io.images import resize_image
+    from pgt_check.io.photo import working_scale
+
+    size = working_scale(w.camera.width, w.camera.height, config.edges.resize_max)
+    if size[0] <= w.size[0]:
+        return w.render, w.photo, w.cam_w, w.scale
+    t = time.perf_counter()
+    scale = (size[0] / w.camera.width, size[1] / w.camera.height)
+    cam = w.camera.scaled(*scale)
+    photo = resize_image(w.original, size)
+    render = renderer.render(cam, w.world_from_cam)
+    clock.add("render", time.perf_counter() - t)
+    return render, photo, cam, scale

@@ -10,7 +10,7 @@ import dataclasses
 import numpy as np
 import pytest
 
-import pgt_check.measure.checker as checker_module
+import pgt_check.measure.edge_path as edge_path_module
 from pgt_check.config import RunConfig
 from pgt_check.io import read_trajectory
 from pgt_check.measure import (
@@ -139,9 +139,9 @@ def test_fail_fast_reraises_a_failed_render(traj, mesh):
 
 def test_paths_that_are_off_are_not_computed(traj, mesh, monkeypatch):
     calls = []
-    real = checker_module.measure_edges
+    real = edge_path_module.measure_edges
     monkeypatch.setattr(
-        checker_module, "measure_edges", lambda *a: calls.append("edges") or real(*a)
+        edge_path_module, "measure_edges", lambda *a: calls.append("edges") or real(*a)
     )
     cfg = _config(mesh, pose={"enabled": False}, **RAW_ONLY)
     checker = FrameChecker(cfg, pick_references(traj, traj.frames[:1], cfg))
@@ -161,9 +161,9 @@ def test_paths_that_are_off_are_not_computed(traj, mesh, monkeypatch):
 
 def test_edges_always_adds_the_edge_path_and_its_evidence(traj, mesh, monkeypatch):
     calls = []
-    real = checker_module.measure_edges
+    real = edge_path_module.measure_edges
     monkeypatch.setattr(
-        checker_module, "measure_edges", lambda *a: calls.append("edges") or real(*a)
+        edge_path_module, "measure_edges", lambda *a: calls.append("edges") or real(*a)
     )
     (m,) = _measure(
         _config(mesh, enhance={"mode": "never"}, edges={"mode": "always"}), traj.frames[:1]
@@ -176,7 +176,7 @@ def test_edges_always_adds_the_edge_path_and_its_evidence(traj, mesh, monkeypatc
 
 def test_edges_auto_is_left_out_where_the_raw_path_is_decisive(traj, mesh, monkeypatch):
     calls = []
-    monkeypatch.setattr(checker_module, "measure_edges", lambda *a: calls.append(a))
+    monkeypatch.setattr(edge_path_module, "measure_edges", lambda *a: calls.append(a))
     (m,) = _measure(
         _config(mesh, enhance={"mode": "never"}, edges={"mode": "auto"}), traj.frames[:1]
     )
