@@ -21,13 +21,13 @@ percentile divided by ``1 - ESTIMATE_BIAS`` per measure.
 
 Reported per frame (``FrameAccuracy``): the rotation angle (deg) and camera-centre distance
 (scene units) of the correction, its mean image displacement at the frame's points (px); a
-one-sided 95 % upper bound of each (the 95th percentile of the bootstrap replicates' size, with
-the bias allowance above); the
-noise of each (95th percentile of the replicates' distance to the estimate: an error smaller
-than this cannot be told from zero on this frame); and the frame's sensitivities (px per degree
-of rotation and per scene unit of camera translation: at the evidence points, averaged over the
-three camera axes, and at the image corners as the check's homography measures them, over error
-axes: ``corner_sensitivities``), which turn pixel thresholds into pose units.
+one-sided 95 % upper bound of each (the 95th percentile of the bootstrap replicates' size,
+with the bias allowance above); the noise of each (95th percentile of the replicates' distance
+to the estimate: an error smaller than this cannot be told from zero on this frame); and the
+frame's sensitivities (px per degree of rotation and per scene unit of camera translation: at
+the evidence points, averaged over the three camera axes, and at the image corners as the
+check's homography measures them, over error axes: ``corner_sensitivities``), which turn pixel
+thresholds into pose units.
 """
 
 from __future__ import annotations
