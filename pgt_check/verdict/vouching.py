@@ -27,7 +27,6 @@ def vouched_frames(ms: Sequence[FrameMeasurement], judged: Sequence[Judgement]) 
     return {m.frame_id for m, j in zip(ms, judged, strict=True) if vouches(j)}
 
 
-
 def vouched_reference(
     m: FrameMeasurement,
     judgement: Judgement,
