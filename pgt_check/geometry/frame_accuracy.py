@@ -259,7 +259,8 @@ def _block_equations(
     jac: np.ndarray, r0: np.ndarray, w: np.ndarray, ok: np.ndarray, scale: float,
     block_of: np.ndarray, nb: int,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Per-block estimating equations at the estimate: (H (nb, 6, 6), g (nb, 6)).
+    """The estimating equations at the estimate: the frame's matrix H (6, 6) and the blocks'
+    scores g (nb, 6) (the score bootstrap resamples only the scores).
 
     g = sum J^T psi(r) with psi(r) = w(r) r (Cauchy), H its derivative; ``jac`` (N, 2, 6),
     ``r0`` (N, 2) residuals (0 where not ``ok``), ``w`` (N,) weights."""
@@ -269,13 +270,11 @@ def _block_equations(
         r0[:, :, None] * r0[:, None, :]
     )
     jtw = np.einsum("nki,nkl->nil", jac, wmat)  # (N, 6, 2)
-    hp = np.einsum("nil,nlj->nij", jtw, jac)  # (N, 6, 6)
+    h_all = np.einsum("nil,nlj->ij", jtw[ok], jac[ok])  # (6, 6)
     gp = np.einsum("nki,nk->ni", jac, w[:, None] * r0)  # (N, 6)
-    hb = np.zeros((nb, 6, 6))
     gb = np.zeros((nb, 6))
-    np.add.at(hb, block_of, np.where(ok[:, None, None], hp, 0.0))
     np.add.at(gb, block_of, np.where(ok[:, None], gp, 0.0))
-    return hb, gb
+    return h_all, gb
 
 
 def _ill_conditioned(h_all: np.ndarray) -> bool:
@@ -443,8 +442,7 @@ def frame_accuracy(
     r0 = np.where(ok[:, None], res, 0.0)
     w = np.where(ok, _weights(r0, scale), 0.0)
     nb = len(blocks)
-    hb, gb = _block_equations(jac, r0, w, ok, scale, block_of, nb)
-    h_all = hb.sum(axis=0)
+    h_all, gb = _block_equations(jac, r0, w, ok, scale, block_of, nb)
     if _ill_conditioned(h_all):
         return FrameAccuracy(False, "ill_conditioned", n_points=n, n_inliers=n_inl, n_blocks=nb)
     steps = _bootstrap_steps(gb, h_all, n_bootstrap, seed)
