@@ -39,11 +39,18 @@ from dataclasses import dataclass
 import numpy as np
 
 from pgt_check.common.checks import check_shape
+from pgt_check.geometry.reprojection import (
+    angle_deg,
+    angle_deg_batch,
+    mean_disp,
+    project,
+    residuals_jac,
+    so3_exp,
+    so3_exp_batch,
+)
+from pgt_check.geometry.sensitivity import frame_sensitivities
 
 logger = logging.getLogger(__name__)
-
-#: quantile over error axes of the ``low_*`` sensitivities (95 % of axes move the corners more)
-LOW_AXIS_QUANTILE = 0.05
 
 #: relative shortfall of the estimate of a large error the bounds allow for, per measure
 #: (rotation, camera-centre distance, image effect): rotations measured 1-4 % low, translations
@@ -92,99 +99,6 @@ class FrameAccuracy:
     n_blocks: int = 0
 
 
-def _skew(v: np.ndarray) -> np.ndarray:
-    """(..., 3) -> (..., 3, 3) cross-product matrices."""
-    k = np.zeros(v.shape[:-1] + (3, 3))
-    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    k[..., 1, 0], k[..., 2, 0], k[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
-    return k
-
-
-def _exp(w: np.ndarray) -> np.ndarray:
-    """Rotation vector (3,) -> (3, 3) (Rodrigues)."""
-    th = float(np.linalg.norm(w))
-    k = _skew(np.asarray(w, np.float64))
-    if th < 1e-10:
-        return np.eye(3) + k
-    return np.eye(3) + math.sin(th) / th * k + (1 - math.cos(th)) / th**2 * (k @ k)
-
-
-def _angle_deg(r: np.ndarray) -> float:
-    return math.degrees(math.acos(float(np.clip((np.trace(r) - 1) / 2, -1.0, 1.0))))
-
-
-def _project(k: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """(N, 3) camera points -> (N, 2) pixels (points behind the camera give NaN)."""
-    z = np.where(x[:, 2] > 1e-9, x[:, 2], np.nan)
-    u = x @ k.T
-    return u[:, :2] / z[:, None]
-
-
-def _residuals_jac(
-    k: np.ndarray, p: np.ndarray, obs: np.ndarray, r: np.ndarray, t: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Residuals (N, 2) and Jacobians (N, 2, 6) w.r.t. a left update (dw, dt):
-    x -> exp(dw) x + dt with x = R p + t."""
-    x = p @ r.T + t
-    res = _project(k, x) - obs
-    z = x[:, 2]
-    fx, fy, s = k[0, 0], k[1, 1], k[0, 1]
-    dproj = np.zeros((len(x), 2, 3))
-    dproj[:, 0, 0] = fx / z
-    dproj[:, 0, 1] = s / z
-    dproj[:, 0, 2] = -(fx * x[:, 0] + s * x[:, 1]) / z**2
-    dproj[:, 1, 1] = fy / z
-    dproj[:, 1, 2] = -fy * x[:, 1] / z**2
-    jac = np.concatenate([dproj @ -_skew(x), dproj], axis=2)
-    return res, jac
-
-
-def sphere_axes(n: int = 256) -> np.ndarray:
-    """(n, 3) unit vectors spread evenly over the sphere (Fibonacci lattice; deterministic)."""
-    i = np.arange(n) + 0.5
-    z = 1.0 - 2.0 * i / n
-    phi = math.pi * (3.0 - math.sqrt(5.0)) * i
-    rho = np.sqrt(1.0 - z * z)
-    return np.stack([rho * np.cos(phi), rho * np.sin(phi), z], axis=1)
-
-
-def _homography_jac(x: np.ndarray) -> np.ndarray:
-    """(N, 2) normalised points -> (N, 2, 8): the motion of each point per parameter of a
-    homography at the identity (h11-1, h12, h13, h21, h22-1, h23, h31, h32)."""
-    a = np.zeros((len(x), 2, 8))
-    u, v = x[:, 0], x[:, 1]
-    a[:, 0, 0], a[:, 0, 1], a[:, 0, 2] = u, v, 1.0
-    a[:, 1, 3], a[:, 1, 4], a[:, 1, 5] = u, v, 1.0
-    a[:, 0, 6], a[:, 0, 7] = -u * u, -u * v
-    a[:, 1, 6], a[:, 1, 7] = -u * v, -v * v
-    return a
-
-
-def corner_sensitivities(
-    pts_cam: np.ndarray, K: np.ndarray, width: int, height: int, axes: np.ndarray
-) -> tuple[np.ndarray, np.ndarray]:
-    """Corner error (px) per radian of rotation about each of ``axes`` (M, 3) and per scene
-    unit of camera translation along each, as the check measures a small pose error: the image
-    motion of the points ``pts_cam`` (N, 3) fitted by a homography (least squares, linearised
-    at the identity), its displacement averaged over the four image corners. A rotation moves
-    the corners by the same amount whatever the scene; a translation's depends on the points'
-    depths, which a single sensitivity at one depth misses. Returns (rot (M,), trans (M,))."""
-    check_shape("axes", axes, (None, 3))
-    x = pts_cam[pts_cam[:, 2] > 0]
-    _, j = _residuals_jac(K, x, np.zeros((len(x), 2)), np.eye(3), np.zeros(3))  # (N, 2, 6)
-    centre = np.array([(width - 1) / 2, (height - 1) / 2])
-    s = max(width, height) / 2
-    a = _homography_jac((_project(K, x) - centre) / s).reshape(-1, 8)
-    h = np.linalg.lstsq(a, j.reshape(-1, 6) / s, rcond=None)[0]  # (8, 6)
-    corners = np.array([[0, 0], [width, 0], [width, height], [0, height]], np.float64) - 0.5
-    c = _homography_jac((corners - centre) / s).reshape(-1, 8) @ h * s  # (8, 6) px per unit
-    out = []
-    for block in (c[:, :3], c[:, 3:]):
-        disp = (block @ axes.T).reshape(4, 2, -1)  # corner, xy, axis
-        out.append(np.linalg.norm(disp, axis=1).mean(axis=0))
-    return out[0], out[1]
-
-
 def _mean_finite(x: np.ndarray) -> float:
     """Mean of the finite values (NaN when none: every point behind the camera)."""
     x = x[np.isfinite(x)]
@@ -200,11 +114,11 @@ def _fit(
 ) -> tuple[np.ndarray, np.ndarray, float]:
     """Robust Gauss-Newton from identity; returns (R, t, final loss scale)."""
     r, t = np.eye(3), np.zeros(3)
-    res, _ = _residuals_jac(k, p, obs, r, t)
+    res, _ = residuals_jac(k, p, obs, r, t)
     med = float(np.nanmedian(np.linalg.norm(res, axis=1)))
     scale = float(np.clip(2.0 * med, loss_scale_px, 200.0)) if math.isfinite(med) else 200.0
     for it in range(max_iter):
-        res, jac = _residuals_jac(k, p, obs, r, t)
+        res, jac = residuals_jac(k, p, obs, r, t)
         ok = np.all(np.isfinite(res), axis=1)
         w = np.where(ok, _weights(np.where(ok[:, None], res, 0.0), scale), 0.0)
         jw = (jac[ok] * np.sqrt(w[ok])[:, None, None]).reshape(-1, 6)
@@ -214,7 +128,7 @@ def _fit(
         if not np.all(dg > 0):
             break
         delta = -np.linalg.solve(h + 1e-9 * np.diag(dg), jw.T @ rw)
-        dr = _exp(delta[:3])
+        dr = so3_exp(delta[:3])
         r, t = dr @ r, dr @ t + delta[3:]
         small = float(np.max(np.abs(delta) * np.sqrt(dg / max(w.sum(), 1.0)))) < 1e-5
         if scale > loss_scale_px:
@@ -302,8 +216,8 @@ def _sizes(
 ) -> tuple[float, float, float]:
     """Rotation (deg), camera-centre distance, mean displacement (px) against ``ref`` (N, 2)
     of ``pts`` (N, 3) of (R, t)."""
-    disp = _project(K, pts @ rr.T + tt) - ref
-    return _angle_deg(rr), float(np.linalg.norm(rr.T @ tt)), _mean_finite(
+    disp = project(K, pts @ rr.T + tt) - ref
+    return angle_deg(rr), float(np.linalg.norm(rr.T @ tt)), _mean_finite(
         np.linalg.norm(disp, axis=1))
 
 
@@ -316,53 +230,25 @@ def _replicates(
     their unmoved projections. All replicates at once: a loop over them was a visible part of
     every frame's cost (reports/pipeline_timing.md)."""
     steps = np.asarray(steps, np.float64).reshape(-1, 6)
-    dr = _exp_batch(steps[:, :3])  # (B, 3, 3)
+    dr = so3_exp_batch(steps[:, :3])  # (B, 3, 3)
     rb = dr @ r
     tb = dr @ t + steps[:, 3:]  # (B, 3)
     reps = np.stack([
-        _angle_deg_batch(rb),
+        angle_deg_batch(rb),
         np.linalg.norm(np.einsum("bji,bj->bi", rb, tb), axis=1),
-        _mean_disp(K, pts @ rb.transpose(0, 2, 1) + tb[:, None, :], ref),
+        mean_disp(K, pts @ rb.transpose(0, 2, 1) + tb[:, None, :], ref),
     ], axis=1)
     # distance of each replicate to the estimate (the noise, whatever the error's size)
     rel_r = rb @ r.T
     rel_t = tb - rel_r @ t
     xc = pts @ r.T + t
     devs = np.stack([
-        _angle_deg_batch(rel_r),
+        angle_deg_batch(rel_r),
         np.linalg.norm(np.einsum("bji,bj->bi", rb, tb) - r.T @ t, axis=1),
-        _mean_disp(K, xc @ rel_r.transpose(0, 2, 1) + rel_t[:, None, :],
-                   _project(K, xc)),
+        mean_disp(K, xc @ rel_r.transpose(0, 2, 1) + rel_t[:, None, :],
+                   project(K, xc)),
     ], axis=1)
     return reps, devs
-
-
-def _exp_batch(w: np.ndarray) -> np.ndarray:
-    """(B, 3) rotation vectors -> (B, 3, 3) (Rodrigues, as ``_exp``)."""
-    th = np.linalg.norm(w, axis=1)
-    k = _skew(w)
-    small = th < 1e-10
-    ts = np.where(small, 1.0, th)
-    a = np.where(small, 1.0, np.sin(ts) / ts)[:, None, None]
-    b = np.where(small, 0.0, (1 - np.cos(ts)) / ts**2)[:, None, None]
-    return np.eye(3) + a * k + b * (k @ k)
-
-
-def _angle_deg_batch(r: np.ndarray) -> np.ndarray:
-    """(B, 3, 3) rotations -> (B,) angles in degrees (as ``_angle_deg``)."""
-    return np.degrees(np.arccos(np.clip((np.trace(r, axis1=1, axis2=2) - 1) / 2, -1.0, 1.0)))
-
-
-def _mean_disp(K: np.ndarray, x: np.ndarray, ref: np.ndarray) -> np.ndarray:
-    """(B,) mean finite distance of the projections of (B, N, 3) camera points to ``ref``
-    (N, 2) (NaN where none is finite: every point behind the camera)."""
-    z = np.where(x[..., 2] > 1e-9, x[..., 2], np.nan)
-    u = x @ K.T
-    d = np.linalg.norm(u[..., :2] / z[..., None] - ref, axis=-1)
-    ok = np.isfinite(d)
-    n = ok.sum(axis=1)
-    total = np.where(ok, d, 0.0).sum(axis=1)
-    return np.where(n > 0, total / np.maximum(n, 1), np.nan)
 
 
 def _bounds(
@@ -382,28 +268,6 @@ def _bounds(
         effect_px=est[2],
         effect_bound_px=float(max(bound[2], est[2])),
         effect_noise_px=float(noise[2]),
-    )
-
-
-def _sensitivities(
-    K: np.ndarray, pts: np.ndarray, obs: np.ndarray, width: int, height: int
-) -> dict[str, float]:
-    """The ``FrameAccuracy`` sensitivity fields and depth of the inlier points ``pts`` (N, 3)
-    observed at ``obs`` (N, 2)."""
-    # mean |du| per degree about each camera axis and per unit along each at the frame's
-    # points; at the image corners as the check measures them, over error axes
-    _, j0 = _residuals_jac(K, pts, obs, np.eye(3), np.zeros(3))
-    per_axis = np.linalg.norm(j0, axis=1).mean(axis=0)  # (6,) px per rad / per unit
-    zc = float(np.median(pts[:, 2]))
-    rot_c, tra_c = corner_sensitivities(pts, K, width, height, sphere_axes())
-    return dict(
-        px_per_deg=float(np.median(rot_c) * math.pi / 180),
-        px_per_unit=float(np.median(tra_c)),
-        low_px_per_deg=float(np.quantile(rot_c, LOW_AXIS_QUANTILE) * math.pi / 180),
-        low_px_per_unit=float(np.quantile(tra_c, LOW_AXIS_QUANTILE)),
-        points_px_per_deg=float(per_axis[:3].mean() * math.pi / 180),
-        points_px_per_unit=float(per_axis[3:].mean()),
-        depth=zc,
     )
 
 
@@ -433,7 +297,7 @@ def frame_accuracy(
     if len(blocks) < min_blocks:
         return FrameAccuracy(False, "too_few_blocks", n_points=n, n_blocks=len(blocks))
     r, t, scale = _fit(K, p, obs, loss_scale_px)
-    res, jac = _residuals_jac(K, p, obs, r, t)
+    res, jac = residuals_jac(K, p, obs, r, t)
     ok = np.all(np.isfinite(res), axis=1)
     inl = ok & (np.linalg.norm(np.where(ok[:, None], res, 0.0), axis=1) < 3 * scale)
     n_inl = int(inl.sum())
@@ -447,14 +311,14 @@ def frame_accuracy(
         return FrameAccuracy(False, "ill_conditioned", n_points=n, n_inliers=n_inl, n_blocks=nb)
     steps = _bootstrap_steps(gb, h_all, n_bootstrap, seed)
     # the image displacement of a correction is measured against the unmoved projection
-    ref = _project(K, p)[inl]
+    ref = project(K, p)[inl]
     est = _sizes(K, p[inl], ref, r, t)
     reps, devs = _replicates(K, p[inl], ref, r, t, steps)
     fa = FrameAccuracy(
         True,
         "",
         **_bounds(est, reps, devs),
-        **_sensitivities(K, p[inl], obs[inl], width, height),
+        **frame_sensitivities(K, p[inl], obs[inl], width, height),
         n_points=n,
         n_inliers=n_inl,
         n_blocks=nb,

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from pgt_check.geometry.frame_accuracy import _exp
+from pgt_check.geometry.reprojection import so3_exp
 from pgt_check.io.lamar import read_sensors
 from pgt_check.output_layout import OUTPUTS
 from pgt_check.report.calibrated_sensors import (
@@ -30,7 +30,7 @@ def test_camera_key_parses():
 
 
 def test_rotation_about_x_y_becomes_the_principal_point():
-    r = _exp(np.radians([0.0, 0.5, 0.0]))  # about y: the image moves along x
+    r = so3_exp(np.radians([0.0, 0.5, 0.0]))  # about y: the image moves along x
     cc = calibrated_camera(CAM, r, 1.01)
     fx, fy = cc.camera.focal
     cx, cy = cc.camera.principal_point
@@ -41,12 +41,12 @@ def test_rotation_about_x_y_becomes_the_principal_point():
     # image position), under a fifth of the effect here
     assert cc.effect_px > 4 and cc.residual_px < 0.2 * cc.effect_px
     # the roll is not an intrinsic: reported, and it is what is left
-    cc = calibrated_camera(CAM, _exp(np.radians([0.0, 0.0, 0.3])), 1.0)
+    cc = calibrated_camera(CAM, so3_exp(np.radians([0.0, 0.0, 0.3])), 1.0)
     assert cc.roll_deg == pytest.approx(0.3, abs=1e-6) and cc.residual_px > 0.5
 
 
 def _shared_json(status: str) -> dict:
-    r = _exp(np.radians([-0.2, 0.8, 0.1]))
+    r = so3_exp(np.radians([-0.2, 0.8, 0.1]))
     return {"calibration": {KEY: {"status": status, "rotation": r.tolist(),
                                   "focal_scale": 0.998, "translation": None}}}
 
