@@ -32,7 +32,8 @@ from typing import Any
 import numpy as np
 
 from pgt_check.config import CorrectConfig, RunConfig
-from pgt_check.correct.pose import Correction, refine_pose, save_corrections
+from pgt_check.correct.correction import Correction, save_corrections
+from pgt_check.correct.pose import refine_pose
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.output_layout import OUTPUTS
 from pgt_check.types import Frame, Trajectory

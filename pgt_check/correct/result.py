@@ -9,8 +9,8 @@ from pathlib import Path
 from typing import Any
 
 from pgt_check.correct.calibration import CalibratedRig
+from pgt_check.correct.correction import Correction
 from pgt_check.correct.frames import CorrectionsSummary
-from pgt_check.correct.pose import Correction
 from pgt_check.output_layout import OUTPUTS
 from pgt_check.verdict.result import FrameResult, RunResult
 from pgt_check.verdict.self_test_curves import SelfTest
@@ -65,7 +65,7 @@ def stored_corrections(judged: RunResult, out: str | Path) -> tuple[CorrectedRun
     run's stored corrections (``corrections.json``) and its registration refinement where it
     started from this judgement's estimate; and whether a refinement file was left out as
     stale (measured for another estimate: other verdict settings)."""
-    from pgt_check.correct.pose import load_corrections
+    from pgt_check.correct.correction import load_corrections
     from pgt_check.correct.registration import (
         apply_refinement,
         load_refinement,

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Any
 from pgt_check import __version__
 from pgt_check.common.files import safe_text
 from pgt_check.config import RunConfig
-from pgt_check.correct.pose import CORRECTION_COLUMNS
+from pgt_check.correct.correction import CORRECTION_COLUMNS
 from pgt_check.measure.columns import MEASUREMENT_COLUMNS, TIMING_COLUMNS
 from pgt_check.output_layout import OUTPUTS
 from pgt_check.report.files import atomic_write_text
@@ -46,7 +46,7 @@ def _frame_columns() -> tuple[str, ...]:
 
 
 #: frames.csv columns, in order. ``corner_error_px`` is the one the verdict used. The
-#: correction columns (``pgt_check.correct.pose``) are an optional tail: empty for frames
+#: correction columns (``pgt_check.correct.correction``) are an optional tail: empty for frames
 #: that were not corrected.
 FRAME_COLUMNS = (*_frame_columns(), *ACCURACY_COLUMNS, *CORRECTION_COLUMNS)
 

@@ -23,7 +23,7 @@ from pgt_check.types import Frame, Trajectory
 
 if TYPE_CHECKING:
     from pgt_check.correct.calibration import CalibratedRig
-    from pgt_check.correct.pose import Correction
+    from pgt_check.correct.correction import Correction
     from pgt_check.correct.result import CorrectedRun
     from pgt_check.executor import CheckerLender
     from pgt_check.verdict.result import RunResult

@@ -138,7 +138,7 @@ def test_corrections_stop_at_their_time_budget(tmp_path, monkeypatch):
     corrected (reason ``time_limit``) and the summary says why (issue #28)."""
     import pgt_check.correct.frames as frames_mod
     from pgt_check.config import RunConfig
-    from pgt_check.correct.pose import Correction
+    from pgt_check.correct.correction import Correction
     from pgt_check.measure import MeasureReason, failed_measurement
     from pgt_check.measure.record import Timings
     from pgt_check.types import Camera, Frame, Trajectory

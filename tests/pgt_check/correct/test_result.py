@@ -4,7 +4,7 @@ and ``stored_corrections`` rebuilds it from a run folder for ``pgt-check report`
 
 from __future__ import annotations
 
-from pgt_check.correct.pose import Correction, save_corrections
+from pgt_check.correct.correction import Correction, save_corrections
 from pgt_check.correct.registration import refine_registration, save_refinement
 from pgt_check.correct.result import CorrectedRun, stored_corrections
 from tests.pgt_check.correct.test_registration import FakeMeasure, moved_case  # noqa: F401

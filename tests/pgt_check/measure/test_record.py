@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from pgt_check.correct.pose import CORRECTION_COLUMNS
+from pgt_check.correct.correction import CORRECTION_COLUMNS
 from pgt_check.enhance.base import Evidence
 from pgt_check.measure import (
     MEASUREMENT_COLUMNS,
