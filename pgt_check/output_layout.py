@@ -3,7 +3,7 @@ which of them the completion marker (``outputs.complete.json``) covers, and whic
 claims before it starts (an input among them would be overwritten).
 
 One frozen ``OutputLayout`` (the module-level ``OUTPUTS``); every writer, the completion marker,
-the ownership check (``store.check_outputs_owned``) and the input-vs-output check
+the ownership check (``ownership.check_outputs_owned``) and the input-vs-output check
 (``stages.inputs.run_output_paths``) read their names from it. Names are relative to the output folder,
 ``/``-separated. A new output file is one field here (with its group) and the line that writes it.
 The other commands' outputs are named here too (``COMPARE_OUTPUTS``, ``ENHANCE_OUTPUTS``).
@@ -104,7 +104,7 @@ class OutputLayout:
         """Every file of fixed name a run may write or remove (the record store and the panels,
         named by frame hashes, aside), in the order the completion marker lists those present:
         the report's, the correction stage's, the separation probes, the calibrated rig. A run
-        refuses to start where one exists that no marker lists (``store.check_outputs_owned``:
+        refuses to start where one exists that no marker lists (``ownership.check_outputs_owned``:
         it is not the tool's to replace)."""
         return (*self.report_files(), *self.group(CORRECT), *self.group(VERDICT),
                 *self.calibrated_paths())

@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from pgt_check.config import RunConfig
+from pgt_check.content_hash import mesh_content_hash
 from pgt_check.errors import InputError, RunInterrupted
 from pgt_check.io import check_frame_ids
 from pgt_check.measure import (
@@ -47,7 +48,6 @@ from pgt_check.stages.remeasure import (
     separation_stage,
 )
 from pgt_check.stages.scene_check import resolve_enhancer_output
-from pgt_check.store import mesh_content_hash
 from pgt_check.threads import run_threads
 from pgt_check.types import Frame, Trajectory
 from pgt_check.verdict import RunResult, judge_run

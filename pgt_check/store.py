@@ -26,7 +26,6 @@ import logging
 import os
 import time
 from collections.abc import Iterable, Iterator, Mapping
-from dataclasses import dataclass
 from pathlib import Path
 from types import TracebackType
 from typing import IO, Any
@@ -38,335 +37,21 @@ from pgt_check.common.files import (
     load_json_limited,
     open_append,
 )
+from pgt_check.content_hash import INPUT_FILES_KEY
 from pgt_check.errors import FormatError, InputError
-from pgt_check.output_layout import OUTPUTS
+from pgt_check.ownership import OUTPUTS_KEY, check_outputs_owned, check_store_files_owned
+from pgt_check.records_file import (
+    FINGERPRINT_KEY,
+    INPUT_KEY,
+    RECORDS_FILE,
+    RUN_FILE,
+    StoredRecord,
+    encode_record,
+    iter_records,
+    truncate_torn_tail,
+)
 
 logger = logging.getLogger(__name__)
-
-#: files up to this size are hashed whole; bigger ones by size + first/last MiB + 64 samples
-FULL_HASH_MAX_BYTES = 256 << 20
-_SAMPLE_BYTES = 1 << 20
-
-
-def content_hash(path: str | Path) -> str:
-    """A cheap, mtime-independent hash of a file's content (or a directory's files).
-
-    A file of at most ``FULL_HASH_MAX_BYTES`` (256 MiB): sha256 of its bytes. A bigger file:
-    sha256 of its size, its first and last MiB and 64 evenly spaced 4 KiB samples (an edit
-    that keeps the size and touches none of those bytes goes unnoticed: documented trade-off
-    for multi-GB meshes). A directory (a COLMAP model): the hashes of its files by name.
-    Returns "missing" for a path that does not exist.
-    """
-    import hashlib
-
-    path = Path(path)
-    if path.is_dir():
-        h = hashlib.sha256()
-        for child in sorted(p for p in path.iterdir() if p.is_file()):
-            h.update(f"{child.name}={content_hash(child)};".encode())
-        return "dir:" + h.hexdigest()[:32]
-    if not path.is_file():
-        return "missing"
-    size = path.stat().st_size
-    h = hashlib.sha256(f"{size};".encode())
-    with open(path, "rb") as f:
-        if size <= FULL_HASH_MAX_BYTES:
-            for chunk in iter(lambda: f.read(1 << 20), b""):
-                h.update(chunk)
-        else:
-            h.update(f.read(_SAMPLE_BYTES))
-            for i in range(64):
-                f.seek(size * i // 64)
-                h.update(f.read(4096))
-            f.seek(size - _SAMPLE_BYTES)
-            h.update(f.read(_SAMPLE_BYTES))
-    return h.hexdigest()[:32]
-
-
-def mesh_content_hash(path: str | Path, side_files: Iterable[str] = ()) -> str:
-    """The content hash of a mesh as its loader read it: ``content_hash`` of the mesh file and
-    of each side file it read (``MeshData.side_files``: OBJ materials and textures, glTF
-    buffers and images; ``"missing:<name>"`` entries are hashed as the name). A mesh without
-    side files (PLY, GLB) hashes as its file alone."""
-    import hashlib
-
-    main = content_hash(path)
-    side = list(side_files)
-    if not side:
-        return main
-    h = hashlib.sha256(f"{main};".encode())
-    folder = Path(path).absolute().parent
-    for name in side:
-        if name.startswith("missing:"):
-            key, digest = name, "missing"
-        else:  # named relative to the mesh: a moved dataset folder keeps its hash
-            key, digest = os.path.relpath(name, folder), content_hash(name)
-        h.update(f"{key}={digest};".encode())
-    return "mesh+side:" + h.hexdigest()[:32]
-
-
-#: written last by ``report.outputs.write_outputs``: the output files and their sha256. Its
-#: absence means the output set is incomplete (a run or ``pgt-check report`` is writing, or was
-#: killed midway). It also says which files of the folder pgt-check wrote (``owned_outputs``)
-COMPLETION_MARKER = OUTPUTS.completion_marker
-#: run.json's key of the output names a run claims while its outputs are incomplete
-OUTPUTS_KEY = "outputs"
-
-
-def owned_outputs(out_dir: str | Path) -> set[str]:
-    """The output files of ``out_dir`` that pgt-check wrote, which a run may replace or remove:
-    those the completion marker lists; while the outputs are incomplete (no marker: a run or
-    ``pgt-check report`` was stopped midway), the names run.json claims (a run claims every
-    output name once it found none of them foreign). Nothing in a folder without either."""
-    out = Path(out_dir)
-    marker = out / COMPLETION_MARKER
-    if marker.is_file():
-        try:
-            files = load_json_limited(marker, MAX_SMALL_JSON_BYTES, COMPLETION_MARKER)["files"]
-            if isinstance(files, dict):
-                return {str(k) for k in files}
-        except (InputError, KeyError, TypeError):
-            pass  # unreadable: what run.json claims
-    run = out / RUN_FILE
-    if run.is_file():
-        try:  # a special or oversized run.json is an InputError of its own
-            claimed = load_json_limited(run, MAX_SMALL_JSON_BYTES, RUN_FILE).get(OUTPUTS_KEY)
-        except (FormatError, AttributeError):  # not JSON, not an object: claims nothing
-            return set()
-        if isinstance(claimed, list):
-            return {str(k) for k in claimed}
-    return set()
-
-
-def check_outputs_owned(out_dir: str | Path, names: Iterable[str]) -> None:
-    """InputError naming the first of ``names`` (output files, relative to ``out_dir``) that
-    exists in ``out_dir`` but was not written there by pgt-check (``owned_outputs``): a run
-    would replace or remove a file of the user's (a ``calibrated/`` session of their own)."""
-    out = Path(out_dir)
-    owned = None
-    for name in names:
-        path = out / name
-        if not os.path.lexists(path):
-            continue
-        if owned is None:
-            owned = owned_outputs(out)
-        if name not in owned:
-            raise InputError(
-                f"{path}: this file was not written by pgt-check (no earlier run's "
-                f"{COMPLETION_MARKER} in {out} lists it) and a run would replace or remove it: "
-                "move it away or choose another --out"
-            )
-
-
-def _store_file_is_ours(path: Path) -> bool | None:
-    """Whether the store file ``path`` (run.json, records.jsonl or the completion marker) was
-    written by pgt-check, from its content: None when there is nothing to lose (missing,
-    empty, a symbolic link, which is replaced and its target left alone) or it cannot be
-    read as a regular file (refused where it is opened)."""
-    if path.is_symlink() or not path.is_file():
-        return None
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(4096)
-    except OSError:
-        return None
-    if not head.strip():
-        return None
-    if path.name == RECORDS_FILE:  # JSON lines: the first one a frame's record
-        first = head.lstrip().split(b"\n", 1)[0]
-        return first.startswith(b"{") and (
-            b'"' + FINGERPRINT_KEY.encode() + b'"' in first or b'"frame_id"' in first)
-    try:
-        info = load_json_limited(path, MAX_SMALL_JSON_BYTES, path.name)
-    except InputError:
-        return False
-    return isinstance(info, dict) and (
-        info.get("tool") == "pgt-check" or (path.name == RUN_FILE and "fingerprint" in info)
-    )
-
-
-def check_store_files_owned(out_dir: str | Path) -> None:
-    """InputError naming run.json, records.jsonl or outputs.complete.json in ``out_dir`` when
-    it holds data pgt-check did not write there, and the folder is not one of pgt-check's
-    (none of the three is recognisably the tool's). A run replaces run.json and the marker,
-    and ``--overwrite`` empties records.jsonl: another tool's file of such a name is the
-    user's (the third audit: a ``run.json`` or ``records.jsonl`` of one's own in ``--out``
-    was replaced, with ``--overwrite`` even records.jsonl). A damaged file of a pgt-check
-    folder stays the run's to handle (unknown settings: ``--resume`` / ``--overwrite``)."""
-    out = Path(out_dir)
-    seen = {name: _store_file_is_ours(out / name)
-            for name in (RUN_FILE, RECORDS_FILE, COMPLETION_MARKER)}
-    if any(ours for ours in seen.values()):
-        return
-    for name, ours in seen.items():
-        if ours is False:
-            raise InputError(
-                f"{out / name}: this file was not written by pgt-check and a run would replace "
-                "it: move it away or choose another --out"
-            )
-
-
-#: run.json's key of the input files' content hashes (absolute path -> ``content_hash``)
-INPUT_FILES_KEY = "input_files"
-
-
-def changed_inputs(run_info: Mapping[str, Any], config_input: Mapping[str, Any] | None = None
-                   ) -> tuple[list[str], list[str]]:
-    """(changed, unreadable): the input files of a run (run.json, ``INPUT_FILES_KEY``) whose
-    content differs now from when they were measured, and those that cannot be read any more
-    (moved or deleted: not checked). A run.json of an older version without that key: its mesh
-    alone (``settings.inputs.mesh`` against ``config_input["mesh"]``, where the hash covers the
-    mesh file alone)."""
-    files = run_info.get(INPUT_FILES_KEY)
-    if not isinstance(files, Mapping):
-        settings = run_info.get("settings")
-        stored = (settings or {}).get("inputs", {}).get("mesh") if isinstance(settings, Mapping) \
-            else None
-        mesh = (config_input or {}).get("mesh")
-        if not isinstance(stored, str) or not mesh or stored.startswith("mesh+side:"):
-            return [], []
-        files = {os.path.abspath(str(mesh)): stored}
-    changed, unreadable = [], []
-    for path, digest in files.items():
-        try:
-            now = content_hash(path)
-        except OSError:
-            now = "missing"
-        if now == "missing":
-            unreadable.append(str(path))
-        elif now != digest:
-            changed.append(str(path))
-    return changed, unreadable
-
-
-RECORDS_FILE = OUTPUTS.records
-#: longest line of records.jsonl read (a record is ~15 KB; a longer line is a corrupt record)
-MAX_RECORD_LINE_BYTES = 16 * 1024**2
-RUN_FILE = OUTPUTS.run
-FINGERPRINT_KEY = "_fingerprint"
-#: a record's key of the frame's inputs (pose, camera, image content, reference photos:
-#: ``stages.inputs.frame_input_keys``); a stored record counts as done only with the same key
-INPUT_KEY = "input_key"
-
-
-@dataclass(frozen=True)
-class StoredRecord:
-    """One record of the store read as the store keys it: the frame, the fingerprint and the
-    input key it was measured with (None: a record without one), and the record itself (a
-    ``FrameMeasurement.to_json`` with those keys)."""
-
-    frame_id: str
-    fingerprint: str | None
-    input_key: str | None
-    data: Mapping[str, Any]
-
-    @classmethod
-    def of(cls, rec: Mapping[str, Any]) -> StoredRecord:
-        key, fp = rec.get(INPUT_KEY), rec.get(FINGERPRINT_KEY)
-        return cls(str(rec["frame_id"]), None if fp is None else str(fp),
-                   None if key is None else str(key), rec)
-
-
-def _json_default(value: Any) -> Any:
-    """numpy scalars and arrays in records become plain JSON numbers and lists."""
-    if hasattr(value, "tolist"):
-        return value.tolist()
-    if hasattr(value, "item"):
-        return value.item()
-    if isinstance(value, Path):
-        return str(value)
-    raise TypeError(f"record value of type {type(value).__name__} is not JSON-serialisable")
-
-
-def encode_record(record: Mapping[str, Any], fingerprint: str) -> bytes:
-    """One JSONL line (with trailing newline) for ``record`` stamped with ``fingerprint``."""
-    rec = {FINGERPRINT_KEY: fingerprint}
-    rec.update((k, v) for k, v in record.items() if k != FINGERPRINT_KEY)
-    return (json.dumps(rec, default=_json_default) + "\n").encode("utf-8")
-
-
-def _skip_rest_of_line(f: IO[bytes]) -> tuple[int, bool]:
-    """Read past the rest of the current line in bounded chunks; (bytes skipped, whether a
-    newline ended it: False at the end of the file)."""
-    skipped = 0
-    while True:
-        chunk = f.readline(1 << 20)
-        skipped += len(chunk)
-        if not chunk:
-            return skipped, False
-        if chunk.endswith(b"\n"):
-            return skipped, True
-
-
-def iter_records(path: str | Path) -> Iterator[dict[str, Any]]:
-    """Records of a JSONL file in file order; skips a torn last line and unreadable lines.
-
-    A line longer than ``MAX_RECORD_LINE_BYTES`` is never held in memory: it is read past in
-    bounded chunks and counted as an unreadable line (its frame is measured again), like a line
-    that is not JSON."""
-    path = Path(path)
-    if not path.is_file():
-        return
-    bad = oversized = 0
-    with open(path, "rb") as f:
-        while True:
-            raw = f.readline(MAX_RECORD_LINE_BYTES + 1)
-            if not raw:
-                break
-            if len(raw) > MAX_RECORD_LINE_BYTES and not raw.endswith(b"\n"):
-                skipped, ended = _skip_rest_of_line(f)
-                if not ended:  # a torn last line, however long
-                    logger.info("%s: ignoring an incomplete last line (%d bytes)", path,
-                                len(raw) + skipped)
-                    break
-                bad += 1
-                oversized += 1
-                continue
-            if not raw.endswith(b"\n"):
-                logger.info("%s: ignoring an incomplete last line (%d bytes)", path, len(raw))
-                break
-            if not raw.strip():
-                continue
-            try:
-                rec = json.loads(raw)
-            except (ValueError, RecursionError):
-                bad += 1
-                continue
-            if isinstance(rec, dict) and "frame_id" in rec:
-                yield rec
-            else:
-                bad += 1
-    if bad:
-        longer = (f", {oversized} of them longer than the {MAX_RECORD_LINE_BYTES >> 20} MiB a "
-                  "record may have" if oversized else "")
-        logger.warning(
-            "%s: skipped %d unreadable lines%s (those frames are measured again)", path, bad,
-            longer,
-        )
-
-
-def _truncate_torn_tail(path: Path) -> int:
-    """Cut a last line that has no newline (a write killed midway); return bytes removed."""
-    with open(path, "rb+") as f:
-        end = f.seek(0, os.SEEK_END)
-        pos, chunk = end, 1 << 16
-        while pos > 0:
-            start = max(0, pos - chunk)
-            f.seek(start)
-            data = f.read(pos - start)
-            i = data.rfind(b"\n")
-            if i >= 0:
-                keep = start + i + 1
-                break
-            pos = start
-        else:
-            keep = 0
-        if keep < end:
-            f.truncate(keep)
-            f.flush()
-            os.fsync(f.fileno())
-        return end - keep
-
 
 def _settings_diff(old: Mapping[str, Any], new: Mapping[str, Any], prefix: str = "") -> list[str]:
     """Dotted keys whose values differ between two nested settings dicts."""
@@ -498,7 +183,7 @@ class RecordStore:
             self._file.truncate(0)
             has_records = False
         elif has_records:
-            removed = _truncate_torn_tail(self.path)
+            removed = truncate_torn_tail(self.path)
             if removed:
                 logger.info("%s: cut %d bytes of an interrupted write", self.path, removed)
             old = (info or {}).get("fingerprint")

@@ -167,7 +167,8 @@ def _inputs_changed(out: Path, cfg: dict, rejudge: bool) -> InputsChanged | None
     """summary.json's ``inputs_changed``: the input files (run.json's content hashes) that
     changed since they were measured, said on stderr; None when none did. Without ``rejudge``
     its explanation is the gate's (``build_summary`` fails the gate on it)."""
-    from pgt_check.store import RUN_FILE, changed_inputs
+    from pgt_check.content_hash import changed_inputs
+    from pgt_check.records_file import RUN_FILE
 
     info = load_json_limited(out / RUN_FILE, MAX_SMALL_JSON_BYTES, RUN_FILE)
     inp = cfg.get("input") if isinstance(cfg, dict) else None

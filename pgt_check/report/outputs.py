@@ -22,8 +22,8 @@ from pgt_check.config import RunConfig
 from pgt_check.correct.correction import CORRECTION_COLUMNS
 from pgt_check.measure.columns import MEASUREMENT_COLUMNS, TIMING_COLUMNS
 from pgt_check.output_layout import OUTPUTS
+from pgt_check.ownership import COMPLETION_MARKER, check_outputs_owned
 from pgt_check.report.files import atomic_write_text
-from pgt_check.store import COMPLETION_MARKER, check_outputs_owned
 from pgt_check.verdict.frame_bounds import ACCURACY_COLUMNS
 from pgt_check.verdict.result import VERDICT_COLUMNS
 

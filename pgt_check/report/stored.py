@@ -9,7 +9,7 @@ from pgt_check.common.files import MAX_SMALL_JSON_BYTES, load_json_limited, regu
 from pgt_check.config import moved_to_sections
 from pgt_check.errors import InputError
 from pgt_check.measure.record import FrameMeasurement, OldRecordError
-from pgt_check.store import FINGERPRINT_KEY
+from pgt_check.records_file import FINGERPRINT_KEY
 
 
 def load_run(out_dir: Path) -> tuple[list[FrameMeasurement], dict]:
@@ -19,7 +19,7 @@ def load_run(out_dir: Path) -> tuple[list[FrameMeasurement], dict]:
     ``run.json``); records of another pgt-check record layout are an InputError.
     """
     from pgt_check.output_layout import OUTPUTS
-    from pgt_check.store import iter_records
+    from pgt_check.records_file import iter_records
 
     rec_path, cfg_path, run_path = (
         out_dir / OUTPUTS.records,

@@ -18,9 +18,9 @@ from typing import Any
 
 from pgt_check.common.files import check_inputs_not_outputs
 from pgt_check.config import RunConfig
+from pgt_check.content_hash import content_hash
 from pgt_check.errors import InputError, MissingExtraError, SetupError
 from pgt_check.measure import SCHEMA_VERSION
-from pgt_check.store import content_hash
 from pgt_check.types import Frame, Trajectory
 
 logger = logging.getLogger(__name__)
@@ -195,7 +195,7 @@ def frame_input_keys(
     frames: Sequence[Frame], references: Any = None, hashes: dict[str, str] | None = None
 ) -> dict[str, str]:
     """Per-frame key of what the measurement reads besides the settings: the frame's pose,
-    camera, image path and image content hash (``store.content_hash``), and the same of its
+    camera, image path and image content hash (``content_hash.content_hash``), and the same of its
     reference frames. A stored record whose key differs is measured again (a pose edited in
     place, a replaced photo). ``hashes``: filled with each image file's content hash."""
     import numpy as np
@@ -245,13 +245,13 @@ def input_file_hashes(
     config: RunConfig, side_files: Sequence[str] = (), image_hashes: dict[str, str] | None = None,
     metadata: Any = None,
 ) -> dict[str, str]:
-    """Absolute path -> ``store.content_hash`` of every file the run's measurements read: the
+    """Absolute path -> ``content_hash.content_hash`` of every file the run's measurements read: the
     trajectory (a COLMAP model folder hashes by its files), sensors file, dataparser transforms,
     the files the reader found beside the trajectory (``metadata``, ``Trajectory.metadata``: a
     LaMAR session's sensors, images and rigs, hloc's intrinsics), the mesh and the side files
     its loader read (materials, textures, buffers), and the images (``image_hashes``: as
     ``frame_input_keys`` hashed them). run.json keeps them so that ``pgt-check report`` can
-    tell which input changed since (``store.changed_inputs``)."""
+    tell which input changed since (``content_hash.changed_inputs``)."""
     inp = config.input
     named = [inp.trajectory, inp.sensors, inp.dataparser_transforms, inp.mesh]
     for key, value in dict(metadata or {}).items():

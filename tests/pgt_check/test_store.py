@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from pgt_check.errors import InputError
-from pgt_check.store import FINGERPRINT_KEY, RecordStore, iter_records
+from pgt_check.records_file import FINGERPRINT_KEY, iter_records
+from pgt_check.store import RecordStore
 
 SETTINGS = {"match": {"method": "sift", "max_keypoints": 4096}}
 
@@ -70,7 +71,7 @@ def test_unreadable_middle_line_is_skipped_with_a_warning(tmp_path, caplog):
     path = tmp_path / "records.jsonl"
     lines = path.read_text().splitlines()
     path.write_text("\n".join([lines[0], "not json", "[1, 2]", lines[1]]) + "\n")
-    with caplog.at_level(logging.WARNING, logger="pgt_check.store"):
+    with caplog.at_level(logging.WARNING, logger="pgt_check.records_file"):
         ids = [r["frame_id"] for r in iter_records(path)]
     assert ids == ["f000", "f001"]
     assert "skipped 2 unreadable lines" in caplog.text
@@ -148,7 +149,7 @@ def test_fsync_per_batch(tmp_path, monkeypatch):
 def test_records_read_as_typed_values_with_their_input_key(tmp_path):
     """``append_measurement`` stamps a record with its input key; ``latest_records`` reads the
     frame, fingerprint and input key back typed (None where a record has no input key)."""
-    from pgt_check.store import INPUT_KEY, StoredRecord
+    from pgt_check.records_file import INPUT_KEY, StoredRecord
 
     with RecordStore.open(tmp_path, "fp1", settings=SETTINGS) as store:
         store.append_measurement(rec(0), "k0")

@@ -112,8 +112,8 @@ def test_obj_texture_replaced_is_a_changed_mesh(scene, tmp_path, cli, base_args,
 
 
 def test_gltf_buffers_and_mtl_are_hashed(scene, tmp_path, case):
+    from pgt_check.content_hash import content_hash, mesh_content_hash
     from pgt_check.render import load_mesh
-    from pgt_check.store import content_hash, mesh_content_hash
 
     gltf = _export(scene, tmp_path / "gltf", "mesh.gltf")
     mesh = load_mesh(gltf)

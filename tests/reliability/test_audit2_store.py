@@ -12,7 +12,7 @@ import logging
 import tracemalloc
 from pathlib import Path
 
-from pgt_check.store import MAX_RECORD_LINE_BYTES, iter_records
+from pgt_check.records_file import MAX_RECORD_LINE_BYTES, iter_records
 
 
 def _record(fid: str) -> bytes:
@@ -37,7 +37,7 @@ def test_huge_line_is_skipped_with_bounded_memory(tmp_path, caplog):
         f.write(_record("b"))
     tracemalloc.start()
     try:
-        with caplog.at_level(logging.WARNING, logger="pgt_check.store"):
+        with caplog.at_level(logging.WARNING, logger="pgt_check.records_file"):
             ids = [r["frame_id"] for r in iter_records(path)]
         _, peak = tracemalloc.get_traced_memory()
     finally:
