@@ -119,12 +119,16 @@ def test_castle_scene_check_falls_back_to_the_base(shared_data):
 
 @pytest.mark.enhance
 def test_castle_mariner_path_is_absolute_evidence(shared_data, check_frames):
-    """The colourless castle with the shipped MaRINeR weights, matched at the size the output
-    is made at (160 px short side): the enhanced path verifies given frames where raw matching
-    finds nothing, and keeps the render's geometry, so the whole trajectory moved by 2 deg + 4 %
-    is verified nowhere (reports/mariner_absolute.md: 6/10 given, 0/10 moved)."""
+    """The colourless castle (never trained on) with the shipped MaRINeR weights, matched at the
+    size the output is made at (160 px short side): the enhanced path alone meets issue 37's
+    evidence targets on this scene where raw matching finds nothing: >= 60 % of the given frames
+    verified, a trajectory moved by 2 deg + 4 % flagged on >= 90 % of its frames, and the
+    enhanced corner error separates given from moved frames with ROC-AUC >= 0.9: the output keeps
+    the render's geometry (reference content is placed where it matches the render's content;
+    the reference's pose is never used), so a moved render is measured as moved. Measured: 9/10 given, 9/10 moved flagged, AUC 0.97 (the 7-Scenes-only
+    weights shipped before: 4/10, 10/10, 0.77; reports/mariner_training.md, ninth session)."""
     pytest.importorskip("torch")
-    from pgt_eval import move_trajectory, shared_transform
+    from pgt_eval import move_trajectory, roc_auc, shared_transform
 
     root = shared_data / "sceaux_castle"
     traj = read_trajectory(root / "trajectories.txt")
@@ -135,11 +139,16 @@ def test_castle_mariner_path_is_absolute_evidence(shared_data, check_frames):
     span = float(np.linalg.norm(centres.max(0) - centres.min(0)))
     moved = move_trajectory(traj, shared_transform(traj, 2.0, 0.04 * span, seed=1))
 
-    def within(records) -> int:
-        return sum(r["corner_error_px_enhanced"] is not None
-                   and r["corner_error_px_enhanced"] <= r["threshold_px"] for r in records)
+    def errors(records) -> np.ndarray:
+        return np.array([np.inf if r["corner_error_px_enhanced"] is None
+                         else r["corner_error_px_enhanced"] for r in records])
 
     given = check_frames(traj, mesh, **cfg)
     assert all(r["corner_error_px_raw"] is None for r in given)  # raw matching: nothing
-    assert within(given) >= 4  # measured 6 of 10
-    assert within(check_frames(moved, mesh, **cfg)) == 0  # measured 0 (8 of 10 flagged)
+    moved_records = check_frames(moved, mesh, **cfg)
+    thr = np.array([r["threshold_px"] for r in given + moved_records])
+    g, m = errors(given), errors(moved_records)
+    assert np.sum(g <= thr[: len(g)]) >= 0.6 * len(g)  # verified; measured 9 of 10
+    assert np.sum(m > thr[len(g):]) >= 0.9 * len(m)  # flagged; measured 9 of 10
+    auc = roc_auc(np.r_[g, m], np.r_[np.zeros(len(g)), np.ones(len(m))])
+    assert auc >= 0.9, auc  # measured 0.97
