@@ -39,9 +39,12 @@ tables are kept in the report).
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -68,14 +71,15 @@ FITTED = [
      "grid"),
     ("run_checks.threshold_rel", "0.15 (x per-frame threshold)", "config/judge.py", "grid"),
     ("gate.max_unverifiable_fraction", "0.5", "config/judge.py (README 'CI gate')", ""),
-    ("verdict.confident_inliers", "40", "config/judge.py", ""),
-    ("verdict.min_inliers", "15", "config/judge.py", ""),
-    ("enhance.auto_margin / CLEAR_MARGIN", "0.5", "constants.py, config/run_config.py", ""),
+    ("verdict.confident_inliers", "40", "config/judge.py", "grid"),
+    ("verdict.min_inliers", "15", "config/judge.py", "grid"),
+    ("enhance.auto_margin / CLEAR_MARGIN", "0.5", "constants.py, config/run_config.py",
+     "grid: CLEAR_MARGIN, the judging side (auto_margin decides what is measured: no)"),
     ("EDGES_DECISIVE_SUPPORT", "0.5", "constants.py (reports/edge_pipeline.md)", ""),
-    ("OWN_ERROR_FRACTION", "0.5", "constants.py", ""),
-    ("DRIFT_THRESHOLD_FACTOR", "2.0", "constants.py (7-Scenes near views)", ""),
+    ("OWN_ERROR_FRACTION", "0.5", "constants.py", "grid"),
+    ("DRIFT_THRESHOLD_FACTOR", "2.0", "constants.py (7-Scenes near views)", "grid"),
     ("OFF_MESH_RATIO / MIN_NEIGHBOUR_FACTOR", "0.25 / 2.0", "constants.py", ""),
-    ("FEATURE_ONLY_MIN_POINTS", "40", "constants.py (reports/accuracy.md)", ""),
+    ("FEATURE_ONLY_MIN_POINTS", "40", "constants.py (reports/accuracy.md)", "grid"),
     ("MIN_RELATIVE_PNP_INLIERS", "50", "correct/frames.py (castle colourless)", ""),
     ("match.resize_max / correct.resize_max", "320 / 640 px", "config/run_config.py "
      "(reports/error_vs_runtime.md)", ""),
@@ -86,8 +90,22 @@ FITTED = [
 GRIDS = {
     "verdict.threshold_rel_diag": (0.01, 0.015, 0.02, 0.025, 0.03, 0.04),
     "run_checks.threshold_rel": (0.075, 0.1, 0.15, 0.2, 0.3, 0.4),
+    # judging constants: refitted on the cached measurements (``--constants-only``)
+    "verdict.confident_inliers": (20, 30, 40, 60, 80),
+    "verdict.min_inliers": (8, 12, 15, 20, 30),
+    "CLEAR_MARGIN": (0.3, 0.4, 0.5, 0.6, 0.7),
+    "OWN_ERROR_FRACTION": (0.3, 0.4, 0.5, 0.6, 0.7),
+    "FEATURE_ONLY_MIN_POINTS": (20, 30, 40, 60, 80),
+    "DRIFT_THRESHOLD_FACTOR": (1.5, 2.0, 2.5, 3.0),
 }
-DEFAULTS = {"verdict.threshold_rel_diag": 0.02, "run_checks.threshold_rel": 0.15}
+DEFAULTS = {"verdict.threshold_rel_diag": 0.02, "run_checks.threshold_rel": 0.15,
+            "verdict.confident_inliers": 40, "verdict.min_inliers": 15, "CLEAR_MARGIN": 0.5,
+            "OWN_ERROR_FRACTION": 0.5, "FEATURE_ONLY_MIN_POINTS": 40,
+            "DRIFT_THRESHOLD_FACTOR": 2.0}
+#: the modules that read the module-level judging constants (``_patched`` sets every copy)
+_JUDGING_MODULES = ("pgt_check.constants", "pgt_check.verdict.decide",
+                    "pgt_check.verdict.checks.base", "pgt_check.verdict.checks.drift",
+                    "pgt_check.verdict.shared", "pgt_check.verdict.frame_bounds")
 
 
 def load_scene(name: str, n: int) -> tuple[Trajectory, Path, dict]:
@@ -251,10 +269,38 @@ def run_scene(name: str, n: int) -> dict:
 
 # --- leave-one-scene-out values of the fitted constants ---------------------------------------
 
+@contextmanager
+def _patched(name: str, value: float) -> Iterator[None]:
+    """Every pgt_check module's copy of the module constant ``name`` set to ``value`` (the
+    modules import it by name), restored after."""
+    for mod in _JUDGING_MODULES:
+        importlib.import_module(mod)
+    mods = [m for k, m in list(sys.modules.items())
+            if k.startswith("pgt_check") and m is not None and hasattr(m, name)]
+    old = [(m, getattr(m, name)) for m in mods]
+    for m in mods:
+        setattr(m, name, value)
+    try:
+        yield
+    finally:
+        for m, v in old:
+            setattr(m, name, v)
+
+
 def _balanced(key: str, value: float, name: str, n: int) -> float | None:
-    """The balanced accuracy of ``key`` = ``value`` on scene ``name`` (cached measurements):
-    per-frame threshold: (correct frames PASS + wrong frames flagged) / 2 on the per-frame case;
-    run-check threshold: (moved run's registration check failed + given run's passed) / 2."""
+    """The balanced accuracy of ``key`` = ``value`` on scene ``name`` (cached measurements);
+    a key without a dot is a module constant of the judging code (``_patched``)."""
+    if "." not in key:
+        with _patched(key, value):
+            return _balanced_of(key, value, name, n)
+    return _balanced_of(key, value, name, n)
+
+
+def _balanced_of(key: str, value: float, name: str, n: int) -> float | None:
+    """``_balanced``: the drift factor: (drifting frames flagged + the others PASS) / 2 on the
+    drift case; the run-check threshold: the mean of the moved run's registration check failed,
+    the given and the per-frame run's not failed; every other key: (correct frames PASS + wrong
+    frames flagged) / 2 on the per-frame case."""
     traj, mesh, cfgd = load_scene(name, n)
     _, g_ms, _ = measure(traj, mesh, cfgd, f"loso-{name}-given")
     given_jd = jd = cfgd
@@ -262,10 +308,11 @@ def _balanced(key: str, value: float, name: str, n: int) -> float | None:
         tj = trusted_judges(name, g_ms, mesh, cfgd)
         given_jd, jd = tj["--remove-calibration"], tj[CAL_FROM]
     all_cases = cases(traj, scene_depth(g_ms))
-    over = {key.replace(".", "__"): value}
-    if key == "verdict.threshold_rel_diag":
-        t, truth = all_cases["per-frame"]
-        _, ms, _ = measure(t, mesh, cfgd, f"loso-{name}-per-frame")
+    over = {key.replace(".", "__"): value} if "." in key else {}
+    if key != "run_checks.threshold_rel":
+        case = "drift" if key == "DRIFT_THRESHOLD_FACTOR" else "per-frame"
+        t, truth = all_cases[case]
+        _, ms, _ = measure(t, mesh, cfgd, f"loso-{name}-{case}")
         rows = judge_run(ms, _cfg(mesh, jd, **over)).rows()  # 7-Scenes: --calibration-from
         lab = np.array([r["frame_id"] in truth["labels"] for r in rows])
         ok = np.array([r["verdict"] == "PASS" for r in rows])
@@ -284,9 +331,12 @@ def _balanced(key: str, value: float, name: str, n: int) -> float | None:
     return float(np.mean(res))
 
 
-def loso_constants(scenes: list[str], n: int) -> dict:
+def loso_constants(scenes: list[str], n: int, keys: list[str] | None = None) -> dict:
     out = {}
     for key, grid in GRIDS.items():
+        if keys is not None and key not in keys:
+            continue
+        print("constant", key, flush=True)
         table = {s: {v: _balanced(key, v, s, n) for v in grid} for s in scenes}
         per = {}
         for s in scenes:
@@ -370,11 +420,16 @@ def write_report(doc: dict) -> None:
         lines += [md_table(HEADER, rows), ""]
         if run.get("constants"):
             lines += ["Constants fitted leave-one-scene-out (grid; score: balanced accuracy "
-                      "on the left-out scene, the per-frame case for the threshold; for the "
+                      "on the left-out scene: the per-frame case (correct frames PASS, wrong "
+                      "ones flagged) for the per-frame threshold and the judging constants, "
+                      "the drift case for the drift factor; for the "
                       "run-check threshold the registration check of the moved run (failed), "
                       "the given run and the per-frame run (not failed; the per-frame run "
                       "since the session-6 label); 7-Scenes judged as the trusted-calibration "
                       "workflow does):", ""]
+            if run.get("constants_command"):
+                lines += [f"Judging constants refitted on the cached measurements: "
+                          f"`{run['constants_command']}`", ""]
             crow = []
             for key, d in run["constants"].items():
                 for s, p in d["per_scene"].items():
@@ -387,7 +442,8 @@ def write_report(doc: dict) -> None:
                       ""]
     lines += ["## Constants fitted on scenes", "",
               md_table(["constant", "value", "where", "LOSO here"],
-                       [[a, b, c, "yes (table above)" if d == "grid" else d or "no (needs new "
+                       [[a, b, c, "yes (table above)" if d == "grid" else
+                         f"yes (table above), {d[6:]}" if d.startswith("grid: ") else d or "no (needs new "
                          "measurements per value)"] for a, b, c, d in FITTED]), ""]
     lines += doc.get("notes", [])
     MD.write_text("\n".join(lines) + "\n")
@@ -445,6 +501,11 @@ def main() -> int:
     p.add_argument("--scene", action="append", default=[], choices=SCENES)
     p.add_argument("--frames", type=int, default=30)
     p.add_argument("--no-constants", action="store_true")
+    p.add_argument("--constants-only", action="store_true",
+                   help="fit the constants (GRIDS) leave-one-scene-out on the cached "
+                        "measurements of --label's scenes, without running the cases again")
+    p.add_argument("--constant", action="append", default=None, choices=list(GRIDS),
+                   help="with --constants-only: only these (default: every one in GRIDS)")
     p.add_argument("--report-only", action="store_true")
     p.add_argument("--out", type=Path, default=None,
                    help="write OUT.md / .json / .png instead of reports/scenes_loso.*")
@@ -458,7 +519,14 @@ def main() -> int:
         JSON, MD, PNG = (args.out.with_suffix(x) for x in (".json", ".md", ".png"))
     doc = json.loads(JSON.read_text()) if JSON.is_file() else {"runs": {}}
     run = doc["runs"].setdefault(args.label, {"scenes": {}})
-    if not args.report_only:
+    if args.constants_only:
+        shared_errors.REUSE_MEASUREMENTS = True
+        done = [s for s in SCENES if s in run["scenes"]]
+        found = loso_constants(done, args.frames, args.constant)
+        run.setdefault("constants", {}).update(found)
+        run["constants_command"] = f"{command_line()}; {machine()}"
+        JSON.write_text(json.dumps(doc, indent=1, default=str) + "\n")
+    elif not args.report_only:
         run.update(command=command_line(), machine=machine())
         for s in args.scene or SCENES:
             run["scenes"][s] = run_scene(s, args.frames)
