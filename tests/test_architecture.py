@@ -15,7 +15,7 @@ LAYERS = {
     "io": 1, "render": 1, "match": 1, "geometry": 1, "enhance": 1,
     "measure": 2,
     "verdict": 3,
-    "store": 3,
+    "store": 3, "content_hash": 3, "ownership": 3, "records_file": 3,
     "correct": 4,
     "report": 5,
     "executor": 6, "stages": 6, "runner": 6, "rejudge": 6,
