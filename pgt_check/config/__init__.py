@@ -1,8 +1,9 @@
 """The run configuration (layer 0): ``from pgt_check.config import RunConfig``.
 
-- ``run_config``: ``RunConfig`` (typed, frozen, strict loading), the measuring sections
-  (input, render, match, homography, enhance, edges, pose), presets, older layouts moved
+- ``run_config``: ``RunConfig`` (typed, frozen, strict loading), presets, older layouts moved
   (``moved_to_sections``);
+- ``measure``: the measuring sections (input, render, match, homography, enhance, edges, pose)
+  and their size bounds;
 - ``judge``: the judging sections (verdict, gate, run_checks, correct) and ``JudgingConfig``,
   the sections the verdict stage may read;
 - ``load``: strict loading of plain data (type and range checks, config files, ``merge``).
@@ -20,14 +21,11 @@ from pgt_check.config.judge import (
     VerdictConfig,
 )
 from pgt_check.config.load import from_dict, merge
-from pgt_check.config.run_config import (
-    ACTION_KEYS,
+from pgt_check.config.measure import (
     MAX_IMAGE_SIDE,
     MAX_ITERATIONS,
     MAX_KEYPOINTS,
     MAX_TILE_GRID,
-    MEASUREMENT_SECTIONS,
-    PRESETS,
     EdgeConfig,
     EnhanceConfig,
     HomographyConfig,
@@ -36,6 +34,11 @@ from pgt_check.config.run_config import (
     PoseConfig,
     ReferenceConfig,
     RenderConfig,
+)
+from pgt_check.config.run_config import (
+    ACTION_KEYS,
+    MEASUREMENT_SECTIONS,
+    PRESETS,
     RunConfig,
     load_config_file,
     moved_to_sections,
