@@ -24,7 +24,7 @@ import csv
 import json
 import logging
 import time
-from dataclasses import asdict, dataclass, replace
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +37,7 @@ from .frozen import FrozenMariner, FrozenMarinerConfig
 from .frozen_cache import build_triples, layout
 from .metrics import psnr_y
 from .train_config import cosine_lr
+from .warm_start import initial_model
 
 logger = logging.getLogger(__name__)
 
@@ -150,50 +151,6 @@ def _load_triples(cache: Path, settings: TrainSettings) -> tuple[FrozenMarinerCo
     if n_done == 0:
         raise ValueError(f"{cache}: no cached training triples yet")
     return cfg, scene
-
-
-#: gate logit of a gated model warm-started from an ungated one (sigmoid = 0.98): it starts as
-#: that model, and learns where to close
-OPEN_GATE_BIAS = 4.0
-
-
-def gated_state_dict(ungated: FrozenMariner) -> dict[str, torch.Tensor]:
-    """The weights of ``ungated`` for the gated variant of its config: the head gains a gate
-    channel with zero weights and bias ``OPEN_GATE_BIAS``, so the gated model starts as
-    ``base + 0.98 x`` the ungated correction (the shipped 7-Scenes weights as the start of an
-    all-scenes gated model, instead of the matching-only base)."""
-    if ungated.cfg.gated:
-        raise ValueError("the model is gated already")
-    sd = {k: v.clone() for k, v in ungated.state_dict().items()}
-    w, b = sd["head.weight"], sd["head.bias"]
-    sd["head.weight"] = torch.cat([w, torch.zeros_like(w[:1])], 0)
-    sd["head.bias"] = torch.cat([b, torch.full_like(b[:1], OPEN_GATE_BIAS)], 0)
-    return sd
-
-
-def _initial_model(
-    cfg: FrozenMarinerConfig, out: Path, init: str | Path | None, resume: bool,
-) -> FrozenMariner:
-    """The model to train, in training mode: ImageNet VGG in the matcher, and the ``init``
-    weights unless ``last.pt`` will be resumed."""
-    from .enhancer import load_checkpoint
-    from .pretrained import backbone_state_dict
-
-    model = FrozenMariner(cfg)
-    model.load_vgg(backbone_state_dict("vgg16"))
-    if init is not None and not (resume and (out / "last.pt").is_file()):
-        start = load_checkpoint(init)
-        if not isinstance(start, FrozenMariner):
-            raise ValueError(f"{init}: not a frozen-matcher checkpoint")
-        if start.cfg == cfg:
-            model.load_state_dict(start.state_dict(), strict=True)
-        elif replace(start.cfg, gated=True) == cfg:
-            model.load_state_dict(gated_state_dict(start), strict=True)
-        else:
-            raise ValueError(f"{init}: config {start.cfg} does not match {cfg}")
-        logger.info("initialised from %s", init)
-    model.train()
-    return model
 
 
 def _resume(
@@ -363,7 +320,7 @@ def train(
     scenes = [sc for _, sc in loaded]
     if len({sc.name for sc in scenes}) != len(scenes):
         raise ValueError(f"triple cache folder names must differ: {[sc.name for sc in scenes]}")
-    model = _initial_model(cfg, out, init, resume)
+    model = initial_model(cfg, out, init, resume)
     params = [p for n, p in model.named_parameters() if not n.startswith("vgg.")]
     opt = torch.optim.Adam(params, lr=settings.lr)
     per = PerceptualLoss.pretrained(("relu1_2", "relu2_2"))

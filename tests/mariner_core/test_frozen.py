@@ -177,12 +177,12 @@ def test_gated_decoder_starts_at_the_base_and_its_gate_bounds_the_correction(tmp
 
 
 def test_a_gated_model_warm_started_from_ungated_weights_starts_as_that_model() -> None:
-    """``train_frozen.gated_state_dict``: the shipped (ungated) weights as the start of a gated
+    """``warm_start.gated_state_dict``: the shipped (ungated) weights as the start of a gated
     model: same correction, gate open (0.98), so the output is the ungated model's up to 2 %
     of its correction; a gated model cannot be converted again."""
     from dataclasses import replace
 
-    from mariner_core.train_frozen import gated_state_dict
+    from mariner_core.warm_start import gated_state_dict
 
     plain = FrozenMariner(SMALL).eval()
     with torch.no_grad():
