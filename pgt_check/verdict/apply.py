@@ -14,13 +14,13 @@ from pgt_check.verdict.decide import (
     CANNOT_SEPARATE,
     Judgement,
     Verdict,
-    bounded_pass,
     judge,
     own_outcomes,
     path_outcomes,
 )
 from pgt_check.verdict.frame_bounds import (
     agreeing_paths,
+    bounded_pass,
     frame_bounds,
     pass_bound,
     trusted_calibrations,

@@ -12,8 +12,9 @@ error it shares with its references. The run-level statement is ``verdict.accura
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Collection, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -23,6 +24,7 @@ from pgt_check.constants import FEATURE_ONLY_MIN_POINTS
 from pgt_check.geometry.frame_accuracy import FrameAccuracy, frame_accuracy
 from pgt_check.measure.record import FrameMeasurement, source_path
 from pgt_check.verdict.calibration import CameraCalibration, camera_matrix
+from pgt_check.verdict.decide import Judgement, Verdict
 
 logger = logging.getLogger(__name__)
 
@@ -154,7 +156,7 @@ def pass_bound(
     calibration: CameraCalibration | None = None,
     paths: Collection[str] | None = None,
 ) -> FrameBound:
-    """The bound of a PASS (``decide.bounded_pass`` checks its ``effect_bound_px``; frames.csv
+    """The bound of a PASS (``bounded_pass`` checks its ``effect_bound_px``; frames.csv
     and the accuracy statement read it): the frame's bound (``frame_bounds``), or, where that
     rests on the feature points alone while other agreeing evidence (the geometric edges) was
     left out of it, the bound from every agreeing point. The feature-only rule guards the pose
@@ -317,3 +319,24 @@ def trusted_calibrations(
 
 
 # --- the run ---------------------------------------------------------------------------------
+
+
+#: the reason prefix of a PASS whose own 95 % bound exceeds the threshold
+BOUND_ABOVE_THRESHOLD = "bound_above_threshold"
+
+
+def bounded_pass(j: Judgement, effect_bound_px: float | None, threshold_px: float) -> Judgement:
+    """``j`` where a PASS and the frame's 95 % bound agree; UNVERIFIABLE
+    (``bound_above_threshold``) where the evidence the PASS rests on bounds the image error
+    only beyond the threshold (``effect_bound_px``: the per-frame bound's displacement at its
+    points, ``verdict.frame_bounds``; None: no bound, ``j`` unchanged). A homography fitted to
+    a few noisy matches can land within the threshold by chance while the same points cannot
+    exclude an error several times larger (colourless 7-Scenes with MaRINeR: PASS frames with
+    95 % bounds of 17-110 px against 16 px, "verified to within" tens of degrees)."""
+    if j.verdict is not Verdict.PASS or effect_bound_px is None or not math.isfinite(
+            effect_bound_px) or effect_bound_px <= threshold_px:
+        return j
+    reason = (f"{BOUND_ABOVE_THRESHOLD} (the evidence bounds the error to {effect_bound_px:.1f} "
+              f"px at 95 %, above the {threshold_px:.1f} px threshold: it cannot tell an error "
+              "above the threshold from none)")
+    return replace(j, verdict=Verdict.UNVERIFIABLE, reason=reason)
