@@ -60,14 +60,19 @@ def _errors(traj, mesh, shading: str, output: str) -> tuple[list[float], list[fl
     return errs, thr
 
 
-def _scene_choice(traj, mesh, shading: str) -> str:
-    cfg = _config(traj, mesh, shading, "auto")
+def scene_choice(cfg: RunConfig, traj) -> str:
+    """The output ("model" or "base") the run's scene check picks for ``traj`` under ``cfg``
+    (MaRINeR with ``enhance.output`` auto)."""
     checker = FrameChecker(cfg, pick_references(traj, traj.frames, cfg))
     try:
         return resolve_enhancer_output(cfg, traj.frames, checker.references,
                                        checker).enhance.output
     finally:
         checker.close()
+
+
+def _scene_choice(traj, mesh, shading: str) -> str:
+    return scene_choice(_config(traj, mesh, shading, "auto"), traj)
 
 
 def main(argv: list[str] | None = None) -> int:

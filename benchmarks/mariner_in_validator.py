@@ -37,11 +37,11 @@ import time
 
 import numpy as np
 from _common import REPORTS, command_line, machine, md_table
+from mariner_evidence import scene_choice
 from scenes_loso import CAL_FROM, SCENES, load_scene, trusted_judges
 
 from pgt_check.config import RunConfig
 from pgt_check.measure import FrameChecker, pick_references
-from pgt_check.stages.scene_check import resolve_enhancer_output
 from pgt_check.verdict import judge_run
 from pgt_eval import move_trajectory, roc_auc, shared_transform
 
@@ -94,13 +94,7 @@ def _judged(name: str, traj, mesh, shading: str, enhance: dict, given_ms: list, 
 
 
 def _scene_choice(traj, mesh, shading: str) -> str:
-    cfg = _config(traj, mesh, shading, SETTINGS["mariner"])
-    checker = FrameChecker(cfg, pick_references(traj, traj.frames, cfg))
-    try:
-        return resolve_enhancer_output(cfg, traj.frames, checker.references,
-                                       checker).enhance.output
-    finally:
-        checker.close()
+    return scene_choice(_config(traj, mesh, shading, SETTINGS["mariner"]), traj)
 
 
 def _score(rows: list[dict]) -> list[float]:
