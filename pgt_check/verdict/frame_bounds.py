@@ -176,6 +176,27 @@ def pass_bound(
                                                    is not None else ""), "")
 
 
+#: the reason prefix of a PASS whose own 95 % bound exceeds the threshold
+BOUND_ABOVE_THRESHOLD = "bound_above_threshold"
+
+
+def bounded_pass(j: Judgement, effect_bound_px: float | None, threshold_px: float) -> Judgement:
+    """``j`` where a PASS and the frame's 95 % bound agree; UNVERIFIABLE
+    (``bound_above_threshold``) where the evidence the PASS rests on bounds the image error
+    only beyond the threshold (``effect_bound_px``: the per-frame bound's displacement at its
+    points, ``verdict.frame_bounds``; None: no bound, ``j`` unchanged). A homography fitted to
+    a few noisy matches can land within the threshold by chance while the same points cannot
+    exclude an error several times larger (colourless 7-Scenes with MaRINeR: PASS frames with
+    95 % bounds of 17-110 px against 16 px, "verified to within" tens of degrees)."""
+    if j.verdict is not Verdict.PASS or effect_bound_px is None or not math.isfinite(
+            effect_bound_px) or effect_bound_px <= threshold_px:
+        return j
+    reason = (f"{BOUND_ABOVE_THRESHOLD} (the evidence bounds the error to {effect_bound_px:.1f} "
+              f"px at 95 %, above the {threshold_px:.1f} px threshold: it cannot tell an error "
+              "above the threshold from none)")
+    return replace(j, verdict=Verdict.UNVERIFIABLE, reason=reason)
+
+
 def _all_sources(evidence: Any, paths: Collection[str] | None) -> tuple[str, ...]:
     """The evidence's sources among ``paths`` (None: all)."""
     return tuple(s for s in evidence.sources if paths is None or source_path(s) in paths)
@@ -316,27 +337,3 @@ def trusted_calibrations(
     from pgt_check.verdict.calibration import trusted_calibration
 
     return trusted_calibration(config.calibration_from, sorted(set(camera_ids)))
-
-
-# --- the run ---------------------------------------------------------------------------------
-
-
-#: the reason prefix of a PASS whose own 95 % bound exceeds the threshold
-BOUND_ABOVE_THRESHOLD = "bound_above_threshold"
-
-
-def bounded_pass(j: Judgement, effect_bound_px: float | None, threshold_px: float) -> Judgement:
-    """``j`` where a PASS and the frame's 95 % bound agree; UNVERIFIABLE
-    (``bound_above_threshold``) where the evidence the PASS rests on bounds the image error
-    only beyond the threshold (``effect_bound_px``: the per-frame bound's displacement at its
-    points, ``verdict.frame_bounds``; None: no bound, ``j`` unchanged). A homography fitted to
-    a few noisy matches can land within the threshold by chance while the same points cannot
-    exclude an error several times larger (colourless 7-Scenes with MaRINeR: PASS frames with
-    95 % bounds of 17-110 px against 16 px, "verified to within" tens of degrees)."""
-    if j.verdict is not Verdict.PASS or effect_bound_px is None or not math.isfinite(
-            effect_bound_px) or effect_bound_px <= threshold_px:
-        return j
-    reason = (f"{BOUND_ABOVE_THRESHOLD} (the evidence bounds the error to {effect_bound_px:.1f} "
-              f"px at 95 %, above the {threshold_px:.1f} px threshold: it cannot tell an error "
-              "above the threshold from none)")
-    return replace(j, verdict=Verdict.UNVERIFIABLE, reason=reason)
