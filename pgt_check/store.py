@@ -17,6 +17,9 @@ rerun with the same fingerprint skips the frames already recorded; with a differ
 it stops with ``InputError`` unless ``resume`` (recompute the frames without a record for the new
 settings) or ``overwrite`` (start fresh) is given. One run at a time may write a store (an
 advisory ``flock`` on ``records.jsonl``; released by the OS even after SIGKILL).
+
+The line format and tolerant reading are ``records_file``'s, the input files' hashes
+``content_hash``'s, and which output files a run may replace ``ownership``'s.
 """
 
 from __future__ import annotations
