@@ -108,10 +108,21 @@ _JUDGING_MODULES = ("pgt_check.constants", "pgt_check.verdict.decide",
                     "pgt_check.verdict.shared", "pgt_check.verdict.frame_bounds")
 
 
+#: ``--shading shaded``: every scene's mesh rendered without its colours (the colourless copies
+#: of issue #38's hidden data); the measurements are cached apart (the config is in the key)
+SHADING: str | None = None
+
+
+def _prefix(name: str) -> str:
+    """The measurement cache key's prefix of scene ``name`` (apart per shading)."""
+    return f"loso-{name}" + ("" if SHADING is None else f"-{SHADING}")
+
+
 def load_scene(name: str, n: int) -> tuple[Trajectory, Path, dict]:
     d = shared_data() / name
     traj = read_trajectory(d / "trajectories.txt", sensors=d / "sensors.txt")
-    return _subset(traj, n), d / "mesh.ply", {}
+    cfgd: dict = {} if SHADING is None else {"render": {"shading": SHADING}}
+    return _subset(traj, n), d / "mesh.ply", cfgd
 
 
 def cases(traj: Trajectory, depth: float) -> dict[str, tuple[Trajectory, dict]]:
@@ -231,7 +242,7 @@ def trusted_judges(name: str, given_ms, mesh: Path, cfgd: dict) -> dict[str, dic
 def run_scene(name: str, n: int) -> dict:
     traj, mesh, cfgd = load_scene(name, n)
     t0 = time.perf_counter()
-    cfg, ms, tpf = measure(traj, mesh, cfgd, f"loso-{name}-given")
+    cfg, ms, tpf = measure(traj, mesh, cfgd, f"{_prefix(name)}-given")
     depth = scene_depth(ms)
     res: dict = {"scene": name, "frames": len(traj), "depth": depth, "s_per_frame": tpf,
                  "rows": {}}
@@ -240,7 +251,7 @@ def run_scene(name: str, n: int) -> dict:
         judges.update(trusted_judges(name, ms, mesh, cfgd))
     all_cases = cases(traj, depth)
     for case, (t, truth) in all_cases.items():
-        c_cfg, c_ms, c_tpf = measure(t, mesh, cfgd, f"loso-{name}-{case}")
+        c_cfg, c_ms, c_tpf = measure(t, mesh, cfgd, f"{_prefix(name)}-{case}")
         for jname, jd in judges.items():
             if jname == CAL_FROM and case == "given":
                 jd = judges["--remove-calibration"]  # the trusted run itself
@@ -256,7 +267,7 @@ def run_scene(name: str, n: int) -> dict:
             ids = set(truth["injected"])
             for jname, jd in judges.items():
                 jc = _cfg(mesh, jd)
-                _, g_ms, _ = measure(traj, mesh, cfgd, f"loso-{name}-given")
+                _, g_ms, _ = measure(traj, mesh, cfgd, f"{_prefix(name)}-given")
                 clean = corrected(traj, g_ms, jc, ids)
                 corr = corrected(t, c_ms, jc, ids)
                 sc = score_corrections(traj, truth["injected"], corr, clean)
@@ -302,7 +313,7 @@ def _balanced_of(key: str, value: float, name: str, n: int) -> float | None:
     the given and the per-frame run's not failed; every other key: (correct frames PASS + wrong
     frames flagged) / 2 on the per-frame case."""
     traj, mesh, cfgd = load_scene(name, n)
-    _, g_ms, _ = measure(traj, mesh, cfgd, f"loso-{name}-given")
+    _, g_ms, _ = measure(traj, mesh, cfgd, f"{_prefix(name)}-given")
     given_jd = jd = cfgd
     if name.startswith("7scenes"):
         tj = trusted_judges(name, g_ms, mesh, cfgd)
@@ -312,7 +323,7 @@ def _balanced_of(key: str, value: float, name: str, n: int) -> float | None:
     if key != "run_checks.threshold_rel":
         case = "drift" if key == "DRIFT_THRESHOLD_FACTOR" else "per-frame"
         t, truth = all_cases[case]
-        _, ms, _ = measure(t, mesh, cfgd, f"loso-{name}-{case}")
+        _, ms, _ = measure(t, mesh, cfgd, f"{_prefix(name)}-{case}")
         rows = judge_run(ms, _cfg(mesh, jd, **over)).rows()  # 7-Scenes: --calibration-from
         lab = np.array([r["frame_id"] in truth["labels"] for r in rows])
         ok = np.array([r["verdict"] == "PASS" for r in rows])
@@ -324,7 +335,7 @@ def _balanced_of(key: str, value: float, name: str, n: int) -> float | None:
     # whose frames carry errors of their own (40 %, no shared error)
     for case, want in (("moved", "failed"), ("given", "passed"), ("per-frame", "passed")):
         t, _ = all_cases[case]
-        _, ms, _ = measure(t, mesh, cfgd, f"loso-{name}-{case}")
+        _, ms, _ = measure(t, mesh, cfgd, f"{_prefix(name)}-{case}")
         sh = judge_run(ms, _cfg(mesh, given_jd if case == "given" else jd, **over)).shared
         st = sh.summary()["registration"]["status"] if sh is not None else "not_checked"
         res.append(float((st == "failed") if want == "failed" else (st != "failed")))
@@ -512,8 +523,13 @@ def main() -> int:
     p.add_argument("--reuse-measurements", action="store_true",
                    help="judge the newest cached measurement of each case where this code has "
                         "none (a change to judging code only; the report names the command)")
+    p.add_argument("--shading", choices=("shaded",), default=None,
+                   help="render every mesh without its colours (colourless copies); use with "
+                        "--out and its own --label")
     args = p.parse_args()
     shared_errors.REUSE_MEASUREMENTS = args.reuse_measurements
+    global SHADING
+    SHADING = args.shading
     if args.out is not None:
         global JSON, MD, PNG
         JSON, MD, PNG = (args.out.with_suffix(x) for x in (".json", ".md", ".png"))
