@@ -46,6 +46,7 @@ from pgt_check.measure.steps import (  # format_exception, pick_references: re-e
     match_path,
     pick_references,
     pose_estimate,
+    raw_contradicts,
     replace_measurement,
 )
 from pgt_check.threads import limit_threads
@@ -316,9 +317,11 @@ class FrameChecker:
             and why is not EnhanceWhy.MODE_ALWAYS
             and edges is not None
             and edges_decisive(edges.measurement, threshold, self.config.enhance)
+            and not raw_contradicts(raw, threshold, self.config.enhance)
         ):
             # the geometric edges already decide with absolute evidence: leave out the
-            # enhancement (colourless meshes where the edges line up clearly)
+            # enhancement (colourless meshes where the edges line up clearly), unless the raw
+            # render aligned and does not clearly pass (the enhanced path breaks the tie)
             why, detail = EnhanceWhy.EDGES_DECISIVE, ""
         enh = ref_id = None
         others: list[tuple[str, PathResult]] = []

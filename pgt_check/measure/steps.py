@@ -96,6 +96,20 @@ def edges_decisive(path: Any, threshold: float, enhance_cfg: Any) -> bool:
     return path.corner_error_px < (1.0 - enhance_cfg.auto_margin) * threshold
 
 
+def raw_contradicts(raw: PathResult, threshold: float, e: EnhanceConfig) -> bool:
+    """The raw path aligned but is not itself a clear PASS (corner error at or above the
+    ``auto_margin`` band's lower edge): it does not back a clear edge PASS. Two absolute paths
+    that disagree then get the enhanced path as a third witness instead of a verdict that rests
+    on whichever of the two the judging trusts more (on blurred TSDF textures a raw render
+    with a few dozen inliers and the edges each failed correct frames or passed wrong ones:
+    reports/scenes_loso.md, tenth session)."""
+    return (
+        raw.success
+        and raw.corner_error_px is not None
+        and raw.corner_error_px >= (1.0 - e.auto_margin) * threshold
+    )
+
+
 def clear_pass(path: PathResult, threshold: float, e: EnhanceConfig) -> bool:
     """A feature path's clear PASS: aligned with at least ``auto_min_inliers`` inliers and its
     corner error below the ``auto_margin`` band around the threshold (the band in which a

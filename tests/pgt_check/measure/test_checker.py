@@ -10,6 +10,7 @@ import dataclasses
 import numpy as np
 import pytest
 
+import pgt_check.measure.checker as checker_module
 import pgt_check.measure.edge_path as edge_path_module
 from pgt_check.config import RunConfig
 from pgt_check.io import read_trajectory
@@ -182,6 +183,41 @@ def test_edges_auto_is_left_out_where_the_raw_path_is_decisive(traj, mesh, monke
     )
     assert m.raw.n_inliers >= 40 and m.raw.corner_error_px < 1.0  # decisive raw PASS
     assert calls == [] and m.edges is None
+
+
+@pytest.mark.parametrize(
+    "raw_ratio, raw_inliers, enhanced",
+    [
+        (0.7, 60, True),  # raw aligned near the threshold: it contradicts the edges' clear PASS
+        (1.6, 25, True),  # raw FAILs on a few inliers: the enhanced path breaks the tie
+        (0.2, 25, False),  # raw agrees (a low error on few inliers): the edges decide
+    ],
+)
+def test_a_clear_edge_pass_leaves_out_the_enhancement_only_where_the_raw_path_agrees(
+    traj, mesh, monkeypatch, raw_ratio, raw_inliers, enhanced
+):
+    """Two absolute paths that disagree (the raw render aligned but not within the clear band,
+    the edges clearly PASS) get the enhanced path as a third witness."""
+    cfg = _config(mesh, enhance={"mode": "auto", "method": "reproject"}, edges={"mode": "auto"})
+    frame = traj.frames[4]
+    thr = cfg.verdict.threshold_for(frame.camera.width, frame.camera.height)
+    real = checker_module.match_path
+
+    def raw_path(*a, **k):
+        r = real(*a, **k)
+        assert r.success  # the sample scene's raw render aligns
+        return dataclasses.replace(r, corner_error_px=raw_ratio * thr, n_inliers=raw_inliers)
+
+    monkeypatch.setattr(checker_module, "match_path", raw_path)
+    monkeypatch.setattr(checker_module, "edges_decisive", lambda *a: True)
+    (m,) = _measure(cfg, [frame], pick_references(traj, [frame], cfg))
+    assert m.edges is not None  # the raw path is not decisive: the edges ran
+    if enhanced:
+        assert m.enhance_why is not EnhanceWhy.EDGES_DECISIVE
+        assert m.enhanced is not None and m.enhance_ran
+    else:
+        assert m.enhance_why is EnhanceWhy.EDGES_DECISIVE
+        assert m.enhanced is None and not m.enhance_ran
 
 
 def test_edges_lead_on_a_shaded_render_and_a_clear_pass_leaves_out_the_raw_path(traj, mesh):
