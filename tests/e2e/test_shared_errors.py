@@ -134,8 +134,10 @@ def test_sample_scene_moved_trajectory(sample_scene, tmp_path, capsys):
      pytest.param("7scenes", 2.0, 0.04, marks=pytest.mark.xfail(strict=False, reason=(
          "open (#38): the gate fails and the rotation is recovered (1.8 of 2.0 deg), but "
          "the refined translation comes out low (0.058 of 0.092 on 2026-12-02, 0.048 after "
-         "the screening's effect cut): on these sweep views the trusted run's shared error "
-         "is taken wholly as calibration (item 2) and the rounds do not split it back")))],
+         "the screening's effect cut, 0.065 after the third-witness rule of 2026-12-03: "
+         "within the test's 30 % by one point, so it passes, but not with a margin): on "
+         "these sweep views the trusted run's shared error is taken wholly as calibration "
+         "(item 2) and the rounds do not split it back")))],
 )
 def test_real_moved_trajectory_fails_the_gate(shared_data, dataset, deg, frac, tmp_path, capsys):
     """2 deg + 4 % of the depth (and 1 deg, and 4 % alone, on the castle) on the real data: the
