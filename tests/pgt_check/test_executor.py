@@ -211,7 +211,9 @@ def test_serial_builds_once_and_closes():
 
 def test_process_matches_serial():
     serial, _ = run_records(RunConfig(), 30)
-    proc, stats = run_records(RunConfig(executor="process", workers=2), 30, delay_s=0.01)
+    # 0.1 s a frame: on a loaded machine the second worker starts later than 30 x 0.01 s
+    # (the first one then took every frame and the "both workers" check below failed)
+    proc, stats = run_records(RunConfig(executor="process", workers=2), 30, delay_s=0.1)
     assert by_id(proc) == by_id(serial)
     assert len(proc) == 30 and stats.worker_crashes == 0
     assert len({r.error_detail for r in proc}) == 2  # both workers were used, each built once
