@@ -123,7 +123,10 @@ def _prefix(name: str) -> str:
 #: as a handheld RGB-D scan gives them (``make_scan_like_scene``: a rounded, holed, decimated,
 #: colourless mesh; photos of the clean boxes plus objects the mesh lacks, exposure changes,
 #: blur, noise): the kind of scene issue #38's hidden textureless scan is, with the true poses
-GENERATED = {"gen_scan_boxes": ("make_scan_like_scene", 40, "scan.ply")}
+#: ``gen_tsdf_boxes``: the same boxes fused from noisy depth into a TSDF mesh
+#: (``pgt_eval.tsdf.make_tsdf_scene``), photos with clutter the mesh lacks
+GENERATED = {"gen_scan_boxes": ("pgt_eval:make_scan_like_scene", 40, "scan.ply"),
+             "gen_tsdf_boxes": ("pgt_eval.tsdf:make_tsdf_scene", 40, "tsdf.ply")}
 ALL_SCENES = SCENES + tuple(GENERATED)
 
 
@@ -132,12 +135,11 @@ def load_scene(name: str, n: int) -> tuple[Trajectory, Path, dict]:
     if name in GENERATED:
         import tempfile
 
-        import pgt_eval
-
         builder, n_written, mesh_name = GENERATED[name]
         d = Path(tempfile.gettempdir()) / "pgt-check-generated" / name
         if not (d / "trajectories.txt").is_file():
-            getattr(pgt_eval, builder)(d, n_frames=n_written)
+            module, func = builder.split(":")
+            getattr(importlib.import_module(module), func)(d, n_frames=n_written)
         return _subset(read_trajectory(d / "trajectories.txt"), n), d / mesh_name, cfgd
     d = shared_data() / name
     traj = read_trajectory(d / "trajectories.txt", sensors=d / "sensors.txt")
