@@ -512,8 +512,9 @@ def plot(doc: dict) -> None:
                 except KeyError:
                     v = None
                 vals.append(np.nan if v is None else v)
-            x = np.arange(len(names)) + 0.4 * k - 0.2 * (len(labels) - 1)
-            ax.bar(x, vals, 0.4, label=label)
+            w = 0.8 / max(1, len(labels))  # the labels' bars side by side within one scene
+            x = np.arange(len(names)) - 0.4 + w * (k + 0.5)
+            ax.bar(x, vals, w, label=label)
             ax.set_xticks(np.arange(len(names)), [s.replace("_", "\n", 1) for s in names],
                           fontsize=7)
         ax.set_title(title, fontsize=9)
