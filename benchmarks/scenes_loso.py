@@ -119,12 +119,13 @@ def _prefix(name: str) -> str:
 
 
 #: generated scenes with exact truth (``--scene gen_...``, not in the default list): name ->
-#: (``pgt_eval`` builder, frames written, mesh file). ``gen_scan_boxes``: the textureless boxes
+#: (builder, frames written, mesh file). ``gen_scan_boxes``: the textureless boxes
 #: as a handheld RGB-D scan gives them (``make_scan_like_scene``: a rounded, holed, decimated,
 #: colourless mesh; photos of the clean boxes plus objects the mesh lacks, exposure changes,
-#: blur, noise): the kind of scene issue #38's hidden textureless scan is, with the true poses
+#: blur, noise): the kind of scene issue #38's hidden textureless scan is, with the true poses.
 #: ``gen_tsdf_boxes``: the same boxes fused from noisy depth into a TSDF mesh
-#: (``pgt_eval.tsdf.make_tsdf_scene``), photos with clutter the mesh lacks
+#: (``pgt_eval.tsdf.make_tsdf_scene``), photos with clutter the mesh lacks. The builder is
+#: "module:function" of ``pgt_eval``
 GENERATED = {"gen_scan_boxes": ("pgt_eval:make_scan_like_scene", 40, "scan.ply"),
              "gen_tsdf_boxes": ("pgt_eval.tsdf:make_tsdf_scene", 40, "tsdf.ply")}
 ALL_SCENES = SCENES + tuple(GENERATED)

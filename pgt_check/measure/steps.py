@@ -84,6 +84,11 @@ NO_ENHANCE = (
 
 
 
+def below_band(corner_error_px: float, threshold: float, e: EnhanceConfig) -> bool:
+    """A corner error below the ``auto_margin`` band around the threshold: a clear PASS."""
+    return corner_error_px < (1.0 - e.auto_margin) * threshold
+
+
 def edges_decisive(path: Any, threshold: float, enhance_cfg: Any) -> bool:
     """The edge path (a ``PathMeasurement``) gives a clear PASS: aligned, not ambiguous, well
     supported, and its corner error below the ``auto_margin`` band around the threshold (the
@@ -93,7 +98,7 @@ def edges_decisive(path: Any, threshold: float, enhance_cfg: Any) -> bool:
         return False
     if path.inlier_ratio < EDGES_DECISIVE_SUPPORT:
         return False
-    return path.corner_error_px < (1.0 - enhance_cfg.auto_margin) * threshold
+    return below_band(path.corner_error_px, threshold, enhance_cfg)
 
 
 def raw_contradicts(raw: PathResult, threshold: float, e: EnhanceConfig) -> bool:
@@ -106,7 +111,7 @@ def raw_contradicts(raw: PathResult, threshold: float, e: EnhanceConfig) -> bool
     return (
         raw.success
         and raw.corner_error_px is not None
-        and raw.corner_error_px >= (1.0 - e.auto_margin) * threshold
+        and not below_band(raw.corner_error_px, threshold, e)
     )
 
 
@@ -118,7 +123,7 @@ def clear_pass(path: PathResult, threshold: float, e: EnhanceConfig) -> bool:
         path.success
         and path.n_inliers >= e.auto_min_inliers
         and path.corner_error_px is not None
-        and path.corner_error_px < (1.0 - e.auto_margin) * threshold
+        and below_band(path.corner_error_px, threshold, e)
     )
 
 
