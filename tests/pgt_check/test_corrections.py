@@ -262,3 +262,50 @@ def test_corrections_on_a_blurred_scan_come_within_30_percent(tmp_path, sample_s
         assert dr <= 0.3 * rot and dt <= 0.3 * t, (fid, dr, dt, c, [r.frame_id for r in refs[fid]])
         if c.applied:  # an applied correction's stated uncertainty covers its error
             assert dr <= 3 * max(c.sigma_rot_deg, 0.05), (fid, dr, c.sigma_rot_deg)
+
+
+def test_relative_fallback_needs_a_reference_the_run_vouches_for(monkeypatch, sample_scene):
+    """Where the raw rounds cannot correct a frame (a colourless mesh), the measurement's
+    one-shot PnP through its enhanced path is written as a correction only when the run
+    vouches for the reference that path used: a wrong or unchecked reference's pose error
+    would be written into the corrected trajectory (colourless 7-Scenes, judged where nothing
+    PASSes, applied 10 such corrections, 6 further off than the input)."""
+    import pgt_check.correct.frames as cf
+    from pgt_check.config import RunConfig
+    from pgt_check.correct.correction import Correction
+    from pgt_check.enhance.base import Evidence
+    from pgt_check.measure.record import FrameMeasurement, PathMeasurement, PoseEstimate
+
+    truth = _sample_truth(sample_scene)
+    frame, ref, other = truth.frames[3], truth.frames[4], truth.frames[5]
+    calls = []
+
+    def failing_refine(checker, f, start=None, **kw):
+        calls.append((start is None, tuple(r.frame_id for r in kw["references"])))
+        return Correction(f.frame_id, False, "too_few_pnp_inliers")
+
+    monkeypatch.setattr(cf, "refine_pose", failing_refine)
+    estimate = np.array(frame.world_from_cam, float)
+    estimate[:3, 3] += 0.05
+
+    def measurement(n_inliers):
+        enhanced = PathMeasurement("enhanced", "reproject", Evidence.RELATIVE, 500, 500, 200,
+                                   n_inliers, 0.5, "", reference_id=ref.frame_id)
+        pose = PoseEstimate(n_inliers, "", 0.05, 0.0, tuple(map(tuple, estimate)))
+        return FrameMeasurement(frame.frame_id, None, None, 640, 480, (0.0, 0.0, 0.0),
+                                enhanced=enhanced, verdict_path="enhanced", pose=pose)
+
+    c = RunConfig().correct
+    got = cf.correct_frame(None, frame, measurement(120), c, references=(ref, other))
+    assert got.success and got.applied and got.reason == "relative_evidence"
+    assert np.allclose(got.pose, estimate)
+    assert calls == [(False, (ref.frame_id, other.frame_id)), (True, (ref.frame_id,
+                                                                      other.frame_id))]
+    # the reference that path used is not vouched for (another one is): not written
+    got = cf.correct_frame(None, frame, measurement(120), c, references=(other,))
+    assert not got.success and got.reason == "too_few_pnp_inliers"
+    # nothing vouched (a run-level check failed every frame): not written
+    assert not cf.correct_frame(None, frame, measurement(120), c, references=()).success
+    # vouched, but too few PnP inliers behind the estimate
+    few = cf.MIN_RELATIVE_PNP_INLIERS - 1
+    assert not cf.correct_frame(None, frame, measurement(few), c, references=(ref,)).success
