@@ -129,7 +129,7 @@ def _add_method_args(p: argparse.ArgumentParser) -> None:
                    "render -> match -> PnP rounds; writes corrected_trajectory.txt (input's "
                    "format) and bad_frames.txt")
     g.add_argument("--correct-rounds", type=int, default=None,
-                   help="render -> match -> PnP rounds per corrected frame (default 3)")
+                   help="render -> match -> PnP rounds per corrected frame (default 4)")
     g.add_argument("--registration-rounds", type=int, default=None, metavar="N",
                    help="when the registration check fails, up to N rounds of measuring up to "
                    "30 frames again at the corrected poses to refine its estimate (8 will "

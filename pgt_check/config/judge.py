@@ -144,7 +144,10 @@ class CorrectConfig:
 
     #: which frames: "fail" (FAIL verdicts), "all" (every measured frame) or "none"
     frames: Literal["none", "fail", "all"] = "fail"
-    rounds: int = 3
+    #: render -> match -> PnP rounds per frame; each round's render is enhanced with the next
+    #: of up to ``correct.frames.CORRECTION_REFERENCES`` (4) vouched references, so 4 rounds
+    #: use each of them once
+    rounds: int = 4
     #: PnP bootstrap resamples for the uncertainty (0 = the last update only)
     bootstrap: int = 12
     #: the registration refinement's rounds together (``run_checks.refine_rounds``), and the

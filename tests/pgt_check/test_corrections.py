@@ -309,3 +309,32 @@ def test_relative_fallback_needs_a_reference_the_run_vouches_for(monkeypatch, sa
     # vouched, but too few PnP inliers behind the estimate
     few = cf.MIN_RELATIVE_PNP_INLIERS - 1
     assert not cf.correct_frame(None, frame, measurement(few), c, references=(ref,)).success
+
+
+def test_the_rounds_take_the_vouched_references_in_turn(monkeypatch, sample_scene):
+    """Each reference places its photo on the mesh by its own pose, whose error moves the
+    correction: the default rounds use every one of the up to ``CORRECTION_REFERENCES``
+    references once (one enhancement per round), so no single reference decides."""
+    import pgt_check.correct.pose as P
+    from pgt_check.config import RunConfig
+    from pgt_check.correct.frames import CORRECTION_REFERENCES
+
+    refs = read_trajectory(sample_scene / "trajectories.txt").frames[:CORRECTION_REFERENCES]
+    assert len(refs) == CORRECTION_REFERENCES
+    seen = []
+
+    def fake_round(target, pose, references=()):
+        seen.append(tuple(r.frame_id for r in references))
+        moved = np.array(pose, float)
+        moved[0, 3] += 0.01  # every round moves: none stops the rounds early
+        return P._Round(1.0, moved, "", 50, np.zeros((0, 3)), np.zeros((0, 2)),
+                        np.ones((4, 4)), None)
+
+    monkeypatch.setattr(P, "_round", fake_round)
+    rounds = RunConfig().correct.rounds
+    done = P._run_rounds(None, np.eye(4), rounds, refs)
+    assert done.n_done == rounds and len(done.done) == rounds
+    used = [s[0] for s in seen]
+    assert all(len(s) == 1 for s in seen)
+    assert set(used) == {r.frame_id for r in refs}  # every reference once at least
+    assert used[:CORRECTION_REFERENCES] == [r.frame_id for r in refs]
