@@ -92,9 +92,11 @@ def main() -> int:
             print(json.dumps(row), flush=True)
     doc.update(command=command_line(), machine=machine())
     JSON.write_text(json.dumps(doc, indent=1) + "\n")
-    rows = [[r["scene"], r["frames"], r["width"],
-             "%.2f (p90 %.2f)" % tuple(r["deg_per_px"]),
-             "%.2f (p90 %.2f)" % tuple(r["depth_pct_per_px"])] for r in doc["rows"].values()]
+    def med(v: list[float]) -> str:
+        return f"{v[0]:.2f} (p90 {v[1]:.2f})"
+
+    rows = [[r["scene"], r["frames"], r["width"], med(r["deg_per_px"]), med(r["depth_pct_per_px"])]
+            for r in doc["rows"].values()]
     MD.write_text("\n".join([
         "# One photo's pose: the rotation/translation trade-off per scene", "",
         (__doc__ or "").split("\n\n    python")[0].split("\n", 1)[1].strip(), "",
