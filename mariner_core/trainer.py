@@ -272,7 +272,7 @@ class Trainer:
             g_loss = generator_adversarial_loss(disc(target).detach(), disc(outputs[-1]))
             disc.requires_grad_(True)
             loss = loss + cfg.lambda_adv * g_loss
-            losses["g_adv"] = float(g_loss)
+            losses["g_adv"] = float(g_loss.detach())
         self.opt.zero_grad(set_to_none=True)
         loss.backward()
         self.opt.step()
@@ -284,7 +284,7 @@ class Trainer:
             d_opt.zero_grad(set_to_none=True)
             d_loss.backward()
             d_opt.step()
-            losses["d_loss"] = float(d_loss)
+            losses["d_loss"] = float(d_loss.detach())
         self.state.step += 1
         self.state.samples += cfg.batch_size
         return {"loss": float(loss.detach()), "l1": l1, "rec": rec, **losses}
