@@ -10,7 +10,10 @@ PASSed), each round also matches the render enhanced with one of them, in turn (
 photo placed on the mesh, ``checker.enhancer``): sharp photo texture where a scan's vertex
 colours are blurred.
 
-The final pose is one PnP on the correspondences of every round together (a lifted point is a
+A round whose PnP fails for too few correspondences is solved together with the next
+reference's round at the same pose (on the generated textureless scans the rounds had ended at
+the first such round: reports/scenes_loso_generated.md). The final pose is one PnP on the
+correspondences of every round together (a lifted point is a
 mesh point whatever pose it was rendered at): on 7-Scenes the raw render gives 12-40 PnP
 inliers per round, and each round's own PnP jumped by 0.3-0.6 deg around its fixed point
 instead of converging, so the last round's pose was as far off as the first
@@ -144,6 +147,18 @@ def _round(target: _Target, pose: np.ndarray, references: Sequence[Frame] = ()) 
     )
 
 
+def _merged(rounds: Sequence[_Round], start: np.ndarray, cfg: Any) -> _Round | None:
+    """The rounds made at one pose (each PnP failed) as one round: their correspondences
+    together and one PnP on them (None when that fails too)."""
+    c = _pooled_pnp(rounds, start, cfg)
+    if not c.success:
+        return None
+    last = rounds[-1]
+    return _Round(last.corner_error_px, c.world_from_cam, "", c.n_inliers,
+                  np.concatenate([r.points for r in rounds]),
+                  np.concatenate([r.kpts_photo for r in rounds]), last.depth, last.cam_w)
+
+
 def _pooled_pnp(rounds: Sequence[_Round], start: np.ndarray, cfg: Any) -> Any:
     """One PnP on the correspondences of ``rounds`` together (``PoseCorrection``)."""
     from pgt_check.geometry.pnp import estimate_pose_from_points
@@ -204,7 +219,10 @@ def _run_rounds(
     target: _Target, pose: np.ndarray, rounds: int, references: Sequence[Frame] = ()
 ) -> _Rounds:
     """Up to ``rounds`` rounds from ``pose``; stops early when a round moves the pose by
-    < 0.002 deg and < 1e-5 x the scene depth, or when a later round's PnP fails."""
+    < 0.002 deg and < 1e-5 x the scene depth, or when a later round's PnP fails. A round whose
+    correspondences are too few for a PnP of their own (a textureless photo: 12-32 matches)
+    does not end the rounds while references are left: the next one is matched at the same
+    pose and the rounds at that pose are solved together (``_merged``)."""
     from pgt_check.geometry.transforms import pose_difference
 
     steps: list[tuple[float, float]] = []
@@ -215,6 +233,7 @@ def _run_rounds(
     n_done = 0
     prev: _Round | None = None
     done: list[_Round] = []
+    pending: list[_Round] = []
     for k in range(rounds):
         # the references take turns (one enhancement per round): the pool holds each one's
         # correspondences, so no single reference's own bias decides
@@ -226,15 +245,28 @@ def _run_rounds(
             d = rnd.depth[rnd.depth > 0]
             depth_scale = float(np.median(d)) if d.size else None
         if rnd.pose is None:
-            if k == 0:
-                return _Rounds(rnd, None, (), last_start, pose, steps, n_done, depth_scale)
-            rnd = prev  # keep the last round whose PnP succeeded
-            n_done -= 1
-            break
+            # too few correspondences for a PnP of its own (a textureless photo): the next
+            # reference is matched at the same pose and the rounds at it solved together
+            pending.append(rnd)
+            merged = _merged(pending, pose, target.checker.config) if len(pending) > 1 else None
+            if merged is None:
+                if k + 1 < rounds and len(pending) < len(references):
+                    continue
+                if not done:
+                    return _Rounds(first or rnd, None, (), last_start, pose, steps, n_done,
+                                   depth_scale)
+                rnd = prev  # keep the last round whose PnP succeeded
+                n_done -= 1
+                break
+            rnd = merged
+        new_pose = rnd.pose
+        if new_pose is None:  # not reached: a merged round carries its PnP pose
+            raise RuntimeError("a correction round without its PnP pose")
+        pending = []
         done.append(rnd)
-        dt, dr = pose_difference(pose, rnd.pose)
+        dt, dr = pose_difference(pose, new_pose)
         steps.append((dr, dt))
-        last_start, pose = pose, rnd.pose
+        last_start, pose = pose, new_pose
         prev = rnd
         if dr < 2e-3 and dt < 1e-5 * (depth_scale or 1.0):
             break

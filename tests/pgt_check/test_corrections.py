@@ -338,3 +338,51 @@ def test_the_rounds_take_the_vouched_references_in_turn(monkeypatch, sample_scen
     assert all(len(s) == 1 for s in seen)
     assert set(used) == {r.frame_id for r in refs}  # every reference once at least
     assert used[:CORRECTION_REFERENCES] == [r.frame_id for r in refs]
+
+
+def test_rounds_too_few_for_a_pnp_alone_are_solved_together(monkeypatch, sample_scene):
+    """A textureless photo gives each round fewer matches than a PnP needs (12-32 on the
+    generated scans, where corrections then failed with ``too_few_pnp_inliers``): the next
+    reference is matched at the same pose and the rounds there solved together, and the
+    pooled pose is the photo's."""
+    import pgt_check.correct.pose as P
+    from pgt_check.config import RunConfig
+    from pgt_check.geometry.transforms import make_rigid
+
+    cfg = RunConfig()
+    frames = read_trajectory(sample_scene / "trajectories.txt").frames
+    cam, truth = frames[0].camera, np.asarray(frames[0].world_from_cam, float)
+    rng = np.random.default_rng(0)
+    pts_cam = np.column_stack([rng.uniform(-1.5, 1.5, 64), rng.uniform(-1, 1, 64),
+                               rng.uniform(3, 6, 64)])
+    world = pts_cam @ truth[:3, :3].T + truth[:3, 3]
+    fx, fy = cam.focal
+    cx, cy = cam.principal_point
+    pix = np.column_stack([fx * pts_cam[:, 0] / pts_cam[:, 2] + cx,
+                           fy * pts_cam[:, 1] / pts_cam[:, 2] + cy])
+    few = cfg.pose.min_inliers - 4  # per round: too few for a PnP of its own
+    seen = []
+
+    def fake_round(target, pose, references=()):
+        k = len(seen)
+        seen.append(references[0].frame_id)
+        sel = slice(k * few, (k + 1) * few)
+        return P._Round(20.0, None, "too_few_pnp_inliers", few, world[sel], pix[sel],
+                        np.ones((4, 4)), cam)
+
+    class _Target:
+        checker = type("C", (), {"config": cfg})()
+
+    monkeypatch.setattr(P, "_round", fake_round)
+    start = truth @ make_rigid(axis_angle_to_rotmat(np.array([0.0, 1.0, 0.0]), 2.0),
+                               np.array([0.05, 0.0, 0.0]))
+    refs = frames[1:5]
+    done = P._run_rounds(_Target(), start, 4, refs)
+    assert seen == [r.frame_id for r in refs]  # the rounds went on after a failed PnP
+    assert done.last is not None and len(done.done) == 2  # rounds 1+2 and 3+4 together
+    dt, dr = pose_difference(truth, done.pose)
+    assert dr < 0.05 and dt < 0.005, (dr, dt)
+    # without references left to try, a failed round still ends the rounds
+    seen.clear()
+    done = P._run_rounds(_Target(), start, 4, refs[:1])
+    assert done.last is None and seen == [refs[0].frame_id]
