@@ -250,13 +250,15 @@ def _run_rounds(
             pending.append(rnd)
             merged = _merged(pending, pose, target.checker.config) if len(pending) > 1 else None
             if merged is None:
-                if k + 1 < rounds and len(pending) < len(references):
+                # (a render too empty to match is the same for every reference: not retried)
+                if (k + 1 < rounds and len(pending) < len(references)
+                        and rnd.reason != "low_coverage"):
                     continue
                 if not done:
                     return _Rounds(first or rnd, None, (), last_start, pose, steps, n_done,
                                    depth_scale)
                 rnd = prev  # keep the last round whose PnP succeeded
-                n_done -= 1
+                n_done -= len(pending)  # the rounds at this pose do not count
                 break
             rnd = merged
         new_pose = rnd.pose

@@ -386,3 +386,24 @@ def test_rounds_too_few_for_a_pnp_alone_are_solved_together(monkeypatch, sample_
     seen.clear()
     done = P._run_rounds(_Target(), start, 4, refs[:1])
     assert done.last is None and seen == [refs[0].frame_id]
+
+
+def test_a_render_too_empty_to_match_is_not_retried_per_reference(monkeypatch):
+    """Low coverage is the same whatever reference enhances the render: the correction stops
+    at the first round (``low_coverage``) instead of rendering again per reference."""
+    import pgt_check.correct.pose as P
+    from pgt_check.config import RunConfig
+
+    calls = []
+
+    def empty_round(target, pose, references=()):
+        calls.append(1)
+        return P._Round(None, None, "low_coverage", 0, np.zeros((0, 3)), np.zeros((0, 2)),
+                        np.zeros((4, 4)), None)
+
+    class _Target:
+        checker = type("C", (), {"config": RunConfig()})()
+
+    monkeypatch.setattr(P, "_round", empty_round)
+    done = P._run_rounds(_Target(), np.eye(4), 4, ("a", "b", "c", "d"))
+    assert done.last is None and done.first.reason == "low_coverage" and len(calls) == 1
