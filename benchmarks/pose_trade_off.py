@@ -36,18 +36,15 @@ def trade_off(pts_cam: np.ndarray, intrinsics: tuple[float, float, float, float]
     """(deg per px RMS with the translation free, % of ``depth`` per px RMS with the rotation
     free) of a camera seeing ``pts_cam`` (N, 3) with pinhole ``intrinsics`` (fx, fy, cx, cy):
     the weakest direction of the linearised projection after the other block compensates."""
+    from pgt_check.geometry.reprojection import residuals_jac
+    from pgt_check.verdict.calibration import camera_matrix
+
     x = np.asarray(pts_cam, np.float64).reshape(-1, 3)
-    fx, fy = intrinsics[0], intrinsics[1]
-    z = x[:, 2]
-    d_proj = np.zeros((len(x), 2, 3))  # d pixel / d camera point
-    d_proj[:, 0, 0], d_proj[:, 0, 2] = fx / z, -fx * x[:, 0] / z**2
-    d_proj[:, 1, 1], d_proj[:, 1, 2] = fy / z, -fy * x[:, 1] / z**2
-    # a camera-frame update x' = x + w x x + t: d x / d w = -[x]_x, d x / d t = I
-    skew = np.zeros((len(x), 3, 3))
-    skew[:, 0, 1], skew[:, 0, 2], skew[:, 1, 2] = -x[:, 2], x[:, 1], -x[:, 0]
-    skew = skew - skew.transpose(0, 2, 1)
-    j_rot = (d_proj @ -skew).reshape(-1, 3) * (np.pi / 180.0)  # px per deg
-    j_t = d_proj.reshape(-1, 3) * (depth / 100.0)  # px per 1 % of the depth
+    k = camera_matrix(intrinsics)
+    # px per left update (dw, dt) of the camera at these points: x -> exp(dw) x + dt
+    _, jac = residuals_jac(k, x, np.zeros((len(x), 2)), np.eye(3), np.zeros(3))
+    j_rot = jac[:, :, :3].reshape(-1, 3) * (np.pi / 180.0)  # px per deg
+    j_t = jac[:, :, 3:].reshape(-1, 3) * (depth / 100.0)  # px per 1 % of the depth
     n = len(x)
 
     def weakest(a: np.ndarray, b: np.ndarray) -> float:

@@ -208,26 +208,28 @@ def corrected(traj: Trajectory, ms, cfg: RunConfig, ids: set[str]) -> dict:
 def frame_points(ms) -> dict:
     """Frame id -> (world points of its absolute evidence (N, 3), pinhole K (3, 3)): the mesh
     points a frame sees, to measure pose differences in the image (``image_shift``)."""
+    from pgt_check.geometry.transforms import apply_rigid
+    from pgt_check.verdict.calibration import camera_matrix
+
     out = {}
     for m in ms:
         ev = m.evidence
         if ev is None or m.world_from_cam is None or m.intrinsics is None or not ev.pts_cam:
             continue
-        wfc = np.asarray(m.world_from_cam, np.float64)
-        pts = np.asarray(ev.pts_cam, np.float64).reshape(-1, 3) @ wfc[:3, :3].T + wfc[:3, 3]
-        fx, fy, cx, cy = m.intrinsics
-        out[m.frame_id] = (pts, np.array([[fx, 0, cx], [0, fy, cy], [0, 0, 1.0]]))
+        pts = apply_rigid(np.asarray(m.world_from_cam, np.float64),
+                          np.asarray(ev.pts_cam, np.float64).reshape(-1, 3))
+        out[m.frame_id] = (pts, camera_matrix(m.intrinsics))
     return out
 
 
 def image_shift(a: np.ndarray, b: np.ndarray, pts: np.ndarray, k: np.ndarray) -> float:
     """Mean distance (photo pixels) between the projections of ``pts`` at the poses ``a`` and
     ``b`` (world_from_cam): how far apart two poses are in what the photo can show."""
-    uv = []
-    for pose in (a, b):
-        cfw = np.linalg.inv(np.asarray(pose, np.float64))
-        x = (pts @ cfw[:3, :3].T + cfw[:3, 3]) @ k.T
-        uv.append(x[:, :2] / x[:, 2:3])
+    from pgt_check.geometry.reprojection import project
+    from pgt_check.geometry.transforms import apply_rigid, invert_rigid
+
+    uv = [project(k, apply_rigid(invert_rigid(np.asarray(pose, np.float64)), pts))
+          for pose in (a, b)]
     return float(np.mean(np.linalg.norm(uv[0] - uv[1], axis=1)))
 
 
