@@ -40,12 +40,14 @@ class Correction:
     ``drot_deg`` / ``dt``: from the checked pose to the corrected one (degrees, scene units).
     ``corner_error_px_before``: the raw corner error at the start pose of the first round;
     ``corner_error_px``: the raw corner error of the render at the last round's start pose (the
-    final update after it is part of the uncertainty). ``start``: "pnp_raw", "pnp_enhanced"
-    (the measurement's PnP estimate and the path it came from) or "checked" (no estimate).
-    ``depth``: median render depth (scene units), the scale for "1 % of scene depth".
-    ``applied``: written to the corrected trajectory: success, corner_error_px <= the frame's
-    threshold and sigma_rot_deg <= max(0.1 deg, half the correction) (else ``reason`` is
-    "not_verified" or "uncertain").
+    final update after it is part of the uncertainty), or where that did not verify it, the
+    corner error of the evidence that did (``verified_by``: the frame measured at the
+    corrected pose). ``start``: "pnp_raw", "pnp_enhanced" (the measurement's PnP estimate and
+    the path it came from) or "checked" (no estimate). ``depth``: median render depth (scene
+    units), the scale for "1 % of scene depth". ``applied``: written to the corrected
+    trajectory: success, verified (corner_error_px <= the frame's threshold) and
+    sigma_rot_deg <= max(0.1 deg, half the correction) (else ``reason`` is "not_verified" or
+    "uncertain").
     """
 
     frame_id: str
@@ -64,6 +66,11 @@ class Correction:
     depth: float | None = None
     applied: bool = False
     steps: tuple[tuple[float, float], ...] = field(default_factory=tuple)
+    #: the evidence that verified the corrected pose: "raw" (the last round's raw render),
+    #: "edges" or "raw" again when the frame was measured at the corrected pose
+    #: (``correct.frames``: a textureless photo gives the rounds' raw render too few matches
+    #: for a homography), "" when nothing verified it
+    verified_by: str = ""
 
     @property
     def pose(self) -> np.ndarray | None:

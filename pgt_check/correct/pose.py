@@ -351,6 +351,14 @@ def _pooled(done: _Rounds, cfg: Any) -> tuple[np.ndarray, int, tuple[float, floa
     return pooled.world_from_cam, pooled.n_inliers, moved
 
 
+def is_certain(sigma_rot_deg: float | None, drot_deg: float | None) -> bool:
+    """Whether a correction's rotation uncertainty is small enough to apply it: at most
+    0.1 deg or half the correction itself."""
+    if sigma_rot_deg is None or drot_deg is None or not math.isfinite(sigma_rot_deg):
+        return False
+    return sigma_rot_deg <= max(0.1, 0.5 * drot_deg)
+
+
 def _correction(
     checker: Any,
     frame: Frame,
@@ -380,8 +388,7 @@ def _correction(
     dt, dr = pose_difference(checked, final)
     err = rnd.corner_error_px
     verified = err is not None and err <= thr
-    certain = math.isfinite(sigma_r) and sigma_r <= max(0.1, 0.5 * dr)
-    applied = verified and certain
+    applied = verified and is_certain(sigma_r, dr)
     reason = "" if applied else ("not_verified" if not verified else "uncertain")
     return Correction(
         frame.frame_id,
@@ -400,4 +407,5 @@ def _correction(
         done.depth_scale,
         applied,
         tuple((float(a), float(b)) for a, b in steps),
+        "raw" if verified else "",
     )

@@ -124,10 +124,14 @@ def test_real_data_correction_7scenes(shared_data):
     assert c.success and base.success
     dt, dr = pose_difference(c.pose, base.pose)
     dt0, dr0 = pose_difference(bad.world_from_cam, base.pose)
-    # raw SIFT finds few inliers on this TSDF mesh: the correction must either land near the
-    # fixed point or say it is uncertain (and then not be applied)
+    # raw SIFT finds few inliers on this TSDF mesh: an applied correction (verified by the
+    # raw render or, measured again at the corrected pose, by the geometric edges) lands
+    # nearer the fixed point than the input did; along the rotation / translation trade-off
+    # of these views it can stay 1.4 of 2.3 deg away (reports/pose_trade_off.md), which its
+    # stated uncertainty covers; otherwise it says why it was not applied
     if c.applied:
-        assert dr < 0.25 * dr0 and dt < 0.25 * dt0
+        assert c.verified_by in ("raw", "edges")
+        assert dr < 0.75 * dr0 and dt < 0.75 * dt0, (dr, dr0, dt, dt0)
     else:
         assert c.reason in ("uncertain", "not_verified")
     assert dr <= 2 * np.hypot(c.sigma_rot_deg, base.sigma_rot_deg)
@@ -407,3 +411,110 @@ def test_a_render_too_empty_to_match_is_not_retried_per_reference(monkeypatch):
     monkeypatch.setattr(P, "_round", empty_round)
     done = P._run_rounds(_Target(), np.eye(4), 4, ("a", "b", "c", "d"))
     assert done.last is None and done.first.reason == "low_coverage" and len(calls) == 1
+
+
+def test_a_textureless_scan_corrections_are_verified_by_measuring_again(tmp_path):
+    """A textureless scan (no mesh colours; photos with objects the mesh lacks, exposure
+    changes, blur): the rounds' raw render gives too few matches for a homography, so no
+    correction was verified by its last round (on the generated box scans none of 24 was
+    applied, though 19 were within 30 % of their error). Measured again at the corrected
+    pose, the frame's own absolute evidence (the geometric edges) verifies the ones that came
+    back, and the certain ones are applied: each within 30 % of its injected rotation and 50 %
+    of its shift (the box scan's translation is the weaker part: 0.06 of 0.15 here), its
+    stated uncertainty covering the rotation left."""
+    from pgt_check.config import RunConfig
+    from pgt_check.correct.frames import correct_run
+    from pgt_check.measure import FrameChecker, build_frame_checker, pick_references
+    from pgt_check.types import Trajectory
+    from pgt_check.verdict import judge_run
+    from pgt_eval import make_scan_like_scene, perturb_pose
+
+    truth = read_trajectory(make_scan_like_scene(tmp_path / "scene", n_frames=30))
+    rng = np.random.default_rng(1)
+    frames = list(truth.frames)
+    injected = {}
+    for i in (5, 15, 24):
+        f = frames[i]
+        frames[i] = f.with_pose(perturb_pose(f.world_from_cam, 2.5, 0.15, rng))
+        injected[f.frame_id] = (2.5, 0.15)  # ~5 % of the ~3 m scene depth
+    traj = Trajectory(tuple(frames), truth.source, truth.format)
+    cfg = RunConfig.from_dict({"input": {"mesh": str(tmp_path / "scene" / "scan.ply")},
+                               "out": str(tmp_path), "correct": {"frames": "all", "budget": 0}})
+    checker = FrameChecker(cfg, pick_references(traj, traj.frames, cfg))
+    try:
+        ms = [checker.measure(f) for f in traj.frames]
+    finally:
+        checker.close()
+    result = judge_run(ms, cfg)
+    corr, _ = correct_run(traj, ms, result, cfg, lambda: build_frame_checker(cfg, None),
+                          tmp_path)
+    given = truth.by_id()
+    applied = [fid for fid in injected if corr[fid].applied]
+    assert len(applied) >= 2, {fid: corr[fid] for fid in injected}
+    for fid in applied:
+        c = corr[fid]
+        assert c.verified_by in ("raw", "edges") and c.reason == ""
+        assert c.corner_error_px is not None and c.corner_error_px <= result.frames[
+            [f.frame_id for f in result.frames].index(fid)].threshold_px
+        dt, dr = pose_difference(given[fid].world_from_cam, c.pose)
+        rot, t = injected[fid]
+        assert dr <= 0.3 * rot and dt <= 0.5 * t, (fid, dr, dt, c)
+        assert dr <= 3 * c.sigma_rot_deg, (fid, dr, c.sigma_rot_deg)
+    # a frame verified only by measuring again says so
+    assert any(corr[fid].verified_by == "edges" for fid in applied)
+
+
+def test_measuring_again_verifies_only_a_pass_within_the_threshold_and_a_certain_correction(
+        monkeypatch):
+    """``_verified_again``: a correction the rounds left ``not_verified`` is applied only where
+    the frame's own absolute evidence at the corrected pose PASSes within the frame's threshold
+    and the correction is certain; any other correction is returned as it was."""
+    from types import SimpleNamespace
+
+    import pgt_check.correct.frames as F
+    from pgt_check.config import RunConfig
+    from pgt_check.correct.correction import Correction
+    from pgt_check.verdict.decide import Verdict
+
+    cfg = RunConfig()
+    frame = read_trajectory(
+        __import__("pathlib").Path(__file__).parents[2] / "sample_data" / "scene"
+        / "trajectories.txt").frames[0]
+    err = {"edges": 3.0}
+
+    class FakeChecker:
+        config = cfg
+        measured = 0
+
+        def measure(self, f):
+            FakeChecker.measured += 1
+            return SimpleNamespace(width=640, height=480,
+                                   path=lambda name: SimpleNamespace(corner_error_px=err[name]))
+
+    outcome = {"v": (Verdict.PASS, "", "edges")}
+    monkeypatch.setattr(F, "path_outcomes", lambda m, v: {})
+    monkeypatch.setattr(F, "own_outcome", lambda m, o, v: outcome["v"])
+    base = Correction("0/cam0", True, "not_verified", tuple(map(tuple, np.eye(4))), 2.0, 0.1,
+                      0.05, 0.01, 20.0, None, 30, 4, "pnp_raw")
+    c = F._verified_again(FakeChecker(), frame, base, 8.0)
+    assert c.applied and c.reason == "" and c.verified_by == "edges" and c.corner_error_px == 3.0
+    # the evidence passes the default threshold but not the frame's own
+    assert not F._verified_again(FakeChecker(), frame, base, 2.5).applied
+    # uncertain: verified, not applied
+    c = F._verified_again(FakeChecker(), frame, replace_sigma(base, 1.5), 8.0)
+    assert not c.applied and c.reason == "uncertain" and c.verified_by == "edges"
+    # the evidence FAILs or is UNVERIFIABLE: unchanged
+    for v in ((Verdict.FAIL, "corner_error", "edges"), (Verdict.UNVERIFIABLE, "x", "")):
+        outcome["v"] = v
+        assert F._verified_again(FakeChecker(), frame, base, 8.0) is base
+    # verified or failed corrections are not measured again
+    n = FakeChecker.measured
+    for other in (replace_sigma(base, 0.05, reason=""), Correction("0/cam0", False, "pnp_failed")):
+        assert F._verified_again(FakeChecker(), frame, other, 8.0) is other
+    assert FakeChecker.measured == n
+
+
+def replace_sigma(c, sigma, **kw):
+    from dataclasses import replace
+
+    return replace(c, sigma_rot_deg=sigma, **kw)
