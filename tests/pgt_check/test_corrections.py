@@ -218,6 +218,34 @@ def _sample_truth(sample_scene):
                       traj.source, traj.format)
 
 
+def _wrong_run(truth, indices, error, mesh, tmp_path, frames_mode, seed):
+    """The frames ``indices`` of ``truth`` moved by ``error`` (deg, scene units; random axes and
+    directions), measured and judged with the defaults (corrections of ``frames_mode``, no
+    time budget): (trajectory, config, measurements, run result, frame id -> error)."""
+    from pgt_check.config import RunConfig
+    from pgt_check.measure import FrameChecker, pick_references
+    from pgt_check.types import Trajectory
+    from pgt_check.verdict import judge_run
+    from pgt_eval import perturb_pose
+
+    rng = np.random.default_rng(seed)
+    frames = list(truth.frames)
+    injected = {}
+    for i in indices:
+        f = frames[i]
+        frames[i] = f.with_pose(perturb_pose(f.world_from_cam, *error, rng))
+        injected[f.frame_id] = error
+    traj = Trajectory(tuple(frames), truth.source, truth.format)
+    cfg = RunConfig.from_dict({"input": {"mesh": str(mesh)}, "out": str(tmp_path),
+                               "correct": {"frames": frames_mode, "budget": 0}})
+    checker = FrameChecker(cfg, pick_references(traj, traj.frames, cfg))
+    try:
+        ms = [checker.measure(f) for f in traj.frames]
+    finally:
+        checker.close()
+    return traj, cfg, ms, judge_run(ms, cfg), injected
+
+
 def test_corrections_on_a_blurred_scan_come_within_30_percent(tmp_path, sample_scene):
     """Issue #38 item 4 on generated data: a mesh whose colours are blurred (as a TSDF scan's:
     7-Scenes) gives the raw render few matches, and each round's PnP on them jumped around its
@@ -225,31 +253,14 @@ def test_corrections_on_a_blurred_scan_come_within_30_percent(tmp_path, sample_s
     left, yet applied). The rounds' correspondences pooled into one PnP, and the render also
     enhanced with a neighbour the run vouches for, bring every wrong frame back to within 30 %
     of its error; a wrong neighbour (frames 9 and 10 both wrong) never serves as a reference."""
-    from pgt_check.config import RunConfig
     from pgt_check.correct.frames import correct_run, vouched_references
-    from pgt_check.measure import FrameChecker, build_frame_checker, pick_references
-    from pgt_check.types import Trajectory
-    from pgt_check.verdict import judge_run
-    from pgt_eval import perturb_pose
+    from pgt_check.measure import build_frame_checker
 
     mesh = _blurred_copy(sample_scene / "mesh.glb", tmp_path, 4.0)
     truth = _sample_truth(sample_scene)
-    rng = np.random.default_rng(0)
-    frames = list(truth.frames)
-    injected = {}
-    for i in (3, 9, 10, 15, 21):
-        f = frames[i]
-        frames[i] = f.with_pose(perturb_pose(f.world_from_cam, 2.5, 0.12, rng))
-        injected[f.frame_id] = (2.5, 0.12)  # 3 % of the ~4 m scene depth
-    traj = Trajectory(tuple(frames), truth.source, truth.format)
-    cfg = RunConfig.from_dict({"input": {"mesh": str(mesh)}, "out": str(tmp_path),
-                               "correct": {"frames": "fail", "budget": 0}})
-    checker = FrameChecker(cfg, pick_references(traj, traj.frames, cfg))
-    try:
-        ms = [checker.measure(f) for f in traj.frames]
-    finally:
-        checker.close()
-    result = judge_run(ms, cfg)
+    # 2.5 deg + 12 cm: 3 % of the ~4 m scene depth
+    traj, cfg, ms, result, injected = _wrong_run(truth, (3, 9, 10, 15, 21), (2.5, 0.12), mesh,
+                                                 tmp_path, "fail", seed=0)
     verdicts = {f.frame_id: f.verdict for f in result.frames}
     assert all(verdicts[fid] == "FAIL" for fid in injected)
     refs = vouched_references(traj, result.frames, {m.frame_id: m for m in ms}, cfg,
@@ -422,30 +433,15 @@ def test_a_textureless_scan_corrections_are_verified_by_measuring_again(tmp_path
     back, and the certain ones are applied: each within 30 % of its injected rotation and 50 %
     of its shift (the box scan's translation is the weaker part: 0.06 of 0.15 here), its
     stated uncertainty covering the rotation left."""
-    from pgt_check.config import RunConfig
     from pgt_check.correct.frames import correct_run
-    from pgt_check.measure import FrameChecker, build_frame_checker, pick_references
-    from pgt_check.types import Trajectory
-    from pgt_check.verdict import judge_run
-    from pgt_eval import make_scan_like_scene, perturb_pose
+    from pgt_check.measure import build_frame_checker
+    from pgt_eval import make_scan_like_scene
 
     truth = read_trajectory(make_scan_like_scene(tmp_path / "scene", n_frames=30))
-    rng = np.random.default_rng(1)
-    frames = list(truth.frames)
-    injected = {}
-    for i in (5, 15, 24):
-        f = frames[i]
-        frames[i] = f.with_pose(perturb_pose(f.world_from_cam, 2.5, 0.15, rng))
-        injected[f.frame_id] = (2.5, 0.15)  # ~5 % of the ~3 m scene depth
-    traj = Trajectory(tuple(frames), truth.source, truth.format)
-    cfg = RunConfig.from_dict({"input": {"mesh": str(tmp_path / "scene" / "scan.ply")},
-                               "out": str(tmp_path), "correct": {"frames": "all", "budget": 0}})
-    checker = FrameChecker(cfg, pick_references(traj, traj.frames, cfg))
-    try:
-        ms = [checker.measure(f) for f in traj.frames]
-    finally:
-        checker.close()
-    result = judge_run(ms, cfg)
+    # 2.5 deg + 15 cm: ~5 % of the ~3 m scene depth
+    traj, cfg, ms, result, injected = _wrong_run(truth, (5, 15, 24), (2.5, 0.15),
+                                                 tmp_path / "scene" / "scan.ply", tmp_path,
+                                                 "all", seed=1)
     corr, _ = correct_run(traj, ms, result, cfg, lambda: build_frame_checker(cfg, None),
                           tmp_path)
     given = truth.by_id()
