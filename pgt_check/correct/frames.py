@@ -8,8 +8,9 @@ first round fails), each round's render also enhanced with a reference the run v
 
 * ``corrected_trajectory.txt``: every frame of the trajectory in the input's own format (LaMAR
   -> LaMAR trajectories file, COLMAP -> images.txt, TUM -> TUM, others -> LaMAR trajectories
-  file), with the corrected pose where the correction is *applied* (its raw corner error is
-  within the frame's threshold), the input pose elsewhere;
+  file), with the corrected pose where the correction is *applied* (verified: its raw corner
+  error, or the frame's own absolute evidence measured again at the corrected pose, within the
+  frame's threshold; and certain), the input pose elsewhere;
 * ``bad_frames.txt``: the FAIL frames, one id per line (``#`` comment lines say which of them
   the corrected trajectory fixes);
 * ``corrections.json``: every correction (``pgt-check report`` puts them back in the rows).
