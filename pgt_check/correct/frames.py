@@ -105,6 +105,8 @@ def _verified_again(checker: Any, frame: Frame, c: Correction,
     try:
         m = checker.measure(frame.with_pose(c.pose))
     except Exception as exc:  # the correction stands as it is; the frame is not lost
+        if getattr(checker.config, "fail_fast", False):
+            raise
         logger.debug("frame %s: measuring at the corrected pose failed: %s", frame.frame_id, exc)
         return c
     verdict, _, path = own_outcome(m, path_outcomes(m, v), v)
