@@ -445,13 +445,13 @@ def test_a_textureless_scan_corrections_are_verified_by_measuring_again(tmp_path
     corr, _ = correct_run(traj, ms, result, cfg, lambda: build_frame_checker(cfg, None),
                           tmp_path)
     given = truth.by_id()
+    thresholds = {f.frame_id: f.threshold_px for f in result.frames}
     applied = [fid for fid in injected if corr[fid].applied]
     assert len(applied) >= 2, {fid: corr[fid] for fid in injected}
     for fid in applied:
         c = corr[fid]
         assert c.verified_by in ("raw", "edges") and c.reason == ""
-        assert c.corner_error_px is not None and c.corner_error_px <= result.frames[
-            [f.frame_id for f in result.frames].index(fid)].threshold_px
+        assert c.corner_error_px is not None and c.corner_error_px <= thresholds[fid]
         dt, dr = pose_difference(given[fid].world_from_cam, c.pose)
         rot, t = injected[fid]
         assert dr <= 0.3 * rot and dt <= 0.5 * t, (fid, dr, dt, c)
@@ -461,10 +461,11 @@ def test_a_textureless_scan_corrections_are_verified_by_measuring_again(tmp_path
 
 
 def test_measuring_again_verifies_only_a_pass_within_the_threshold_and_a_certain_correction(
-        monkeypatch):
+        monkeypatch, sample_scene):
     """``_verified_again``: a correction the rounds left ``not_verified`` is applied only where
     the frame's own absolute evidence at the corrected pose PASSes within the frame's threshold
     and the correction is certain; any other correction is returned as it was."""
+    from dataclasses import replace
     from types import SimpleNamespace
 
     import pgt_check.correct.frames as F
@@ -473,9 +474,7 @@ def test_measuring_again_verifies_only_a_pass_within_the_threshold_and_a_certain
     from pgt_check.verdict.decide import Verdict
 
     cfg = RunConfig()
-    frame = read_trajectory(
-        __import__("pathlib").Path(__file__).parents[2] / "sample_data" / "scene"
-        / "trajectories.txt").frames[0]
+    frame = read_trajectory(sample_scene / "trajectories.txt").frames[0]
     err = {"edges": 3.0}
 
     class FakeChecker:
@@ -497,7 +496,7 @@ def test_measuring_again_verifies_only_a_pass_within_the_threshold_and_a_certain
     # the evidence passes the default threshold but not the frame's own
     assert not F._verified_again(FakeChecker(), frame, base, 2.5).applied
     # uncertain: verified, not applied
-    c = F._verified_again(FakeChecker(), frame, replace_sigma(base, 1.5), 8.0)
+    c = F._verified_again(FakeChecker(), frame, replace(base, sigma_rot_deg=1.5), 8.0)
     assert not c.applied and c.reason == "uncertain" and c.verified_by == "edges"
     # the evidence FAILs or is UNVERIFIABLE: unchanged
     for v in ((Verdict.FAIL, "corner_error", "edges"), (Verdict.UNVERIFIABLE, "x", "")):
@@ -505,12 +504,6 @@ def test_measuring_again_verifies_only_a_pass_within_the_threshold_and_a_certain
         assert F._verified_again(FakeChecker(), frame, base, 8.0) is base
     # verified or failed corrections are not measured again
     n = FakeChecker.measured
-    for other in (replace_sigma(base, 0.05, reason=""), Correction("0/cam0", False, "pnp_failed")):
+    for other in (replace(base, reason=""), Correction("0/cam0", False, "pnp_failed")):
         assert F._verified_again(FakeChecker(), frame, other, 8.0) is other
     assert FakeChecker.measured == n
-
-
-def replace_sigma(c, sigma, **kw):
-    from dataclasses import replace
-
-    return replace(c, sigma_rot_deg=sigma, **kw)
