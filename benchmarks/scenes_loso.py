@@ -120,12 +120,15 @@ SHADING: str | None = None
 #: ``--seed``: added to every case's perturbation seed (0: the cases of every earlier label);
 #: other injected errors on the same frames, cached apart
 SEED = 0
+#: ``--frames``: the measurement cache keys name the count where it is not the default 30
+FRAMES = 30
 
 
 def _prefix(name: str) -> str:
-    """The measurement cache key's prefix of scene ``name`` (apart per shading and seed)."""
+    """The measurement cache key's prefix of scene ``name`` (apart per shading, seed and frame
+    count)."""
     return (f"loso-{name}" + ("" if SHADING is None else f"-{SHADING}")
-            + ("" if SEED == 0 else f"-seed{SEED}"))
+            + ("" if SEED == 0 else f"-seed{SEED}") + ("" if FRAMES == 30 else f"-n{FRAMES}"))
 
 
 #: generated scenes with exact truth (``--scene gen_...``, not in the default list): name ->
@@ -631,8 +634,8 @@ def main() -> int:
                         "same frames); use with its own --label")
     args = p.parse_args()
     shared_errors.REUSE_MEASUREMENTS = args.reuse_measurements
-    global SHADING, SEED
-    SHADING, SEED = args.shading, args.seed
+    global SHADING, SEED, FRAMES
+    SHADING, SEED, FRAMES = args.shading, args.seed, args.frames
     if args.out is not None:
         global JSON, MD, PNG
         JSON, MD, PNG = (args.out.with_suffix(x) for x in (".json", ".md", ".png"))
