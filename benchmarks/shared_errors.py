@@ -134,6 +134,60 @@ def measure(
     return cfg, ms, tpf
 
 
+@functools.lru_cache(maxsize=1)
+def _all_code_version() -> str:
+    """A hash of every pgt_check source (the judging code too: the reference pass chooses what
+    to measure again from a judgement)."""
+    import hashlib
+
+    import pgt_check
+
+    h = hashlib.blake2b(digest_size=6)
+    for f in sorted(Path(pgt_check.__file__).parent.rglob("*.py")):
+        h.update(f.read_bytes())
+    return h.hexdigest()
+
+
+def as_run(traj: Trajectory, ms: list, cfg: RunConfig, key: str) -> tuple[list, list]:
+    """What a run does between its main pass and its verdicts (``pgt_check.runner``), on the
+    main pass's measurements ``ms`` judged with ``cfg``: the reference pass (frames whose
+    enhanced path leaned on a reference whose own absolute evidence did not pass, measured
+    again with references that did: ``enhance.refs.verified_references``) and the separation
+    probes (``stages.remeasure.separation_stage``). -> (measurements, probes) for
+    ``judge_run(ms, cfg, probes)``; cached under ``key``, ``cfg`` and the code. ``measure``
+    alone is the main pass: the reports up to the thirteenth session's labels judged that."""
+    import hashlib
+    from dataclasses import replace
+
+    from pgt_check.enhance.refs import verified_references
+    from pgt_check.measure import FrameMeasurement
+    from pgt_check.stages.remeasure import PlainMeasure, separation_stage
+
+    h = hashlib.blake2b(repr(cfg).encode(), digest_size=6).hexdigest()
+    out = CACHE / f"{key}-run-{h}-{_all_code_version()}"
+    done = out / "reference_pass.json"
+    rcfg = replace(cfg, out=str(out), executor="serial")
+    if done.is_file():
+        got = {m["frame_id"]: FrameMeasurement.from_json(m)
+               for m in json.loads(done.read_text())}
+    else:
+        got = {}
+        if cfg.enhance.mode != "never" and ms:
+            refs = verified_references(traj, judge_run(ms, cfg), cfg)
+            if refs:
+                frames = [f for f in traj.frames if f.frame_id in refs]
+                measure = PlainMeasure("references (as a run)", refs)
+                try:
+                    got = {m.frame_id: m for m in measure(frames, rcfg)}
+                finally:
+                    measure.close()
+        out.mkdir(parents=True, exist_ok=True)
+        done.write_text(json.dumps([m.to_json() for m in got.values()]))
+    ms = [got.get(m.frame_id, m) for m in ms]
+    probes = separation_stage(traj, ms, rcfg, _all_code_version())
+    return ms, probes
+
+
 #: the rounds the refinement is measured with (``--registration-rounds``)
 REFINE_ROUNDS = 8
 

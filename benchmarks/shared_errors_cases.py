@@ -96,9 +96,11 @@ def cases(traj: Trajectory, depth: float) -> dict[str, tuple[Trajectory, dict]]:
     return out
 
 
-def evaluate(name: str, truth: dict, ms, cfg: RunConfig) -> dict:
+def evaluate(name: str, truth: dict, ms, cfg: RunConfig, probes=None) -> dict:
+    """The case's row: verdicts, run-level checks, per-frame ROC-AUC (``probes``: the
+    separation check's, ``shared_errors.as_run``)."""
     t0 = time.perf_counter()
-    j = judge_run(ms, cfg)
+    j = judge_run(ms, cfg, probes)
     t_run = time.perf_counter() - t0
     rows = j.rows()
     flagged = np.array([r["verdict"] != "PASS" for r in rows])
@@ -118,6 +120,7 @@ def evaluate(name: str, truth: dict, ms, cfg: RunConfig) -> dict:
             reg_deg=reg.get("angle_deg"),
             reg_t=reg.get("translation"),
             reg_px=reg.get("effect_px"),
+            reg_thr_px=j.shared.threshold_px,
             similarity=se["similarity"]["status"],
             sim_scale=se["similarity"].get("scale"),
             drift=se["drift"]["status"],
