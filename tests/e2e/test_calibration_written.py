@@ -190,8 +190,10 @@ def _passes(summary: dict) -> bool:
 
 @pytest.mark.slow
 @pytest.mark.parametrize(("kind", "fmt"), [
-    ("principal_point", "lamar"), ("focal", "lamar"), ("rotation", "lamar"),
-    ("translation", "lamar"), ("principal_point", "tum"),
+    # the principal point only through TUM input: that case checks the same re-check and the
+    # TUM command line too (a LaMAR copy of it cost CI ~30 s for nothing more)
+    ("focal", "lamar"), ("rotation", "lamar"), ("translation", "lamar"),
+    ("principal_point", "tum"),
 ])
 def test_the_written_calibration_passes_its_own_recheck(kind, fmt, tmp_path, capsys):
     """#39 item 5: the commands the CLI prints as the fix (``calibrated/trajectories.txt``; the
