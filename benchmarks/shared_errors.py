@@ -63,11 +63,8 @@ from pgt_check.verdict import judge_run
 CACHE = Path("/tmp/pgt-check-bench-cache")
 
 
-@functools.lru_cache(maxsize=1)
-def _code_version() -> str:
-    """A hash of the pgt_check sources a measurement depends on (read once per process; all but
-    ``JUDGING_ONLY``): a cached measurement is reused only by the code that made it (a
-    measurement cached by another working tree once served a later run)."""
+def _sources_hash(skip: tuple[str, ...]) -> str:
+    """A hash of the pgt_check sources but those under the folders ``skip``."""
     import hashlib
 
     import pgt_check
@@ -75,9 +72,17 @@ def _code_version() -> str:
     h = hashlib.blake2b(digest_size=6)
     root = Path(pgt_check.__file__).parent
     for f in sorted(root.rglob("*.py")):
-        if not f.relative_to(root).as_posix().startswith(JUDGING_ONLY):
+        if not f.relative_to(root).as_posix().startswith(skip):
             h.update(f.read_bytes())
     return h.hexdigest()
+
+
+@functools.lru_cache(maxsize=1)
+def _code_version() -> str:
+    """A hash of the pgt_check sources a measurement depends on (read once per process; all but
+    ``JUDGING_ONLY``): a cached measurement is reused only by the code that made it (a
+    measurement cached by another working tree once served a later run)."""
+    return _sources_hash(JUDGING_ONLY)
 
 
 #: packages that only judge stored measurements (the measurement stack - measure, render,
@@ -138,14 +143,7 @@ def measure(
 def _all_code_version() -> str:
     """A hash of every pgt_check source (the judging code too: the reference pass chooses what
     to measure again from a judgement)."""
-    import hashlib
-
-    import pgt_check
-
-    h = hashlib.blake2b(digest_size=6)
-    for f in sorted(Path(pgt_check.__file__).parent.rglob("*.py")):
-        h.update(f.read_bytes())
-    return h.hexdigest()
+    return _sources_hash(())
 
 
 def as_run(traj: Trajectory, ms: list, cfg: RunConfig, key: str) -> tuple[list, list]:
