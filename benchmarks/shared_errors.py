@@ -152,8 +152,9 @@ def as_run(traj: Trajectory, ms: list, cfg: RunConfig, key: str) -> tuple[list, 
     enhanced path leaned on a reference whose own absolute evidence did not pass, measured
     again with references that did: ``enhance.refs.verified_references``) and the separation
     probes (``stages.remeasure.separation_stage``). -> (measurements, probes) for
-    ``judge_run(ms, cfg, probes)``; cached under ``key``, ``cfg`` and the code. ``measure``
-    alone is the main pass: the reports up to the thirteenth session's labels judged that."""
+    ``judge_run(ms, cfg, probes)``; cached under ``key``, ``cfg`` (a trusted calibration file
+    by its content: scenes_loso writes it to a new temporary folder each time) and the code.
+    ``measure`` alone is the main pass, which scenes_loso's labels before after9 judged."""
     import hashlib
     from dataclasses import replace
 
@@ -161,7 +162,11 @@ def as_run(traj: Trajectory, ms: list, cfg: RunConfig, key: str) -> tuple[list, 
     from pgt_check.measure import FrameMeasurement
     from pgt_check.stages.remeasure import PlainMeasure, separation_stage
 
-    h = hashlib.blake2b(repr(cfg).encode(), digest_size=6).hexdigest()
+    cal = cfg.run_checks.calibration_from
+    ident = repr(replace(cfg, run_checks=replace(cfg.run_checks, calibration_from=None)))
+    if cal:
+        ident += Path(cal).read_text()
+    h = hashlib.blake2b(ident.encode(), digest_size=6).hexdigest()
     out = CACHE / f"{key}-run-{h}-{_all_code_version()}"
     done = out / "reference_pass.json"
     rcfg = replace(cfg, out=str(out), executor="serial")
