@@ -139,7 +139,7 @@ def test_sample_scene_moved_trajectory(sample_scene, tmp_path, capsys):
     [("castle", 1.0, 0.0), ("castle", 0.0, 0.04), ("7scenes", 2.0, 0.04)],
 )
 def test_real_moved_trajectory_fails_the_gate(shared_data, dataset, deg, frac, tmp_path, capsys):
-    """2 deg + 4 % of the depth (and 1 deg, and 4 % alone, on the castle) on the real data: the
+    """2 deg + 4 % of the depth on 7-Scenes, 1 deg and 4 % alone on the castle: the
     gate fails, the summary states the correction, and with ``--registration-rounds 8`` (the
     failed check's estimate refined by measuring again at the corrected poses) it recovers the
     injected rotation and translation within 30 %. The 7-Scenes poses also carry their real
