@@ -148,19 +148,17 @@ def _all_code_version() -> str:
 
 def as_run(traj: Trajectory, ms: list, cfg: RunConfig, key: str) -> tuple[list, list]:
     """What a run does between its main pass and its verdicts (``pgt_check.runner``), on the
-    main pass's measurements ``ms`` judged with ``cfg``: the reference pass (frames whose
-    enhanced path leaned on a reference whose own absolute evidence did not pass, measured
-    again with references that did: ``enhance.refs.verified_references``) and the separation
-    probes (``stages.remeasure.separation_stage``). -> (measurements, probes) for
+    main pass's measurements ``ms`` judged with ``cfg``, with the runner's own stages: the
+    reference pass (``stages.remeasure.reference_stage``) and the separation probes
+    (``stages.remeasure.separation_stage``). -> (measurements, probes) for
     ``judge_run(ms, cfg, probes)``; cached under ``key``, ``cfg`` (a trusted calibration file
     by its content: scenes_loso writes it to a new temporary folder each time) and the code.
     ``measure`` alone is the main pass, which scenes_loso's labels before after9 judged."""
     import hashlib
     from dataclasses import replace
 
-    from pgt_check.enhance.refs import verified_references
     from pgt_check.measure import FrameMeasurement
-    from pgt_check.stages.remeasure import PlainMeasure, separation_stage
+    from pgt_check.stages.remeasure import reference_stage, separation_stage
 
     cal = cfg.run_checks.calibration_from
     ident = repr(replace(cfg, run_checks=replace(cfg.run_checks, calibration_from=None)))
@@ -174,16 +172,7 @@ def as_run(traj: Trajectory, ms: list, cfg: RunConfig, key: str) -> tuple[list, 
         got = {m["frame_id"]: FrameMeasurement.from_json(m)
                for m in json.loads(done.read_text())}
     else:
-        got = {}
-        if cfg.enhance.mode != "never" and ms:
-            refs = verified_references(traj, judge_run(ms, cfg), cfg)
-            if refs:
-                frames = [f for f in traj.frames if f.frame_id in refs]
-                measure = PlainMeasure("references (as a run)", refs)
-                try:
-                    got = {m.frame_id: m for m in measure(frames, rcfg)}
-                finally:
-                    measure.close()
+        got = reference_stage(traj, traj.frames, ms, rcfg)[1]
         out.mkdir(parents=True, exist_ok=True)
         done.write_text(json.dumps([m.to_json() for m in got.values()]))
     ms = [got.get(m.frame_id, m) for m in ms]

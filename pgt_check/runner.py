@@ -44,6 +44,7 @@ from pgt_check.stages.inputs import (  # re-exported: tests and callers patch / 
 from pgt_check.stages.remeasure import (
     PlainMeasure,
     correct_stage,
+    reference_stage,
     self_test_stage,
     separation_stage,
 )
@@ -274,22 +275,10 @@ def _reference_pass(
     neighbour must not decide, or starve, a correct frame. Their records are appended to the
     store (the latest one counts, so ``pgt-check report`` judges them too; ``--resume``
     measures them again from the first choice)."""
-    from pgt_check.enhance.refs import verified_references
-
-    if config.enhance.mode == "never" or not measurements:
-        return measurements
-    refs = verified_references(prepared.trajectory, judge_run(measurements, config), config)
+    refs, got = reference_stage(prepared.trajectory, prepared.frames, measurements, config)
     if not refs:
         return measurements
     frames = [f for f in prepared.frames if f.frame_id in refs]
-    logger.info("%d frames leaned on a reference whose own absolute evidence did not pass: "
-                "measured again with references that passed (%d without one)", len(frames),
-                sum(not r for r in refs.values()))
-    measure = PlainMeasure("pgt-check references", refs)
-    try:
-        got = {m.frame_id: m for m in measure(frames, config)}
-    finally:
-        measure.close()
     keys = frame_input_keys(frames, refs)
     for f in frames:
         if f.frame_id in got:

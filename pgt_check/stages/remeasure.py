@@ -117,6 +117,36 @@ def self_test_stage(traj: Trajectory, result: CorrectedRun, config: RunConfig) -
     return replace(result, self_test=st)
 
 
+def reference_stage(
+    trajectory: Trajectory, frames: Sequence[Frame], measurements: Sequence[FrameMeasurement],
+    config: RunConfig,
+) -> tuple[dict[str, tuple[Frame, ...]], dict[str, FrameMeasurement]]:
+    """The reference pass: the ``frames`` whose enhanced path leaned on a reference whose own
+    absolute evidence did not pass (``enhance.refs.verified_references``, on a first judgement
+    of ``measurements``) measured again with references among the frames whose evidence did.
+    -> (frame id -> its new references, frame id -> its new measurement); empty when the
+    enhanced path is off or no frame needs it. The runner stores the new measurements
+    (``runner._reference_pass``); benchmarks judge them as a run does."""
+    from pgt_check.enhance.refs import verified_references
+    from pgt_check.verdict import judge_run
+
+    if config.enhance.mode == "never" or not measurements:
+        return {}, {}
+    refs = verified_references(trajectory, judge_run(measurements, config), config)
+    if not refs:
+        return {}, {}
+    todo = [f for f in frames if f.frame_id in refs]
+    logger.info("%d frames leaned on a reference whose own absolute evidence did not pass: "
+                "measured again with references that passed (%d without one)", len(todo),
+                sum(not r for r in refs.values()))
+    measure = PlainMeasure("pgt-check references", refs)
+    try:
+        got = {m.frame_id: m for m in measure(todo, config)}
+    finally:
+        measure.close()
+    return refs, got
+
+
 def separation_stage(traj: Trajectory, measurements: Sequence[FrameMeasurement],
                      config: RunConfig, fingerprint: str = "") -> list[Any]:
     """Frames moved by a known amount and measured again through each path that decides
