@@ -356,13 +356,15 @@ def run_scene(name: str, n: int) -> dict:
     for case, (t, truth) in all_cases.items():
         c_cfg, c_ms, c_tpf = measure(t, mesh, cfgd, f"{_prefix(name)}-{case}")
         for jname, jd in judges.items():
+            judged_as = jname
             if jname == CAL_FROM and case == "given":
-                jd = judges["--remove-calibration"]  # the trusted run itself
+                judged_as = "--remove-calibration"  # the trusted run itself
+                jd = judges[judged_as]
             jc = _cfg(mesh, jd)
             # the reference pass and the separation probes, which a run makes after its main
             # pass with the judging settings (the labels before after9 judged the main pass)
             r_ms, probes = as_a_run[case, jname] = as_run(
-                t, c_ms, jc, f"{_prefix(name)}-{case}-{_slug(jname)}")
+                t, c_ms, jc, f"{_prefix(name)}-{case}-{_slug(judged_as)}")
             try:
                 row = evaluate(case, truth, r_ms, jc, probes)
             except ValueError as err:  # e.g. a ROC-AUC with one class left: recorded, not fatal
