@@ -143,6 +143,17 @@ class _DaskRun:
             return fut.result()
         if fut.status == "cancelled" or self.stop.is_set():
             return None
+        if fut.status != "error":
+            # "lost" (or "pending" again): the frame finished, but the worker holding its result
+            # died before it was fetched; not a failure of the frame, so it is measured again
+            # (a released future is not recomputed for us, and as_completed yields it only once)
+            logger.warning(
+                "frame %s: its result was lost with a worker (%s); measuring it again",
+                task.frame.frame_id,
+                fut.status,
+            )
+            self.retry.append(task)
+            return None
         err = fut.exception()
         if isinstance(err, CheckerSetupError):
             raise err

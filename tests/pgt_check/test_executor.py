@@ -407,6 +407,31 @@ def test_dask_local_cluster_matches_serial():
     assert stats.workers == 2
 
 
+def test_dask_lost_result_is_measured_again_not_an_error():
+    """A frame whose result was lost with a worker after it finished (future status "lost")
+    goes back to the queue; it is not recorded as an internal error (seen in CI: a crash next
+    to a finished frame recorded that frame as ``internal error: None``)."""
+    import threading
+
+    from pgt_check.executor.common import Task
+    from pgt_check.executor.dask import _DaskRun
+
+    class Lost:
+        status = "lost"
+
+        def exception(self):
+            return None
+
+    frame = next(make_frames(1))
+    run = _DaskRun(
+        None, FakeChecker, RunConfig(executor="dask"), threading.Event(), ExecutorStats(),
+        as_completed=lambda: None, killed=RuntimeError,
+    )
+    task = Task(frame)
+    assert run.outcome(Lost(), task) is None
+    assert list(run.retry) == [task] and task.crashes == 0 and not task.isolated
+
+
 @pytest.mark.dask
 def test_dask_scheduler_address_and_crash(tmp_path):
     distributed = pytest.importorskip("distributed")
