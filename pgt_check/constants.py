@@ -33,6 +33,13 @@ MIN_NEIGHBOUR_FACTOR = 2.0
 
 # --- run-level checks (``verdict.shared``) ----------------------------------------------------
 
+#: significance of the registration check's coherence test (``geometry.shared_errors.solver.
+#: _coherence_p``): a correction above the shared threshold FAILs the run only when the frames
+#: pull together at this level; otherwise it may be the frames' own errors summed (a noisy
+#: evidence path on few frames: the colourless castle judged by MaRINeR alone fitted a 3 deg
+#: "misregistration" at p = 0.98, reports/mariner_alone.md) and the check is inconclusive.
+#: The usual 5 %, not fitted
+COHERENCE_ALPHA = 0.05
 #: a frame whose absolute evidence leaves more than this fraction of the per-frame threshold
 #: after the shared correction has an error of its own: it is left out of the pooled fits, and
 #: a passed registration check does not cover it

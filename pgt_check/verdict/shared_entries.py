@@ -65,6 +65,9 @@ def registration_entry(est: Any, threshold: float, kind: str) -> RegistrationChe
     """The rigid or similarity check of a ``RegistrationEstimate`` (``kind``), with its
     message."""
     status = check_status(est.success, est.effect_px_ci, est.effect_px, threshold)
+    coherence_p = finite_or_none(est.coherence_p) if est.success else None
+    if status == FAILED and not coherent(coherence_p, est.n_frames):
+        status = INCONCLUSIVE
     check = RegistrationCheck(
         status=status,
         reason=est.reason,
@@ -82,6 +85,7 @@ def registration_entry(est: Any, threshold: float, kind: str) -> RegistrationChe
         n_frames=est.n_frames,
         n_points=est.n_points,
         n_inliers=est.n_inliers,
+        coherence_p=coherence_p,
         ambiguous_with_calibration=bool(est.ambiguous_with_calibration),
         corrected_world_from_world=(
             None
@@ -90,6 +94,18 @@ def registration_entry(est: Any, threshold: float, kind: str) -> RegistrationChe
         ),
     )
     return replace(check, message=registration_message(check, threshold))
+
+
+def coherent(p_value: float | None, n_frames: int) -> bool:
+    """Whether the frames pull together (``RegistrationEstimate.coherence_p`` at most
+    ``COHERENCE_ALPHA``), or the test cannot tell (not run, or too few frames for its smallest
+    p-value to reach the level: those runs keep the interval rule alone)."""
+    from pgt_check.constants import COHERENCE_ALPHA
+    from pgt_check.geometry.shared_errors import coherence_min_p
+
+    if p_value is None or coherence_min_p(n_frames) > COHERENCE_ALPHA:
+        return True
+    return p_value <= COHERENCE_ALPHA
 
 
 def registration_message(e: RegistrationCheck, threshold: float) -> str:
@@ -114,6 +130,11 @@ def registration_message(e: RegistrationCheck, threshold: float) -> str:
         FAILED: f"FAILED: the trajectory is misregistered to the mesh (above {threshold:.1f} px)",
         INCONCLUSIVE: f"inconclusive: the interval straddles {threshold:.1f} px",
     }[e.status]
+    if e.status == INCONCLUSIVE and e.coherence_p is not None and lo is not None and lo > threshold:
+        # above it, but the frames do not pull together (``coherent``)
+        verdict = (f"inconclusive: above {threshold:.1f} px, but the frames do not pull "
+                   f"together (sign-flip p = {e.coherence_p:.2g}): their own errors may add up "
+                   "to it")
     amb = (
         " (not separable from a calibration error with these views)"
         if e.ambiguous_with_calibration

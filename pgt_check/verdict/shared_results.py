@@ -59,6 +59,8 @@ class RegistrationCheck:
     n_inliers: int = 0
     ambiguous_with_calibration: bool = False
     corrected_world_from_world: list[list[float]] | None = None
+    #: sign-flip p-value of "the frames' own errors, no shared one" (None: not tested)
+    coherence_p: float | None = None
     message: str = ""
     #: share of the frames whose residual agrees with the correction
     frames_agreeing: float | None = None
@@ -89,6 +91,7 @@ class RegistrationCheck:
             "n_inliers": self.n_inliers,
             "ambiguous_with_calibration": self.ambiguous_with_calibration,
             "corrected_world_from_world": self.corrected_world_from_world,
+            "coherence_p": self.coherence_p,
             "message": self.message,
         }
         if self.frames_agreeing is not None:

@@ -32,6 +32,11 @@ still caught) and the calibration estimate the calibration-only fit, both flagge
 Drift (``drift``): windows grown to enough inliers, compared with the reference by paired
 bootstrap, flagged on the lower bound, short runs rejected.
 
+Coherence (``solver._coherence_p``): a registration's correction is a *shared* error only when
+the frames pull together: a sign-flip test over frames (each frame's pull on the world block
+flipped at random, the null of independent per-frame errors) gives its p-value; the verdict
+stage fails a run on it only when significant.
+
 Consensus (``screening``): before the fits pool the frames, each frame's own pose correction
 (what the shared model leaves of its evidence) is tested against the null spread of all
 frames' (Wald statistic, its scale estimated from the lower quartile, so it holds with up to
@@ -60,6 +65,7 @@ from pgt_check.geometry.shared_errors.settings import (
     DriftSettings,
     FitSettings,
 )
+from pgt_check.geometry.shared_errors.solver import coherence_min_p
 
 __all__ = [
     "REASONS",
@@ -72,6 +78,7 @@ __all__ = [
     "FrameEvidence",
     "FrameScreen",
     "RegistrationEstimate",
+    "coherence_min_p",
     "estimate_calibration",
     "estimate_drift",
     "estimate_registration",

@@ -22,6 +22,7 @@ from pgt_check.geometry.shared_errors.settings import FitSettings
 from pgt_check.geometry.shared_errors.solver import (
     _bootstrap_deltas,
     _ci,
+    _coherence_p,
     _Fit,
     _solve,
 )
@@ -90,8 +91,10 @@ def _registration_from_fit(
     ref_deltas: np.ndarray | None = None,
     selection: _Selection | None = None,
     min_inliers: int = 12,
+    coherence: bool = False,
 ) -> RegistrationEstimate:
-    """Summaries and bootstrap CIs of a world fit (relative to ``reference`` if given)."""
+    """Summaries and bootstrap CIs of a world fit (relative to ``reference`` if given); with
+    ``coherence`` also the sign-flip p-value of its world part (``solver._coherence_p``)."""
     st = fit.state
     rn = np.linalg.norm(fit.residuals, axis=1)
     inl = rn < max_error_px
@@ -132,6 +135,8 @@ def _registration_from_fit(
         median_scene_depth=depth,
         residual_median_before=float(np.median(np.linalg.norm(r_before[inl], axis=1))),
         residual_median_after=float(np.median(rn[inl])),
+        coherence_p=(_coherence_p(p, fit, ref, 7 if similarity else 6, seed) if coherence
+                     else float("nan")),
         **base,
     )
 
@@ -250,5 +255,5 @@ def estimate_registration(
     return _registration_from_fit(
         p, fit, similarity=similarity, calib=calib, n_bootstrap=s.n_bootstrap, seed=s.seed,
         max_error_px=s.max_error_px, scene_depth=scene_depth, selection=sel,
-        min_inliers=s.min_inliers,
+        min_inliers=s.min_inliers, coherence=s.coherence,
     )  # fmt: skip

@@ -58,6 +58,9 @@ class RegistrationEstimate:
     ambiguity: str = ""  # why it is ambiguous ("" when not)
     gain_world_only: float = float("nan")  # robust-cost drop of the world-only fit
     gain_calibration_only: float = float("nan")  # robust-cost drop of the calibration-only fit
+    #: p-value of "no shared world error, only the frames' own" (``solver._coherence_p``, a
+    #: sign-flip test over frames; NaN: not tested)
+    coherence_p: float = float("nan")
 
     def exceeds(self, threshold_px: float) -> bool:
         """True when the lower 95 % bound of the pixel effect exceeds ``threshold_px``."""

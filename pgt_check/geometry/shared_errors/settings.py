@@ -45,6 +45,9 @@ class FitSettings:
     #: poses are given, e.g. RGB beside depth) where the points' depths differ enough; off by
     #: default: for cameras circling the scene it mimics a world rotation
     calibration_translation: bool = False
+    #: test whether the frames pull together (``RegistrationEstimate.coherence_p``; the drift
+    #: windows, which compare windows with each other, do not)
+    coherence: bool = True
 
 
 @dataclass(frozen=True)

@@ -128,6 +128,61 @@ def _bootstrap_deltas(
     return counts, -np.linalg.solve(hb, gb[..., None])[..., 0]
 
 
+#: sign patterns drawn for the coherence test beyond ``COHERENCE_EXACT_FRAMES`` frames
+COHERENCE_DRAWS = 2000
+#: up to this many frames the coherence test enumerates every sign pattern (2^F, exact)
+COHERENCE_EXACT_FRAMES = 12
+
+
+def coherence_min_p(n_frames: int) -> float:
+    """The smallest p-value ``_coherence_p`` can give with ``n_frames`` frames (a pattern and
+    its opposite give the same statistic): with 5 frames or fewer it cannot reach 5 %."""
+    if n_frames <= COHERENCE_EXACT_FRAMES:
+        return 2.0 / 2.0 ** max(n_frames, 1)
+    return 1.0 / (COHERENCE_DRAWS + 1)
+
+
+def _coherence_p(p: _Problem, fit: _Fit, reference: _State, n_world: int, seed: int) -> float:
+    """P-value of the null "no shared world error: each frame's pull is its own" for a fit.
+
+    Sign-flip (randomisation) test at the frame level: at ``reference``'s world map (the fit's
+    calibration kept) each frame's gradient g_f of the robust cost, with the fit's Jacobian and
+    weights; the statistic is the world block's efficient score ``dw' S dw`` of the one-step
+    correction ``d = -H^-1 sum_f s_f g_f`` (``S``: the inverse of the world block of ``H^-1``,
+    so the calibration stays a nuisance), with every s_f = +1 for the data. Under the null the
+    frames' errors are independent and symmetric, so flipping whole frames leaves the
+    statistic's distribution unchanged; a shared error pulls every frame the same way and is
+    broken by the flips. Every pattern up to ``COHERENCE_EXACT_FRAMES`` frames (the smallest
+    p-value is then 2 / 2^F), ``COHERENCE_DRAWS`` random ones beyond. Frames weigh by their
+    evidence (a frame with many points pulls more), as in the fit; frames the fit weighs 0 (left
+    out) add nothing. NaN when the blocks cannot be inverted."""
+    import itertools
+
+    r0, _ = _residuals(p, fit.state.with_world(reference))
+    ends = np.append(p.starts[1:], len(r0))
+    g = np.stack([
+        _normal_equations(fit.jac[a:b], fit.weights[a:b], r0[a:b])[1]
+        for a, b in zip(p.starts, ends, strict=True)
+    ])
+    nf = p.n_frames
+    if nf <= COHERENCE_EXACT_FRAMES:
+        signs = np.array(list(itertools.product((1.0, -1.0), repeat=nf)))
+    else:
+        rng = np.random.default_rng(seed)
+        signs = np.vstack([np.ones(nf), rng.choice((-1.0, 1.0), size=(COHERENCE_DRAWS, nf))])
+    h = fit.hessian
+    try:
+        h_inv = np.linalg.inv(h + 1e-9 * np.diag(np.diag(h)))
+        s_world = np.linalg.inv(h_inv[:n_world, :n_world])
+    except np.linalg.LinAlgError:
+        return float("nan")
+    d_world = -(signs @ g) @ h_inv[:n_world].T  # (B, n_world): world part of -H^-1 g_s
+    stat = np.einsum("bi,ij,bj->b", d_world, s_world, d_world)
+    if not np.all(np.isfinite(stat)):
+        return float("nan")
+    return float(np.mean(stat >= stat[0] * (1.0 - 1e-9)))
+
+
 def _ci(x: np.ndarray, axis: int = 0) -> np.ndarray:
     return np.percentile(x, [2.5, 97.5], axis=axis)
 
