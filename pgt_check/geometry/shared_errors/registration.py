@@ -92,6 +92,7 @@ def _registration_from_fit(
     selection: _Selection | None = None,
     min_inliers: int = 12,
     coherence: bool = False,
+    loss_scale_px: float = 2.0,
 ) -> RegistrationEstimate:
     """Summaries and bootstrap CIs of a world fit (relative to ``reference`` if given); with
     ``coherence`` also the sign-flip p-value of its world part (``solver._coherence_p``)."""
@@ -135,7 +136,7 @@ def _registration_from_fit(
         median_scene_depth=depth,
         residual_median_before=float(np.median(np.linalg.norm(r_before[inl], axis=1))),
         residual_median_after=float(np.median(rn[inl])),
-        coherence_p=(_coherence_p(p, fit, ref, 7 if similarity else 6, seed) if coherence
+        coherence_p=(_coherence_p(p, fit, ref, similarity, loss_scale_px, seed) if coherence
                      else float("nan")),
         **base,
     )
@@ -255,5 +256,5 @@ def estimate_registration(
     return _registration_from_fit(
         p, fit, similarity=similarity, calib=calib, n_bootstrap=s.n_bootstrap, seed=s.seed,
         max_error_px=s.max_error_px, scene_depth=scene_depth, selection=sel,
-        min_inliers=s.min_inliers, coherence=s.coherence,
+        min_inliers=s.min_inliers, coherence=s.coherence, loss_scale_px=s.loss_scale_px,
     )  # fmt: skip

@@ -142,35 +142,45 @@ def coherence_min_p(n_frames: int) -> float:
     return 1.0 / (COHERENCE_DRAWS + 1)
 
 
-def _coherence_p(p: _Problem, fit: _Fit, reference: _State, n_world: int, seed: int) -> float:
+def _coherence_p(
+    p: _Problem, fit: _Fit, reference: _State, similarity: bool, loss_scale_px: float, seed: int
+) -> float:
     """P-value of the null "no shared world error: each frame's pull is its own" for a fit.
 
-    Sign-flip (randomisation) test at the frame level: at ``reference``'s world map (the fit's
-    calibration kept) each frame's gradient g_f of the robust cost, with the fit's Jacobian and
-    weights; the statistic is the world block's efficient score ``dw' S dw`` of the one-step
-    correction ``d = -H^-1 sum_f s_f g_f`` (``S``: the inverse of the world block of ``H^-1``,
-    so the calibration stays a nuisance), with every s_f = +1 for the data. Under the null the
-    frames' errors are independent and symmetric, so flipping whole frames leaves the
-    statistic's distribution unchanged; a shared error pulls every frame the same way and is
-    broken by the flips. Every pattern up to ``COHERENCE_EXACT_FRAMES`` frames (the smallest
-    p-value is then 2 / 2^F), ``COHERENCE_DRAWS`` random ones beyond. Frames weigh by their
-    evidence (a frame with many points pulls more), as in the fit; frames the fit weighs 0 (left
-    out) add nothing. NaN when the blocks cannot be inverted."""
+    Sign-flip (randomisation) test at the frame level, on the linearisation at ``reference``'s
+    world map (the fit's calibration kept): each frame's gradient g_f of the robust cost, its
+    Cauchy weights from those residuals alone (scale as the fit's first step: twice their
+    median, at least ``loss_scale_px``), so that a frame with its residuals' signs flipped
+    weighs the same; weights taken from the fit would favour the data's own pattern. The
+    statistic is the world block's efficient score ``dw' S dw`` of the one-step correction
+    ``d = -H^-1 sum_f s_f g_f`` (``S``: the inverse of the world block of ``H^-1``, so the
+    calibration stays a nuisance), every s_f = +1 for the data. Under the null the frames'
+    errors are independent and symmetric, so flipping whole frames leaves the statistic's
+    distribution unchanged; a shared error pulls every frame the same way and the flips break
+    it. Every pattern up to ``COHERENCE_EXACT_FRAMES`` frames (the smallest p-value is then
+    2 / 2^F), ``COHERENCE_DRAWS`` random ones beyond. Frames the fit left out (weight 0) add
+    nothing. NaN when the blocks cannot be inverted."""
     import itertools
 
-    r0, _ = _residuals(p, fit.state.with_world(reference))
+    n_world = 7 if similarity else 6
+    calib = fit.jac.shape[2] > n_world
+    r0, jm = _residuals(p, fit.state.with_world(reference), jac=True, world=True,
+                        similarity=similarity, calib=calib)
+    assert jm is not None  # asked for
+    rn = np.linalg.norm(r0, axis=1)
+    scale = float(np.clip(2.0 * np.median(rn), loss_scale_px, 200.0))
+    wgt = _cauchy_weights(r0, scale) * (fit.weights > 0)
     ends = np.append(p.starts[1:], len(r0))
-    g = np.stack([
-        _normal_equations(fit.jac[a:b], fit.weights[a:b], r0[a:b])[1]
-        for a, b in zip(p.starts, ends, strict=True)
-    ])
+    blocks = [_normal_equations(jm[a:b], wgt[a:b], r0[a:b])
+              for a, b in zip(p.starts, ends, strict=True)]
+    h = sum(b[0] for b in blocks)
+    g = np.stack([b[1] for b in blocks])
     nf = p.n_frames
     if nf <= COHERENCE_EXACT_FRAMES:
         signs = np.array(list(itertools.product((1.0, -1.0), repeat=nf)))
     else:
         rng = np.random.default_rng(seed)
         signs = np.vstack([np.ones(nf), rng.choice((-1.0, 1.0), size=(COHERENCE_DRAWS, nf))])
-    h = fit.hessian
     try:
         h_inv = np.linalg.inv(h + 1e-9 * np.diag(np.diag(h)))
         s_world = np.linalg.inv(h_inv[:n_world, :n_world])

@@ -10,6 +10,8 @@ import numpy as np
 import pytest
 
 from pgt_check.geometry.shared_errors import (
+    FitSettings,
+    coherence_min_p,
     estimate_calibration,
     estimate_drift,
     estimate_registration,
@@ -104,3 +106,44 @@ def test_degenerate_input_fails_with_a_reason():
     assert not estimate_drift(ev[:1]).success
     (cal,) = estimate_calibration(empty).values()
     assert not cal.success and cal.reason == "too_few_points"
+
+
+def _own_errors(seed: int, deg: float, t: float):
+    """Per-frame errors of their own: each frame rotated by ``deg`` about a random axis and
+    moved by ``t`` in a random direction (true = C_i @ checked)."""
+    rng = np.random.default_rng(1000 + seed)
+    table = [similarity(deg, rng.normal(size=3), t * rng.normal(size=3) / np.sqrt(3))
+             for _ in range(64)]
+    return lambda i: table[i]
+
+
+def test_coherence_tells_a_shared_error_from_frames_own_errors():
+    """The sign-flip test (``RegistrationEstimate.coherence_p``): a world error shared by every
+    frame is significant beside per-frame errors of a third of its size; per-frame errors of
+    their own alone are not, at about the test's level, though the fit makes a correction of
+    them (12 frames: the exact enumeration; 30: random patterns)."""
+    shared = similarity(1.5, (0.3, -0.5, 0.8), (0.05, -0.03, 0.02))
+    sig_shared, sig_own, big_own = 0, 0, 0
+    for seed in range(10):
+        own = _own_errors(seed, 0.5, 0.015)
+        n = 12 if seed % 2 else 30
+        ev = make_evidence(seed, n_frames=n, world_error=lambda i, own=own: shared @ own(i))
+        reg = estimate_registration(ev)
+        assert reg.success and 0.0 < reg.coherence_p <= 1.0
+        sig_shared += reg.coherence_p <= 0.05
+        ev = make_evidence(seed, n_frames=n, world_error=_own_errors(seed, 2.0, 0.06))
+        reg = estimate_registration(ev)
+        assert reg.success
+        sig_own += reg.coherence_p <= 0.05
+        big_own += reg.exceeds(THRESHOLD_PX)
+    assert sig_shared == 10
+    assert sig_own <= 2, sig_own  # the null's 5 % of 10 runs
+    assert big_own >= 3, big_own  # the fitted correction alone would have failed these runs
+
+
+def test_coherence_can_be_switched_off_and_its_resolution():
+    ev = make_evidence(0, n_frames=12)
+    assert np.isnan(estimate_registration(ev, FitSettings(coherence=False)).coherence_p)
+    assert np.isfinite(estimate_registration(ev).coherence_p)
+    assert coherence_min_p(5) > 0.05 >= coherence_min_p(6)  # 2 / 2^F: 6 frames can reject
+    assert coherence_min_p(40) < 1e-3
