@@ -42,6 +42,7 @@ def _registration(effect: float, ci=None, success: bool = True, **kw) -> SimpleN
         n_inliers=700,
         ambiguous_with_calibration=False,
         corrected_world_from_world=np.eye(4),
+        coherence_p=math.nan,
     )
     est.update(kw)
     return SimpleNamespace(**est)
@@ -103,6 +104,25 @@ def test_registration_entry_failed_and_its_message():
     assert "1.50 deg" in e.message and "6.0 px (95 % 4.5-7.5)" in e.message
     assert "2.0 % of the scene depth" in e.message and "over 12 frames" in e.message
     json.dumps(e.to_json())  # summary.json-ready
+
+
+@pytest.mark.parametrize("p,n_frames,want", [
+    (0.01, 12, FAILED),  # the frames pull together
+    (0.4, 12, INCONCLUSIVE),  # the fitted correction may be the frames' own errors summed
+    (0.4, 5, FAILED),  # 5 frames: the test cannot reach 5 % (2 / 2^5); the interval decides
+    (math.nan, 12, FAILED),  # not tested
+])
+def test_registration_entry_fails_only_when_the_frames_pull_together(p, n_frames, want):
+    e = registration_entry(_registration(9.0, (7.0, 11.0), coherence_p=p, n_frames=n_frames),
+                           2.4, "rigid")
+    assert e.status == want
+    assert e.coherence_p == (None if math.isnan(p) else p)
+    assert json.loads(json.dumps(e.to_json()))["coherence_p"] == e.coherence_p
+    if want == INCONCLUSIVE:
+        assert "do not pull together (sign-flip p = 0.4)" in e.message and "9.0 px" in e.message
+    # below the threshold the test changes nothing
+    assert registration_entry(_registration(1.0, (0.5, 1.5), coherence_p=p, n_frames=n_frames),
+                              2.4, "rigid").status == PASSED
 
 
 def test_registration_entry_similarity_passed_and_ambiguous():

@@ -18,7 +18,7 @@ REGISTRATION_KEYS = [
     "status", "reason", "kind", "angle_deg", "angle_deg_ci", "translation", "translation_ci",
     "translation_rel_depth", "translation_rel_depth_ci", "scale", "scale_ci", "effect_px",
     "effect_px_ci", "n_frames", "n_points", "n_inliers", "ambiguous_with_calibration",
-    "corrected_world_from_world", "message",
+    "corrected_world_from_world", "coherence_p", "message",
 ]
 
 
@@ -28,7 +28,7 @@ def _estimate(**kw) -> SimpleNamespace:
         translation_ci=(0.03, 0.07), translation_frac=0.02, translation_frac_ci=(0.01, 0.03),
         scale=1.0, scale_ci=(1.0, 1.0), effect_px=6.0, effect_px_ci=(4.5, 7.5), n_frames=12,
         n_points=900, n_inliers=700, ambiguous_with_calibration=False,
-        corrected_world_from_world=np.eye(4),
+        corrected_world_from_world=np.eye(4), coherence_p=0.01,
     )  # fmt: skip
     est.update(kw)
     return SimpleNamespace(**est)

@@ -27,6 +27,7 @@ SHARED_DEFAULTS = dict(
     max_correlation=0.985,
     model_penalty=2.0,
     ambiguity_margin=0.1,
+    coherence=True,
     calibration_translation=False,
 )
 
