@@ -29,6 +29,7 @@ __all__ = [
     "calibration_change_entry",
     "calibration_entry",
     "check_status",
+    "coherent",
     "drift_entry",
     "finite_interval",
     "finite_or_none",
