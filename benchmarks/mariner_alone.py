@@ -83,7 +83,8 @@ def run_scene(name: str, n: int) -> dict:
     def verdicts(mask) -> dict:
         sel = [r for r, m in zip(rows, mask, strict=True) if m]
         return {"n": len(sel), **Counter(r["verdict"] for r in sel),
-                "cannot_separate": sum(r.get("reason") == "path_cannot_separate" for r in sel)}
+                "cannot_separate": sum(str(r.get("reason", "")).startswith("path_cannot_separate")
+                                       for r in sel)}
 
     return {
         "scene": name, "frames": len(rows), "wrong": int(labels.sum()),
