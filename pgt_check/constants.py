@@ -37,7 +37,7 @@ MIN_NEIGHBOUR_FACTOR = 2.0
 #: _coherence_p``): a correction above the shared threshold FAILs the run only when the frames
 #: pull together at this level; otherwise it may be the frames' own errors summed (a noisy
 #: evidence path on few frames: the colourless castle judged by MaRINeR alone fitted a 3 deg
-#: "misregistration" at p = 0.98, reports/mariner_alone.md) and the check is inconclusive.
+#: "misregistration" at p = 0.97, reports/mariner_alone.md) and the check is inconclusive.
 #: The usual 5 %, not fitted
 COHERENCE_ALPHA = 0.05
 #: a frame whose absolute evidence leaves more than this fraction of the per-frame threshold
