@@ -21,6 +21,13 @@ def _normal_equations(jm: np.ndarray, wgt: np.ndarray, r: np.ndarray):
     return jw.T @ jw, jw.T @ (r[:, :, None] * sw).reshape(-1)
 
 
+def _start_scale(r: np.ndarray, loss_scale_px: float) -> float:
+    """The Cauchy scale of a fit's first step on residuals ``r`` (N, 2): twice their median
+    norm, at least ``loss_scale_px`` (the target) and at most 200 px."""
+    med = float(np.median(np.linalg.norm(r, axis=1)))
+    return float(np.clip(2.0 * med, loss_scale_px, 200.0))
+
+
 def _cauchy_weights(r: np.ndarray, scale: float) -> np.ndarray:
     rn2 = np.sum(r * r, axis=1)
     return 1.0 / (1.0 + rn2 / scale**2)
@@ -53,8 +60,7 @@ def _solve(
     r, _ = _residuals(p, st)
     scale = loss_scale_px
     if anneal:
-        med = float(np.median(np.linalg.norm(r, axis=1)))
-        scale = float(np.clip(2.0 * med, loss_scale_px, 200.0))
+        scale = _start_scale(r, loss_scale_px)
     it = 0
     while True:
         r, jm = _residuals(p, st, jac=True, world=world, similarity=similarity, calib=calib)
@@ -103,8 +109,14 @@ def _max_canonical_corr(h: np.ndarray, a: np.ndarray, b: np.ndarray) -> float:
 
 
 def _frame_blocks(p: _Problem, fit: _Fit) -> tuple[np.ndarray, np.ndarray]:
-    """Per-frame normal-equation blocks H_f (F, P, P) and gradients g_f (F, P)."""
-    jm, w, r = fit.jac, fit.weights, fit.residuals
+    """Per-frame normal-equation blocks H_f (F, P, P) and gradients g_f (F, P) of a fit."""
+    return _blocks_of(p, fit.jac, fit.weights, fit.residuals)
+
+
+def _blocks_of(
+    p: _Problem, jm: np.ndarray, w: np.ndarray, r: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Per-frame H_f (F, P, P) and g_f (F, P) of Jacobian ``jm``, weights ``w``, residuals ``r``."""
     ends = np.append(p.starts[1:], len(r))
     blocks = [
         _normal_equations(jm[a:b], w[a:b], r[a:b]) for a, b in zip(p.starts, ends, strict=True)
@@ -167,14 +179,9 @@ def _coherence_p(
     r0, jm = _residuals(p, fit.state.with_world(reference), jac=True, world=True,
                         similarity=similarity, calib=calib)
     assert jm is not None  # asked for
-    rn = np.linalg.norm(r0, axis=1)
-    scale = float(np.clip(2.0 * np.median(rn), loss_scale_px, 200.0))
-    wgt = _cauchy_weights(r0, scale) * (fit.weights > 0)
-    ends = np.append(p.starts[1:], len(r0))
-    blocks = [_normal_equations(jm[a:b], wgt[a:b], r0[a:b])
-              for a, b in zip(p.starts, ends, strict=True)]
-    h = sum(b[0] for b in blocks)
-    g = np.stack([b[1] for b in blocks])
+    wgt = _cauchy_weights(r0, _start_scale(r0, loss_scale_px)) * (fit.weights > 0)
+    hf, g = _blocks_of(p, jm, wgt, r0)
+    h = hf.sum(axis=0)
     nf = p.n_frames
     if nf <= COHERENCE_EXACT_FRAMES:
         signs = np.array(list(itertools.product((1.0, -1.0), repeat=nf)))
