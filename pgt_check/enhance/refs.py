@@ -149,13 +149,20 @@ def pose_renders(files: Sequence[Path], poses: Trajectory) -> list[RenderItem]:
 
 def absolute_passes(result: Any) -> set[str]:
     """Frame ids whose own absolute evidence passed in a judged run (a ``RunResult``): the
-    verdict PASS rests on absolute evidence, or the raw path alone says PASS; never a frame the
-    run-level checks left out (its absolute evidence disagrees with the shared model)."""
+    verdict PASS rests on absolute evidence, the raw path alone says PASS, or the frame's own
+    absolute evidence alone does (``Judgement.own_verdict``) whatever the run-level checks made
+    of its verdict: under a failed registration check every verdict is FAIL, yet a reference
+    right up to that shared error is what a relative path needs (frame and reference carry it
+    alike). Without that, the reference pass of such a run took every reference away (colourless
+    7-Scenes with the defaults: per-frame AUC 0.89 -> 0.55, reports/scenes_loso_colourless.md).
+    Never a frame the run-level checks left out (its absolute evidence disagrees with the shared
+    model)."""
     left_out = result.shared.left_out if result.shared is not None else frozenset()
     out = set()
     for fr in result.frames:
         j = fr.judgement
-        own = (j.verdict.value == "PASS" and j.evidence == "absolute") or j.raw_verdict == "PASS"
+        own = (j.verdict.value == "PASS" and j.evidence == "absolute") or \
+            j.raw_verdict == "PASS" or j.own_verdict == "PASS"
         if own and fr.frame_id not in left_out:
             out.add(fr.frame_id)
     return out

@@ -123,6 +123,11 @@ class Judgement:
     #: that path's corner error as the verdict compared it (the camera's calibration error
     #: removed where the run removes it), photo px; None without a deciding path or error
     error_px: float | None = None
+    #: what the frame's own absolute evidence alone says (``own_outcome``: the raw path with
+    #: confident inliers, else the geometric edges), before the run-level checks and whatever
+    #: path decided: a frame that FAILs on a shared error (a failed registration check, a
+    #: drifting segment) can still be right up to that error ("" when not judged)
+    own_verdict: str = ""
 
     @property
     def disagree(self) -> bool | None:
@@ -278,10 +283,11 @@ def judge(
         m, config, shared, out, ref_off, PathOutcome(base, why)
     )
     err = path_error_px(m, path, config, shared)
+    own_v = own_outcome(m, out, config)[0].value
     if final or verdict is not Verdict.PASS:
-        return Judgement(verdict, reason, evidence, raw_v, enh_v, path, err)
+        return Judgement(verdict, reason, evidence, raw_v, enh_v, path, err, own_v)
     run_level = _run_level(m.frame_id, shared, evidence, _absolute_pass(out), m.camera_id)
-    return Judgement(*run_level, raw_v, enh_v, path, err)
+    return Judgement(*run_level, raw_v, enh_v, path, err, own_v)
 
 
 def _paths_decision(

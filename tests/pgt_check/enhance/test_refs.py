@@ -27,12 +27,14 @@ def _traj(n: int) -> Trajectory:
     ), "synthetic", "lamar")
 
 
-def _frame(fid, verdict, evidence, raw, refs=(), enhance_ran=True):
+def _frame(fid, verdict, evidence, raw, refs=(), enhance_ran=True, own=None):
+    """``own``: what the frame's own absolute evidence says (default: its raw path's verdict)."""
     paths = [SimpleNamespace(reference_id=r) for r in refs]
     m = SimpleNamespace(frame_id=fid, enhance_ran=enhance_ran,
                         enhanced=paths[0] if paths else None,
                         enhanced_alternatives=tuple(paths[1:]))
-    j = SimpleNamespace(verdict=Verdict(verdict), evidence=evidence, raw_verdict=raw)
+    j = SimpleNamespace(verdict=Verdict(verdict), evidence=evidence, raw_verdict=raw,
+                        own_verdict=raw if own is None else own)
     return SimpleNamespace(frame_id=fid, measurement=m, judgement=j)
 
 
@@ -48,8 +50,12 @@ def test_absolute_passes_are_own_absolute_evidence_and_not_left_out():
         _frame("3", "PASS", "absolute", ""),  # e.g. the edge path decided
         _frame("4", "PASS", "absolute", "PASS"),  # left out by the run-level checks
         _frame("5", "UNVERIFIABLE", "none", "UNVERIFIABLE"),
+        # FAIL on a failed registration check, its own edges passed: right up to the shared
+        # error, which a relative path cancels (frame and reference carry it alike)
+        _frame("6", "FAIL", "absolute", "UNVERIFIABLE", own="PASS"),
+        _frame("7", "FAIL", "absolute", "UNVERIFIABLE", own="FAIL"),  # off on its own
     ], left_out={"4"})
-    assert absolute_passes(res) == {"0", "1", "3"}
+    assert absolute_passes(res) == {"0", "1", "3", "6"}
 
 
 def test_frames_leaning_on_unverified_references_get_verified_ones():

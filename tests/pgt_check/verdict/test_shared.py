@@ -498,3 +498,34 @@ def test_registration_is_fitted_outside_a_drifting_segment(truth):
     assert flagged <= set(ids) and flagged <= set(j.shared.registration.frames_left_out)
     outside = [r for r in j.rows() if r["frame_id"] not in set(ids)]
     assert all(r["verdict"] == "PASS" for r in outside), [r["reason"] for r in outside]
+
+
+def _with_edges(ms: list[FrameMeasurement], err: float) -> list[FrameMeasurement]:
+    """``ms`` with a geometric-edge path of corner error ``err`` (the raw path of
+    ``measurements(relative=True)`` has too few inliers: the edges are the frame's own
+    evidence, as on a colourless mesh)."""
+    from dataclasses import replace
+
+    edges = replace(_path("raw", err), kind="edges", method="edges")
+    return [replace(m, edges=edges) for m in ms]
+
+
+def test_frames_failed_by_the_registration_check_keep_their_own_verdict(truth):
+    """A shared move below the per-frame threshold: the registration check fails every frame,
+    yet each frame's own evidence (its edges; the raw path has too few inliers) passes
+    (``Judgement.own_verdict``), so such frames still serve as references for relative paths
+    (``enhance.refs.absolute_passes``: frame and reference carry the shared error alike; the
+    reference pass of a run whose every verdict was FAIL had taken them all away)."""
+    from pgt_check.enhance.refs import absolute_passes
+
+    moved = _move(truth, 0.5, 0.03)
+    j = judge_run(_with_edges(measurements(truth, moved, relative=True), 5.0), RunConfig())
+    assert j.shared.summary()["registration"]["status"] == "failed"
+    assert all(f.verdict == "FAIL" and f.reason.startswith("registration") for f in j.frames)
+    assert all(f.judgement.raw_verdict == "UNVERIFIABLE" for f in j.frames)
+    assert all(f.judgement.own_verdict == "PASS" for f in j.frames)
+    assert absolute_passes(j) == {f.frame_id for f in j.frames} - set(j.shared.left_out)
+    # frames whose own edges are off by more than the threshold do not
+    off = judge_run(_with_edges(measurements(truth, moved, relative=True), 40.0), RunConfig())
+    assert all(f.judgement.own_verdict == "FAIL" for f in off.frames)
+    assert absolute_passes(off) == set()
