@@ -54,6 +54,24 @@ def judged_rows(traj, mesh, cfgd: dict, key: str):
     return j.rows(), sep, tpf, ms
 
 
+def injected_effect_px(m, given: np.ndarray, bad: np.ndarray, depth: float) -> float:
+    """The image effect of a frame's injected error: the mean displacement (px) of a 5 x 5 grid
+    of image points, lifted at the scene's median depth with the given pose, between their
+    projections at the given and at the injected pose (the colourless renders leave too few
+    evidence points to use the frame's own)."""
+    from pgt_check.geometry.reprojection import project
+    from pgt_check.geometry.transforms import apply_rigid, invert_rigid
+    from pgt_check.verdict.calibration import camera_matrix
+
+    k = camera_matrix(m.intrinsics)
+    u, v = np.meshgrid(np.linspace(0, m.width - 1, 5), np.linspace(0, m.height - 1, 5))
+    uv = np.stack([u.ravel(), v.ravel()], axis=1)
+    rays = np.linalg.solve(k, np.vstack([uv.T, np.ones(len(uv))])).T
+    world = apply_rigid(np.asarray(given, np.float64), rays * depth)
+    moved = project(k, apply_rigid(invert_rigid(np.asarray(bad, np.float64)), world))
+    return float(np.mean(np.linalg.norm(moved - uv, axis=1)))
+
+
 def run_scene(name: str, n: int) -> dict:
     from pgt_eval import perturb_runs, roc_auc
 
@@ -73,6 +91,11 @@ def run_scene(name: str, n: int) -> dict:
     bad, inj = perturb_runs(traj, 0.4, (0.5, 4.0), (0.01 * depth, 0.08 * depth), seed=3)
     wrong = {p.frame_id for p in inj}
     rows, sep, tpf, _ = judged_rows(bad, mesh, cfgd, f"item5-{name}-n{n}-per-frame")
+    g_by, b_by = traj.by_id(), bad.by_id()
+    effect = {m.frame_id: injected_effect_px(m, g_by[m.frame_id].world_from_cam,
+                                             b_by[m.frame_id].world_from_cam, depth)
+              for m in g_ms if m.frame_id in wrong and m.intrinsics is not None}
+    thr = {r["frame_id"]: r.get("threshold_px") for r in rows}
     labels = np.array([r["frame_id"] in wrong for r in rows])
     enh = np.array([np.inf if r.get("corner_error_px_enhanced") is None
                     else r["corner_error_px_enhanced"] for r in rows])
@@ -93,6 +116,11 @@ def run_scene(name: str, n: int) -> dict:
         "separation": {k: enh_sep.get(k) for k in ("status", "p_value", "n_frames", "n_higher")},
         "barred": sep.get("barred", []) if sep else [],
         "correct": verdicts(~labels), "wrong_frames": verdicts(labels),
+        # the wrong frames that PASS: their injected error's image effect against the threshold
+        # (a PASS of an injection below the threshold is right)
+        "wrong_pass": [{"frame_id": r["frame_id"], "effect_px": effect.get(r["frame_id"]),
+                        "threshold_px": thr.get(r["frame_id"])}
+                       for r in rows if r["frame_id"] in wrong and r["verdict"] == "PASS"],
         "given": {"n": len(g_rows), **Counter(r["verdict"] for r in g_rows)},
         "s_per_frame": tpf, "seconds": time.perf_counter() - t0,
     }
@@ -104,6 +132,16 @@ def _v(d: dict) -> str:
     return f"{', '.join(parts)} of {d['n']}{extra}"
 
 
+def _wrong_pass(rows: list | None) -> str:
+    if rows is None:
+        return "(not measured)"
+    if not rows:
+        return "none"
+    return ", ".join(f"{r['frame_id']}: {r['effect_px']:.1f} / {r['threshold_px']:.1f}"
+                     if r.get("effect_px") is not None and r.get("threshold_px") is not None
+                     else str(r["frame_id"]) for r in rows)
+
+
 def write_report(doc: dict) -> None:
     rows = []
     for r in doc["scenes"].values():
@@ -113,12 +151,13 @@ def write_report(doc: dict) -> None:
             "-" if r["enhanced_auc"] is None else f"{r['enhanced_auc']:.2f}",
             f"{s.get('status') or 'not probed'}"
             + ("" if s.get("p_value") is None else f" (p {s['p_value']:.3f})"),
-            _v(r["correct"]), _v(r["wrong_frames"]), _v(r["given"]),
-            f"{r['s_per_frame']:.2f}",
+            _v(r["correct"]), _v(r["wrong_frames"]), _wrong_pass(r.get("wrong_pass")),
+            _v(r["given"]), f"{r['s_per_frame']:.2f}",
         ])
     head = ["scene", "frames", "enhanced path AUC (its own separating power)",
             "separation check on the enhanced path", "correct frames", "wrong frames",
-            "given run", "s/frame"]
+            "wrong frames that PASS: injected image effect / threshold (px)", "given run",
+            "s/frame"]
     text = [
         "# MaRINeR evidence alone on colourless renders, every shared scene (issue #38, item 5)",
         "",
