@@ -154,8 +154,8 @@ def absolute_passes(result: Any) -> set[str]:
     of its verdict: under a failed registration check every verdict is FAIL, yet a reference
     right up to that shared error is what a relative path needs (frame and reference carry it
     alike). Without that, the reference pass of such a run took every reference away (colourless
-    7-Scenes with the defaults: per-frame AUC 0.89 -> 0.55, reports/scenes_loso_colourless.md).
-    Never a frame the run-level checks left out (its absolute evidence disagrees with the shared
+    7-Scenes with the defaults: reports/scenes_loso_colourless.md, colourless6 and 7). Never a
+    frame the run-level checks left out (its absolute evidence disagrees with the shared
     model)."""
     left_out = result.shared.left_out if result.shared is not None else frozenset()
     out = set()
