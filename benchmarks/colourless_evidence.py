@@ -38,7 +38,8 @@ from shared_errors import cases, datasets, scene_depth
 
 from pgt_check.config import RunConfig
 from pgt_check.types import Trajectory
-from pgt_check.verdict.decide import Verdict, path_outcome
+from pgt_check.verdict.decide import path_outcome
+from pgt_check.verdict.judgement import Verdict
 from pgt_eval import roc_auc
 
 CACHE = Path("/tmp/pgt-check-colourless-cache")

@@ -38,7 +38,8 @@ from pgt_check.correct.pose import is_certain, refine_pose
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.output_layout import OUTPUTS
 from pgt_check.types import Frame, Trajectory
-from pgt_check.verdict.decide import Verdict, own_outcome, path_outcomes
+from pgt_check.verdict.decide import own_outcome, path_outcomes
+from pgt_check.verdict.judgement import Verdict
 from pgt_check.verdict.result import FrameResult, RunResult
 from pgt_check.verdict.vouching import vouches
 

@@ -10,14 +10,7 @@ from typing import Any
 from pgt_check.config.judge import JudgingConfig
 from pgt_check.enhance.base import Evidence
 from pgt_check.measure.record import FrameMeasurement
-from pgt_check.verdict.decide import (
-    CANNOT_SEPARATE,
-    Judgement,
-    Verdict,
-    judge,
-    own_outcomes,
-    path_outcomes,
-)
+from pgt_check.verdict.decide import judge, own_outcomes, path_outcomes
 from pgt_check.verdict.frame_bounds import (
     agreeing_paths,
     bounded_pass,
@@ -26,6 +19,7 @@ from pgt_check.verdict.frame_bounds import (
     trusted_calibrations,
     world_sensitivity,
 )
+from pgt_check.verdict.judgement import CANNOT_SEPARATE, Judgement, Verdict
 from pgt_check.verdict.off_mesh import off_mesh_frames
 from pgt_check.verdict.result import FrameResult, RunResult
 from pgt_check.verdict.separation import Probe, path_separation

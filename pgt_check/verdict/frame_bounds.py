@@ -24,7 +24,7 @@ from pgt_check.constants import FEATURE_ONLY_MIN_POINTS
 from pgt_check.geometry.frame_accuracy import FrameAccuracy, frame_accuracy
 from pgt_check.measure.record import FrameMeasurement, source_path
 from pgt_check.verdict.calibration import CameraCalibration, camera_matrix
-from pgt_check.verdict.decide import Judgement, Verdict
+from pgt_check.verdict.judgement import Judgement, Verdict
 
 logger = logging.getLogger(__name__)
 

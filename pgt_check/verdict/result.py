@@ -11,8 +11,8 @@ from typing import Any
 
 from pgt_check.measure.columns import headline_values
 from pgt_check.measure.record import FrameMeasurement
-from pgt_check.verdict.decide import Judgement
 from pgt_check.verdict.frame_bounds import FrameBound
+from pgt_check.verdict.judgement import Judgement
 from pgt_check.verdict.separation import Separation
 from pgt_check.verdict.shared import SharedChecks
 

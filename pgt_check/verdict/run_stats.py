@@ -15,7 +15,7 @@ import numpy as np
 from pgt_check.config import GateConfig
 from pgt_check.geometry.homography import auc_at_thresholds
 from pgt_check.measure.record import MeasureReason
-from pgt_check.verdict.decide import Verdict
+from pgt_check.verdict.judgement import Verdict
 
 if TYPE_CHECKING:  # pragma: no cover
     from pgt_check.verdict.result import RunResult

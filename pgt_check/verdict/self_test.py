@@ -50,7 +50,8 @@ from pgt_check.geometry.transforms import axis_angle_to_rotmat, move_pose
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.types import Frame
 from pgt_check.verdict.accuracy import DetectionLimits
-from pgt_check.verdict.decide import Verdict, judge
+from pgt_check.verdict.decide import judge
+from pgt_check.verdict.judgement import Verdict
 from pgt_check.verdict.result import FrameResult, RunResult
 from pgt_check.verdict.self_test_curves import (  # noqa: F401  (re-exported)
     HELD_TOLERANCE,

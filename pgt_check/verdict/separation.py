@@ -47,7 +47,7 @@ from pgt_check.common.sequences import evenly_spaced
 from pgt_check.config import VerdictConfig
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.output_layout import OUTPUTS
-from pgt_check.verdict.decide import CANNOT_SEPARATE  # re-exported: the reason prefix
+from pgt_check.verdict.judgement import CANNOT_SEPARATE  # re-exported: the reason prefix
 
 #: the probe moves the image centre by this x the frame's threshold (a clear error: a path
 #: that cannot see it cannot tell a PASS from a FAIL; large against the errors of wrong frames,

@@ -11,7 +11,8 @@ from dataclasses import replace
 from pgt_check.config import VerdictConfig
 from pgt_check.enhance.base import Evidence
 from pgt_check.measure.record import FrameMeasurement
-from pgt_check.verdict.decide import Judgement, Verdict, path_outcome
+from pgt_check.verdict.decide import path_outcome
+from pgt_check.verdict.judgement import Judgement, Verdict
 
 
 def vouches(j: Judgement) -> bool:

@@ -146,7 +146,7 @@ def test_corrections_stop_at_their_time_budget(tmp_path, monkeypatch):
     from pgt_check.measure import MeasureReason, failed_measurement
     from pgt_check.measure.record import Timings
     from pgt_check.types import Camera, Frame, Trajectory
-    from pgt_check.verdict.decide import Judgement, Verdict
+    from pgt_check.verdict.judgement import Judgement, Verdict
     from pgt_check.verdict.result import FrameResult, RunResult
 
     cam = Camera.pinhole(64, 48, 50.0, 50.0, 31.5, 23.5)
@@ -471,7 +471,7 @@ def test_measuring_again_verifies_only_a_pass_within_the_threshold_and_a_certain
     import pgt_check.correct.frames as F
     from pgt_check.config import RunConfig
     from pgt_check.correct.correction import Correction
-    from pgt_check.verdict.decide import Verdict
+    from pgt_check.verdict.judgement import Verdict
 
     cfg = RunConfig()
     frame = read_trajectory(sample_scene / "trajectories.txt").frames[0]

@@ -15,7 +15,7 @@ from pgt_check.config import RunConfig
 from pgt_check.enhance.refs import absolute_passes, verified_references
 from pgt_check.geometry.transforms import make_rigid
 from pgt_check.types import Camera, Frame, Trajectory
-from pgt_check.verdict.decide import Verdict
+from pgt_check.verdict.judgement import Verdict
 
 CAM = Camera.pinhole(64, 48, 50, 50, 31.5, 23.5)
 

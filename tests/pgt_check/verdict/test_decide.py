@@ -249,7 +249,8 @@ def test_a_reference_that_passed_only_through_its_own_references_vouches_for_not
     registration), and measured 14 px through a frame that passed on its own render. Only a
     reference the run passes on its own absolute evidence vouches: q (PASS through its
     references) does not, so g is judged through p."""
-    from pgt_check.verdict.decide import Judgement, judge
+    from pgt_check.verdict.decide import judge
+    from pgt_check.verdict.judgement import Judgement
     from pgt_check.verdict.vouching import vouched_frames, vouched_reference
 
     cfg = VerdictConfig()

@@ -121,8 +121,8 @@ def test_a_frame_without_agreeing_absolute_evidence_has_no_bound():
     """A frame whose verdict rests on paths with no absolute points of their own (a
     reprojected reference) is not bounded by the points of a path that disagrees."""
     from pgt_check.measure.record import AbsoluteEvidence
-    from pgt_check.verdict.decide import Verdict
     from pgt_check.verdict.frame_bounds import agreeing_paths, bound_points
+    from pgt_check.verdict.judgement import Verdict
 
     ev = AbsoluteEvidence(("raw",), ((1.0, 2.0),), ((0.0, 0.0, 1.0),), (1,))
     assert bound_points(ev, paths=("enhanced",))[2] == ()

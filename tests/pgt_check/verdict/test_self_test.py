@@ -80,8 +80,8 @@ def test_moves_have_the_injected_size():
 def test_choose_frames_takes_pass_frames_with_a_bound_evenly():
     from pgt_check.geometry.frame_accuracy import FrameAccuracy
     from pgt_check.measure import MeasureReason, failed_measurement
-    from pgt_check.verdict.decide import Judgement, Verdict
     from pgt_check.verdict.frame_bounds import FrameBound
+    from pgt_check.verdict.judgement import Judgement, Verdict
     from pgt_check.verdict.result import FrameResult
 
     frames = [_frame(i) for i in range(10)]
