@@ -81,12 +81,25 @@ def scenes(names: list[str]) -> dict[str, tuple[Trajectory, str, dict]]:
     return out
 
 
+def perturbed(checker, frame, rot, trans, rng):
+    """``frame`` with a random pose error (module docstring): rotation uniform in ``rot`` deg
+    about a random axis, centre shift uniform in ``trans`` x the frame's median render depth
+    (rendered by ``checker``'s renderer at a quarter of the size). Returns (the wrong frame,
+    rotation deg, shift, that depth)."""
+    from pgt_eval import perturb_pose
+
+    depth = checker.renderer.render(frame.camera.scaled(0.25), frame.world_from_cam).depth
+    med = float(np.median(depth[depth > 0]))
+    r = float(rng.uniform(*rot))
+    t = float(rng.uniform(*trans)) * med
+    return frame.with_pose(perturb_pose(frame.world_from_cam, r, t, rng)), r, t, med
+
+
 def run_scene(name, truth, mesh, extra, n_frames, rot, trans, seed):
     from pgt_check.config import merge
     from pgt_check.correct.frames import CORRECTION_REFERENCES, correct_frame
     from pgt_check.geometry.transforms import pose_difference
     from pgt_check.measure import FrameChecker, pick_references
-    from pgt_eval import perturb_pose
 
     cfg = RunConfig.from_dict(merge({"input": {"mesh": mesh}}, extra))
     rng = np.random.default_rng(seed)
@@ -96,11 +109,7 @@ def run_scene(name, truth, mesh, extra, n_frames, rot, trans, seed):
     try:
         for i in idx:
             f = truth.frames[int(i)]
-            depth = checker.renderer.render(f.camera.scaled(0.25), f.world_from_cam).depth
-            med = float(np.median(depth[depth > 0]))
-            r = float(rng.uniform(*rot))
-            t = float(rng.uniform(*trans)) * med
-            bad = f.with_pose(perturb_pose(f.world_from_cam, r, t, rng))
+            bad, r, t, med = perturbed(checker, f, rot, trans, rng)
             frames = list(truth.frames)
             frames[int(i)] = bad
             traj = Trajectory(tuple(frames), truth.source, truth.format)

@@ -51,10 +51,11 @@ ROT, TRANS = (1.0, 4.0), (0.02, 0.08)
 def wrong_trajectory(traj, mesh: Path, n_wrong: int, seed: int):
     """``traj`` with ``n_wrong`` evenly spaced frames perturbed (module docstring); returns it
     and frame id -> (injected rotation deg, injected centre shift)."""
+    from corrections import perturbed
+
     from pgt_check.config import RunConfig
     from pgt_check.measure import build_frame_checker
     from pgt_check.types import Trajectory
-    from pgt_eval import perturb_pose
 
     rng = np.random.default_rng(seed)
     n = len(traj.frames)
@@ -66,11 +67,7 @@ def wrong_trajectory(traj, mesh: Path, n_wrong: int, seed: int):
     try:
         for i in idx:
             f = frames[int(i)]
-            depth = checker.renderer.render(f.camera.scaled(0.25), f.world_from_cam).depth
-            med = float(np.median(depth[depth > 0]))
-            r = float(rng.uniform(*ROT))
-            t = float(rng.uniform(*TRANS)) * med
-            frames[int(i)] = f.with_pose(perturb_pose(f.world_from_cam, r, t, rng))
+            frames[int(i)], r, t, _ = perturbed(checker, f, ROT, TRANS, rng)
             injected[f.frame_id] = (r, t)
     finally:
         checker.close()

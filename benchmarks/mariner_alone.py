@@ -55,21 +55,18 @@ def judged_rows(traj, mesh, cfgd: dict, key: str):
 
 
 def injected_effect_px(m, given: np.ndarray, bad: np.ndarray, depth: float) -> float:
-    """The image effect of a frame's injected error: the mean displacement (px) of a 5 x 5 grid
-    of image points, lifted at the scene's median depth with the given pose, between their
-    projections at the given and at the injected pose (the colourless renders leave too few
-    evidence points to use the frame's own)."""
-    from pgt_check.geometry.reprojection import project
-    from pgt_check.geometry.transforms import apply_rigid, invert_rigid
+    """The image effect of a frame's injected error: ``scenes_loso.image_shift`` between the
+    given and the injected pose over a 5 x 5 grid of image points lifted at the scene's median
+    depth with the given pose (the colourless renders leave too few evidence points to use the
+    frame's own)."""
+    from pgt_check.geometry.transforms import apply_rigid
     from pgt_check.verdict.calibration import camera_matrix
 
     k = camera_matrix(m.intrinsics)
     u, v = np.meshgrid(np.linspace(0, m.width - 1, 5), np.linspace(0, m.height - 1, 5))
-    uv = np.stack([u.ravel(), v.ravel()], axis=1)
-    rays = np.linalg.solve(k, np.vstack([uv.T, np.ones(len(uv))])).T
+    rays = np.linalg.solve(k, np.vstack([u.ravel(), v.ravel(), np.ones(u.size)])).T
     world = apply_rigid(np.asarray(given, np.float64), rays * depth)
-    moved = project(k, apply_rigid(invert_rigid(np.asarray(bad, np.float64)), world))
-    return float(np.mean(np.linalg.norm(moved - uv, axis=1)))
+    return scenes_loso.image_shift(given, bad, world, k)
 
 
 def run_scene(name: str, n: int) -> dict:
