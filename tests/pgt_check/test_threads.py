@@ -3,6 +3,8 @@ same results."""
 
 from __future__ import annotations
 
+import logging
+
 import cv2
 import pytest
 
@@ -102,6 +104,11 @@ def test_without_threadpoolctl_only_opencv_is_limited(caller_threads, monkeypatc
     import sys
 
     monkeypatch.setitem(sys.modules, "threadpoolctl", None)  # import fails
+    # the warning is captured whatever an earlier test in this process left on the logger
+    # (a command's log level, a library's logging.config that disables existing loggers)
+    log = logging.getLogger("pgt_check.threads")
+    monkeypatch.setattr(log, "disabled", False)
+    caplog.set_level(logging.WARNING, logger="pgt_check.threads")
     with run_threads(1):
         assert cv2.getNumThreads() == 1
     assert cv2.getNumThreads() == caller_threads
