@@ -77,19 +77,24 @@ FITTED = [
     ("verdict.threshold_rel_diag", "0.02 (x image diagonal = threshold px)", "config/judge.py",
      "grid"),
     ("run_checks.threshold_rel", "0.15 (x per-frame threshold)", "config/judge.py", "grid"),
-    ("gate.max_unverifiable_fraction", "0.5", "config/judge.py (README 'CI gate')", ""),
+    ("gate.max_unverifiable_fraction", "0.5", "config/judge.py (README 'CI gate')",
+     "margins: not identifiable here (table 'Margins')"),
     ("verdict.confident_inliers", "40", "config/judge.py", "grid"),
     ("verdict.min_inliers", "15", "config/judge.py", "grid"),
     ("enhance.auto_margin / CLEAR_MARGIN", "0.5", "constants.py, config/run_config.py",
      "grid: CLEAR_MARGIN, the judging side (auto_margin decides what is measured: no)"),
-    ("EDGES_DECISIVE_SUPPORT", "0.5", "constants.py (reports/edge_pipeline.md)", ""),
+    ("EDGES_DECISIVE_SUPPORT", "0.5", "constants.py (reports/edge_pipeline.md)",
+     "grid: each value measured again (the per-frame case)"),
     ("OWN_ERROR_FRACTION", "0.5", "constants.py", "grid"),
     ("DRIFT_THRESHOLD_FACTOR", "2.0", "constants.py (7-Scenes near views)", "grid"),
-    ("OFF_MESH_RATIO / MIN_NEIGHBOUR_FACTOR", "0.25 / 2.0", "constants.py", ""),
+    ("OFF_MESH_RATIO / MIN_NEIGHBOUR_FACTOR", "0.25 / 2.0", "constants.py",
+     "margins: not identifiable here (table 'Margins')"),
     ("FEATURE_ONLY_MIN_POINTS", "40", "constants.py (reports/accuracy.md)", "grid"),
-    ("MIN_RELATIVE_PNP_INLIERS", "50", "correct/frames.py (castle colourless)", ""),
+    ("MIN_RELATIVE_PNP_INLIERS", "50", "correct/frames.py (castle colourless)",
+     "no (the corrections case again per value: about an hour per value on 2 cores)"),
     ("match.resize_max / correct.resize_max", "320 / 640 px", "config/run_config.py "
-     "(reports/error_vs_runtime.md)", ""),
+     "(reports/error_vs_runtime.md)",
+     "no: a speed / accuracy choice, measured per scene in reports/error_vs_runtime.md"),
     ("ESTIMATE_BIAS", "0.05 / 0.15 / 0.05 (rotation / translation / image effect)",
      "geometry/frame_accuracy.py (reports/accuracy.md)",
      "per scene: coverage of the injected errors (eighth-session notes)"),
@@ -104,15 +109,22 @@ GRIDS = {
     "OWN_ERROR_FRACTION": (0.3, 0.4, 0.5, 0.6, 0.7),
     "FEATURE_ONLY_MIN_POINTS": (20, 30, 40, 60, 80),
     "DRIFT_THRESHOLD_FACTOR": (1.5, 2.0, 2.5, 3.0),
+    # decides what is measured (the enhanced path skipped): each value measured again; above 1
+    # the edges never decide alone
+    "EDGES_DECISIVE_SUPPORT": (0.3, 0.5, 0.7, 1.01),
 }
+#: the constants in ``GRIDS`` that change what is measured: the per-frame case is measured
+#: again with each value (cached under its own key, by this code)
+MEASURED = {"EDGES_DECISIVE_SUPPORT"}
 DEFAULTS = {"verdict.threshold_rel_diag": 0.02, "run_checks.threshold_rel": 0.15,
             "verdict.confident_inliers": 40, "verdict.min_inliers": 15, "CLEAR_MARGIN": 0.5,
             "OWN_ERROR_FRACTION": 0.5, "FEATURE_ONLY_MIN_POINTS": 40,
-            "DRIFT_THRESHOLD_FACTOR": 2.0}
-#: the modules that read the module-level judging constants (``_patched`` sets every copy)
-_JUDGING_MODULES = ("pgt_check.constants", "pgt_check.verdict.decide",
-                    "pgt_check.verdict.checks.base", "pgt_check.verdict.checks.drift",
-                    "pgt_check.verdict.shared", "pgt_check.verdict.frame_bounds")
+            "DRIFT_THRESHOLD_FACTOR": 2.0, "EDGES_DECISIVE_SUPPORT": 0.5}
+#: the modules that read the module-level constants of ``GRIDS`` (``_patched`` sets every copy)
+_JUDGING_MODULES = ("pgt_check.constants", "pgt_check.measure.steps",
+                    "pgt_check.verdict.decide", "pgt_check.verdict.checks.base",
+                    "pgt_check.verdict.checks.drift", "pgt_check.verdict.shared",
+                    "pgt_check.verdict.frame_bounds")
 
 
 #: ``--shading shaded``: every scene's mesh rendered without its colours (the colourless copies
@@ -438,7 +450,14 @@ def _balanced_of(key: str, value: float, name: str, n: int) -> float | None:
     if key != "run_checks.threshold_rel":
         case = "drift" if key == "DRIFT_THRESHOLD_FACTOR" else "per-frame"
         t, truth = all_cases[case]
-        _, ms, _ = measure(t, mesh, cfgd, f"{_prefix(name)}-{case}")
+        if key in MEASURED:  # measured again by this code with the value (patched by the caller)
+            reuse, shared_errors.REUSE_MEASUREMENTS = shared_errors.REUSE_MEASUREMENTS, False
+            try:
+                _, ms, _ = measure(t, mesh, cfgd, f"{_prefix(name)}-{case}-{key}{value:g}")
+            finally:
+                shared_errors.REUSE_MEASUREMENTS = reuse
+        else:
+            _, ms, _ = measure(t, mesh, cfgd, f"{_prefix(name)}-{case}")
         rows = judge_run(ms, _cfg(mesh, jd, **over)).rows()  # 7-Scenes: --calibration-from
         lab = np.array([r["frame_id"] in truth["labels"] for r in rows])
         ok = np.array([r["verdict"] == "PASS" for r in rows])
@@ -481,6 +500,40 @@ def loso_constants(scenes: list[str], n: int, keys: list[str] | None = None) -> 
                           -abs(v - DEFAULTS[key])))}
         out[key] = {"grid": list(grid), "table": {s: {str(v): x for v, x in d.items()}
                                                   for s, d in table.items()}, "per_scene": per}
+    return out
+
+
+def margins(run: dict, n: int) -> dict:
+    """Per scene, how far its runs are from the two constants no case here can fit (no shared
+    scene has a run the tool cannot verify, nor a frame that looks past the mesh): the largest
+    UNVERIFIABLE fraction of a given run (any judge of ``run``; the gate fails a run above
+    ``gate.max_unverifiable_fraction``), and over the given frames the smallest render
+    coverage and the smallest ratio of a frame's coverage to its neighbours' median
+    (``verdict.off_mesh``: off the mesh at most ``OFF_MESH_RATIO``, and only below
+    ``verdict.min_coverage``)."""
+    import statistics
+
+    from pgt_check.constants import NEIGHBOURS_PER_SIDE
+
+    out = {}
+    for name, res in run["scenes"].items():
+        unv = []
+        for rows in res["rows"].values():
+            v = rows.get("given", {}).get("verdicts") or {}
+            if v:
+                unv.append(v.get("UNVERIFIABLE", 0) / sum(v.values()))
+        traj, mesh, cfgd = load_scene(name, n)
+        _, ms, _ = measure(traj, mesh, cfgd, f"{_prefix(name)}-given")
+        cov = [m.coverage for m in ms if m.coverage is not None]
+        ratios = []
+        for k, c in enumerate(cov):
+            around = (cov[max(0, k - NEIGHBOURS_PER_SIDE):k]
+                      + cov[k + 1:k + 1 + NEIGHBOURS_PER_SIDE])
+            if around and statistics.median(around) > 0:
+                ratios.append(c / statistics.median(around))
+        out[name] = {"given_unverifiable_max": max(unv) if unv else None,
+                     "coverage_min": min(cov) if cov else None,
+                     "coverage_ratio_min": min(ratios) if ratios else None}
     return out
 
 
@@ -576,6 +629,18 @@ def write_report(doc: dict) -> None:
             lines += [md_table(["constant", "left out", "default", "fitted on the others",
                                 "score with the default", "score with the LOSO value"], crow),
                       ""]
+        if run.get("margins"):
+            lines += ["Margins of the constants no case here identifies (the given runs: the "
+                      "largest UNVERIFIABLE fraction of any judge, against "
+                      "`gate.max_unverifiable_fraction` 0.5; the smallest render coverage, "
+                      "against `verdict.min_coverage` 0.05, and the smallest ratio of a "
+                      "frame's coverage to its neighbours' median, against `OFF_MESH_RATIO` "
+                      "0.25; a frame is off the mesh only below both):", "",
+                      md_table(["scene", "given: UNVERIFIABLE at most", "coverage at least",
+                                "coverage / neighbours' median at least"],
+                               [[s, _f2(m["given_unverifiable_max"]), _f2(m["coverage_min"]),
+                                 _f2(m["coverage_ratio_min"])]
+                                for s, m in run["margins"].items()]), ""]
     lines += ["## Constants fitted on scenes", "",
               md_table(["constant", "value", "where", "LOSO here"],
                        [[a, b, c, "yes (table above)" if d == "grid" else
@@ -627,6 +692,10 @@ def plot(doc: dict) -> None:
     fig.savefig(PNG, dpi=90)
 
 
+def _f2(x: float | None) -> str:
+    return "" if x is None else f"{x:.2f}"
+
+
 def _ratio(s: str | None) -> float | None:
     a, b = _frac(s)
     return a / b if b else None
@@ -669,6 +738,7 @@ def main() -> int:
         done = [s for s in SCENES if s in run["scenes"]]
         found = loso_constants(done, args.frames, args.constant)
         run.setdefault("constants", {}).update(found)
+        run["margins"] = margins(run, args.frames)
         run["constants_command"] = f"{command_line()}; {machine()}"
         JSON.write_text(json.dumps(doc, indent=1, default=str) + "\n")
     elif not args.report_only:
