@@ -171,7 +171,10 @@ def load_scene(name: str, n: int) -> tuple[Trajectory, Path, dict]:
         import tempfile
 
         builder, n_written, mesh_name = GENERATED[name]
-        d = Path(tempfile.gettempdir()) / "pgt-check-generated" / name
+        # more frames than the scene's default: a longer trajectory of its own (its own folder)
+        d = Path(tempfile.gettempdir()) / "pgt-check-generated" / (
+            name if n <= n_written else f"{name}-{n}")
+        n_written = max(n, n_written)
         if not (d / "trajectories.txt").is_file():
             module, func = builder.split(":")
             getattr(importlib.import_module(module), func)(d, n_frames=n_written)
