@@ -22,6 +22,7 @@ Measurements are cached as ``scenes_loso.py``'s are.
     python benchmarks/scenes_loso_half.py [--scenes a,b] [--fraction 0.5] [--frames 30]
         [--seed 4] [--camera-offset DEG REL]
         [--remove-calibration [--calibration-translation]] [--as-run] [--reuse-measurements]
+        [--report-only]
 """
 
 from __future__ import annotations
@@ -59,7 +60,12 @@ def main(argv: list[str] | None = None) -> int:
                    help="with the reference pass and probes a run adds (shared_errors.as_run)")
     p.add_argument("--reuse-measurements", action="store_true",
                    help="judge the newest cached measurements (as scenes_loso.py)")
+    p.add_argument("--report-only", action="store_true",
+                   help="write the Markdown from reports/scenes_loso_half.json")
     a = p.parse_args(argv)
+    if a.report_only:
+        write_report(json.loads(JSON.read_text()))
+        return 0
     shared_errors.REUSE_MEASUREMENTS = a.reuse_measurements
     L.FRAMES = a.frames  # the cache keys' frame count (``scenes_loso._prefix``)
     for name in [s for s in a.scenes.split(",") if s]:
@@ -135,10 +141,16 @@ KEY = ("scene", "frames", "fraction", "seed", "judge")
 
 def record(line: dict) -> None:
     """Keep ``line`` (replacing a row with the same ``KEY``) and write the Markdown table."""
-    rows = json.loads(JSON.read_text())["rows"] if JSON.is_file() else []
-    rows = [r for r in rows if any(r.get(k) != line[k] for k in KEY)]
+    doc = json.loads(JSON.read_text()) if JSON.is_file() else {"rows": [], "notes": []}
+    rows = [r for r in doc["rows"] if any(r.get(k) != line[k] for k in KEY)]
     rows.append({**line, "command": command_line(), "machine": machine()})
-    JSON.write_text(json.dumps({"rows": rows}, indent=1) + "\n")
+    doc["rows"] = rows  # the hand-written reading ("notes") is kept
+    JSON.write_text(json.dumps(doc, indent=1) + "\n")
+    write_report(doc)
+
+
+def write_report(doc: dict) -> None:
+    rows = doc["rows"]
     head = ["scene", "frames", "wrong (fraction, seed)", "judged", "per-frame AUC",
             "correct frames flagged", "wrong frames flagged", "verdicts",
             "registration (px)", "drift", "calibration", "left out of the pooled fits"]
@@ -153,7 +165,8 @@ def record(line: dict) -> None:
     (REPORTS / "scenes_loso_half.md").write_text("\n".join(
         ["# Many frames wrong at once, neighbours too", "",
          (__doc__ or "").split("\n\n    python")[0].strip(), "",
-         md_table(head, table), "", "Commands:", "", *[f"- {c}" for c in cmds], ""]))
+         md_table(head, table), "", "Commands:", "", *[f"- {c}" for c in cmds], "",
+         *doc.get("notes", [])]) + "\n")
 
 
 if __name__ == "__main__":
