@@ -182,6 +182,23 @@ def load_trusted_calibrations(path: str) -> dict[str, CameraCalibration]:
     return usable
 
 
+def trusted_not_separable(path: str, camera_ids: Sequence[str]) -> set[str]:
+    """This run's cameras (``camera_ids``) whose calibration in a trusted run's summary.json
+    that run could not tell from its own registration (``separable_from_registration``
+    false; a sole camera stands for a sole camera, as in ``trusted_calibration``): the
+    calibration removed may carry that run's own misregistration (a trusted run covering part
+    of a sweep: reports/trusted_subsets.md). Read after ``trusted_calibration`` checked it."""
+    from pgt_check.common.files import MAX_SMALL_JSON_BYTES, load_json_limited
+
+    doc = load_json_limited(path, MAX_SMALL_JSON_BYTES, "--calibration-from summary")
+    entries = doc["shared_errors"]["calibration"]
+    mixed = {str(c) for c, e in entries.items()
+             if isinstance(e, Mapping) and e.get("separable_from_registration") is False}
+    if len(entries) == 1 and len(camera_ids) == 1 and mixed:
+        return set(camera_ids)
+    return mixed & set(camera_ids)
+
+
 def trusted_calibration(path: str, camera_ids: Sequence[str]) -> dict[str, CameraCalibration]:
     """Calibration errors per camera from a trusted run's summary.json
     (``shared_errors.calibration``), for this run's cameras (``--calibration-from``)."""

@@ -202,11 +202,16 @@ def calibration_entry(
     return replace(check, message=message)
 
 
-def calibration_change_entry(est: Any, threshold: float) -> CalibrationCheck:
+def calibration_change_entry(
+    est: Any, threshold: float, trusted_separable: bool = True
+) -> CalibrationCheck:
     """This run's calibration against a trusted run's (``--calibration-from``): the estimate on
     the evidence after removing the trusted calibration. FAILED when it moves the images by
     more than the shared threshold with confidence: the camera changed (focal length,
-    principal point, mounting) since the trusted run, and its frames are not PASS."""
+    principal point, mounting) since the trusted run, and its frames are not PASS. With
+    ``trusted_separable`` false (the trusted run could not tell this calibration from its own
+    registration) a FAILED message also names the other explanation: the trusted estimate
+    took in that run's own misregistration."""
     entry = calibration_entry(est, threshold, threshold)
     if entry.status == NOT_CHECKED:
         return replace(
@@ -225,6 +230,12 @@ def calibration_change_entry(est: Any, threshold: float) -> CalibrationCheck:
         f"{hi:.1f}, threshold {threshold:.1f}): principal point ({pp[0]:+.1f}, {pp[1]:+.1f}) px, "
         f"roll {est.roll_deg:+.2f} deg, focal length x{est.focal_scale:.4f}"
     )
+    if status == FAILED and not trusted_separable:
+        message += (
+            "; or the trusted run, which could not tell this calibration from its own "
+            "registration, removed part of its own misregistration with it: calibrate on a run "
+            "spread over the views this one sees (docs/run-level-checks.md)"
+        )
     return replace(entry, status=status, message=message)
 
 

@@ -20,7 +20,12 @@ import numpy as np
 from pgt_check.config.judge import JudgingConfig
 from pgt_check.constants import OWN_ERROR_FRACTION
 from pgt_check.measure.record import FrameMeasurement
-from pgt_check.verdict.calibration import CameraCalibration, frame_homographies, trusted_calibration
+from pgt_check.verdict.calibration import (
+    CameraCalibration,
+    frame_homographies,
+    trusted_calibration,
+    trusted_not_separable,
+)
 from pgt_check.verdict.shared_entries import calibration_change_entry, calibration_entry
 from pgt_check.verdict.shared_results import CalibrationCheck
 from pgt_check.verdict.status import FAILED, FINDING, INCONCLUSIVE, NOT_CHECKED
@@ -272,8 +277,9 @@ def _calibration_checks(
         # calibration only: the change is what the trusted calibration leaves unexplained (a
         # joint fit would trade part of it against a world correction, and re-split the same
         # run's calibration differently)
+        mixed = trusted_not_separable(v.calibration_from, sorted(intrinsics))
         for cam_id, est in estimate_calibration(rest, settings, registration="none").items():
             if cam_id:
-                change[cam_id] = calibration_change_entry(est, thr)
+                change[cam_id] = calibration_change_entry(est, thr, cam_id not in mixed)
     return Calibrations(calib, cals, change)
 

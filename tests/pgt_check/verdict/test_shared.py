@@ -308,6 +308,36 @@ def test_calibration_from_a_trusted_run_sees_the_camera_change(truth, tmp_path):
                                        "drift:")) for r in changed.rows())
 
 
+def test_a_camera_change_names_a_trusted_run_that_could_not_separate(truth, tmp_path):
+    """A calibration change against a trusted run whose calibration was not separable from its
+    own registration (7-Scenes: a trusted run on the last third of a sweep took in that
+    segment's offset, reports/trusted_subsets.md): the FAIL also names that explanation and
+    what to do; against a separable trusted run it does not."""
+    import json
+
+    def with_pp_shift(ms, dx):
+        return [m.__class__(**{**m.__dict__, "evidence": AbsoluteEvidence(
+            ("raw",), tuple((u + dx, v) for u, v in m.evidence.pts2d), m.evidence.pts_cam)})
+            for m in ms]
+
+    trusted = judge_run(with_pp_shift(measurements(truth, truth), 5.0), RunConfig()).shared
+    changed = with_pp_shift(measurements(truth, truth, seed=1), 11.0)
+    messages = {}
+    for separable in (True, False):
+        se = trusted.summary()
+        for entry in se["calibration"].values():
+            entry["separable_from_registration"] = separable
+        path = tmp_path / f"summary-{separable}.json"
+        path.write_text(json.dumps({"shared_errors": se}))
+        cfg = RunConfig.from_dict({"run_checks": {"calibration_from": str(path)}})
+        (change,) = judge_run(changed, cfg).shared.summary()["calibration_change"].values()
+        assert change["status"] == "failed", change["message"]
+        messages[separable] = change["message"]
+    assert "could not tell this calibration from its own registration" in messages[False]
+    assert "could not tell" not in messages[True]
+    assert messages[False].startswith(messages[True])
+
+
 def test_a_changed_camera_fails_frames_the_other_checks_pass():
     from pgt_check.verdict.decide import _run_level
     from pgt_check.verdict.shared import SharedChecks
