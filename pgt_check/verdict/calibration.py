@@ -191,7 +191,10 @@ def trusted_not_separable(path: str, camera_ids: Sequence[str]) -> set[str]:
     from pgt_check.common.files import MAX_SMALL_JSON_BYTES, load_json_limited
 
     doc = load_json_limited(path, MAX_SMALL_JSON_BYTES, "--calibration-from summary")
-    entries = doc["shared_errors"]["calibration"]
+    shared = doc.get("shared_errors") if isinstance(doc, dict) else None
+    entries = shared.get("calibration") if isinstance(shared, dict) else None
+    if not isinstance(entries, dict):
+        return set()
     mixed = {str(c) for c, e in entries.items()
              if isinstance(e, Mapping) and e.get("separable_from_registration") is False}
     if len(entries) == 1 and len(camera_ids) == 1 and mixed:
