@@ -232,8 +232,8 @@ def calibration_change_entry(
     )
     if status == FAILED and not trusted_separable:
         message += (
-            "; or the trusted run, which could not tell this calibration from its own "
-            "registration, removed part of its own misregistration with it: calibrate on a run "
+            "; or the trusted calibration took in part of the trusted run's own "
+            "misregistration (that run could not tell the two apart): calibrate on a run "
             "spread over the views this one sees (docs/run-level-checks.md)"
         )
     return replace(entry, status=status, message=message)

@@ -333,8 +333,8 @@ def test_a_camera_change_names_a_trusted_run_that_could_not_separate(truth, tmp_
         (change,) = judge_run(changed, cfg).shared.summary()["calibration_change"].values()
         assert change["status"] == "failed", change["message"]
         messages[separable] = change["message"]
-    assert "could not tell this calibration from its own registration" in messages[False]
-    assert "could not tell" not in messages[True]
+    assert "took in part of the trusted run's own misregistration" in messages[False]
+    assert "misregistration" not in messages[True]
     assert messages[False].startswith(messages[True])
 
 
