@@ -93,9 +93,9 @@ def main(argv: list[str] | None = None) -> int:
                                 + ("rm" if a.remove_calibration else "default")
                                 + ("-ct" if a.calibration_translation else ""))
         row = evaluate("per-frame", {"labels": {q.frame_id for q in inj}}, ms, cfg, probes)
-        screen = judge_run(ms, cfg, probes).shared
-        left = (screen.summary().get("frame_screen", {}).get("n_left_out")
-                if screen is not None else None)
+        shared = judge_run(ms, cfg, probes).shared
+        left = (shared.summary().get("frame_screen", {}).get("n_left_out")
+                if shared is not None else None)
         keep = {k: row.get(k) for k in ("flagged", "verdicts", "registration", "reg_px",
                                         "drift", "calibration", "frame_auc", "flagged_bad",
                                         "flagged_good")}
@@ -105,9 +105,8 @@ def main(argv: list[str] | None = None) -> int:
             judged += " --calibration-translation"
         if a.camera_offset is not None:
             judged += " (camera offset {:g} deg + {:g} x depth)".format(*a.camera_offset)
-            cal = judge_run(ms, cfg, probes).shared
-            keep["calibration_estimate"] = (cal.summary().get("calibration")
-                                            if cal is not None else None)
+            keep["calibration_estimate"] = (shared.summary().get("calibration")
+                                            if shared is not None else None)
         line = {"scene": name, "frames": len(traj), "fraction": a.fraction, "seed": a.seed,
                 "judge": judged + (", as a run" if a.as_run else ", main pass"),
                 "wrong": len(inj), "left_out": left, "s": round(time.perf_counter() - t0),
