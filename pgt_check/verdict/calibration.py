@@ -32,11 +32,15 @@ def camera_matrix(intrinsics: Sequence[float], focal_scale: float = 1.0) -> np.n
 
 @dataclass(frozen=True, eq=False)
 class CameraCalibration:
-    """rotation (3, 3), focal_scale, translation (3,) of ``true_cam_from_checked_cam``."""
+    """rotation (3, 3), focal_scale, translation (3,) of ``true_cam_from_checked_cam``;
+    ``separable``: false when the run that estimated it could not tell it from its own
+    registration (``separable_from_registration``), so it may carry that run's own
+    misregistration (a trusted run covering part of a sweep: reports/trusted_subsets.md)."""
 
     rotation: np.ndarray
     focal_scale: float
     translation: np.ndarray
+    separable: bool = True
 
     @classmethod
     def from_estimate(cls, est: Any) -> CameraCalibration | None:
@@ -150,7 +154,8 @@ def _trusted_entry(path: str, cam_id: str, entry: Any) -> CameraCalibration | No
             t = np.zeros(0)
         if t.shape != (3,) or not np.all(np.isfinite(t)):
             raise InputError(f"{where}.translation: expected 3 finite numbers; got {trans!r:.80}")
-    return CameraCalibration(r, float(scale), t)
+    separable = entry.get("separable_from_registration") is not False
+    return CameraCalibration(r, float(scale), t, separable)
 
 
 def load_trusted_calibrations(path: str) -> dict[str, CameraCalibration]:
@@ -180,26 +185,6 @@ def load_trusted_calibrations(path: str) -> dict[str, CameraCalibration]:
     if not usable:
         raise InputError(f"{path}: no camera has a calibration estimate (--calibration-from)")
     return usable
-
-
-def trusted_not_separable(path: str, camera_ids: Sequence[str]) -> set[str]:
-    """This run's cameras (``camera_ids``) whose calibration in a trusted run's summary.json
-    that run could not tell from its own registration (``separable_from_registration``
-    false; a sole camera stands for a sole camera, as in ``trusted_calibration``): the
-    calibration removed may carry that run's own misregistration (a trusted run covering part
-    of a sweep: reports/trusted_subsets.md). Read after ``trusted_calibration`` checked it."""
-    from pgt_check.common.files import MAX_SMALL_JSON_BYTES, load_json_limited
-
-    doc = load_json_limited(path, MAX_SMALL_JSON_BYTES, "--calibration-from summary")
-    shared = doc.get("shared_errors") if isinstance(doc, dict) else None
-    entries = shared.get("calibration") if isinstance(shared, dict) else None
-    if not isinstance(entries, dict):
-        return set()
-    mixed = {str(c) for c, e in entries.items()
-             if isinstance(e, Mapping) and e.get("separable_from_registration") is False}
-    if len(entries) == 1 and len(camera_ids) == 1 and mixed:
-        return set(camera_ids)
-    return mixed & set(camera_ids)
 
 
 def trusted_calibration(path: str, camera_ids: Sequence[str]) -> dict[str, CameraCalibration]:

@@ -24,7 +24,6 @@ from pgt_check.verdict.calibration import (
     CameraCalibration,
     frame_homographies,
     trusted_calibration,
-    trusted_not_separable,
 )
 from pgt_check.verdict.shared_entries import calibration_change_entry, calibration_entry
 from pgt_check.verdict.shared_results import CalibrationCheck
@@ -277,9 +276,11 @@ def _calibration_checks(
         # calibration only: the change is what the trusted calibration leaves unexplained (a
         # joint fit would trade part of it against a world correction, and re-split the same
         # run's calibration differently)
-        mixed = trusted_not_separable(v.calibration_from, sorted(intrinsics))
         for cam_id, est in estimate_calibration(rest, settings, registration="none").items():
             if cam_id:
-                change[cam_id] = calibration_change_entry(est, thr, cam_id not in mixed)
+                trusted = cals.get(cam_id)
+                change[cam_id] = calibration_change_entry(
+                    est, thr, trusted is None or trusted.separable
+                )
     return Calibrations(calib, cals, change)
 
