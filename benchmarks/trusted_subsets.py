@@ -12,7 +12,7 @@ the judged runs are frames no rule was fitted on (``7scenes_redkitchen_train``, 
 runs the share of correct frames PASS, of wrong frames flagged, the per-frame AUC and the
 registration and calibration-change checks. Writes reports/trusted_subsets.{md,json}.
 
-    python benchmarks/trusted_subsets.py [--frames 40] [--report-only]
+    python benchmarks/trusted_subsets.py [--frames 40] [--calibration-translation] [--report-only]
 """
 
 from __future__ import annotations
@@ -46,6 +46,9 @@ def trusted_frames(traj: Trajectory, subset: str, n: int = 20) -> Trajectory:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--frames", type=int, default=40)
+    p.add_argument("--calibration-translation", action="store_true",
+                   help="fit the camera-frame translation too, in the trusted and the judged "
+                        "runs (pgt-check --calibration-translation)")
     p.add_argument("--report-only", action="store_true",
                    help="write the Markdown from reports/trusted_subsets.json")
     a = p.parse_args(argv)
@@ -59,19 +62,26 @@ def main(argv: list[str] | None = None) -> int:
     bad, inj = perturb_runs(held, 0.4, (0.5, 4.0), (0.01 * depth, 0.08 * depth), seed=7)
     wrong = {q.frame_id for q in inj}
     _, bad_ms, _ = measure(bad, mesh, cfgd, f"trusted-held-n{a.frames}-wrong")
+    ct = a.calibration_translation
+    tag = "-ct" if ct else ""
     rows = []
     for subset in SUBSETS:
         t = trusted_frames(shared, subset)
         _, t_ms, _ = measure(t, mesh, cfgd, f"trusted-{subset.replace(' ', '_')}")
-        rm = L._cfg(mesh, {**cfgd, "run_checks": {"remove_calibration": True}})
-        t_ms, t_probes = as_run(t, t_ms, rm, f"trusted-{subset.replace(' ', '_')}-rm")
+        rm = L._cfg(mesh, {**cfgd, "run_checks": {"remove_calibration": True,
+                                                  "calibration_translation": ct}})
+        t_ms, t_probes = as_run(t, t_ms, rm, f"trusted-{subset.replace(' ', '_')}-rm{tag}")
         tj = judge_run(t_ms, rm, t_probes)
         se = tj.shared.summary()
         summary = Path(tempfile.mkdtemp(prefix="trusted_")) / "summary.json"
         summary.write_text(json.dumps({"shared_errors": se}, default=str))
         (cal,) = se["calibration"].values()
-        cf = L._cfg(mesh, {**cfgd, "run_checks": {"calibration_from": str(summary)}})
-        row = {"trusted": subset, "trusted_frames": len(t.frames),
+        cf = L._cfg(mesh, {**cfgd, "run_checks": {"calibration_from": str(summary),
+                                                  "calibration_translation": ct}})
+        row = {"trusted": subset, "calibration_translation": ct,
+               "translation_cm": [100 * float(x) for x in cal["translation"]]
+               if ct and cal.get("translation") is not None else None,
+               "trusted_frames": len(t.frames),
                "trusted_verdicts": dict(sorted({v: sum(r["verdict"] == v for r in tj.rows())
                                                for v in ("PASS", "FAIL", "UNVERIFIABLE")}
                                               .items())),
@@ -81,7 +91,7 @@ def main(argv: list[str] | None = None) -> int:
         for case, traj, ms, labels in (("clean", held, held_ms, set()),
                                        ("40 % wrong", bad, bad_ms, wrong)):
             r_ms, probes = as_run(traj, ms, cf, f"trusted-held-n{a.frames}-{case[:5].strip()}"
-                                  f"-from-{subset.replace(' ', '_')}")
+                                  f"-from-{subset.replace(' ', '_')}{tag}")
             j = judge_run(r_ms, cf, probes)
             jr = j.rows()
             ok = [r for r in jr if r["frame_id"] not in labels]
@@ -97,6 +107,8 @@ def main(argv: list[str] | None = None) -> int:
         rows.append(row)
     out = REPORTS / "trusted_subsets.json"
     notes = json.loads(out.read_text()).get("notes", []) if out.is_file() else []
+    old = json.loads(out.read_text()).get("rows", []) if out.is_file() else []
+    rows += [r for r in old if r.get("calibration_translation", False) != ct]  # the other fit
     doc = {"command": command_line(), "machine": machine(), "frames": a.frames, "rows": rows,
            "notes": notes}  # the hand-written reading is kept
     out.write_text(json.dumps(doc, indent=1, default=str) + "\n")
@@ -112,9 +124,13 @@ def write_report(doc: dict) -> None:
     table = []
     for r in doc["rows"]:
         c, w = r["clean"], r["40 % wrong"]
+        ct = r.get("calibration_translation", False)
+        cal = f"{r['calibration_deg']:.2f}"
+        if ct and r.get("translation_cm") is not None:
+            cal += " + t (" + ", ".join(f"{x:+.1f}" for x in r["translation_cm"]) + ") cm"
         table.append([
-            r["trusted"], ", ".join(f"{k} {v}" for k, v in r["trusted_verdicts"].items() if v),
-            f"{r['calibration_deg']:.2f} ({r['calibration_status']}; "
+            r["trusted"] + (" (+ translation)" if ct else ""), ", ".join(f"{k} {v}" for k, v in r["trusted_verdicts"].items() if v),
+            f"{cal} ({r['calibration_status']}; "
             f"{'yes' if r['separable'] else 'no'})", r["trusted_registration"],
             f"{c['correct_pass']} ({c['registration']}, {c['calibration_change']})",
             w["correct_pass"], w["wrong_flagged"], f"{w['auc']:.3f}"])
