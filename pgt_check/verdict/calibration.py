@@ -35,12 +35,15 @@ class CameraCalibration:
     """rotation (3, 3), focal_scale, translation (3,) of ``true_cam_from_checked_cam``;
     ``separable``: false when the run that estimated it could not tell it from its own
     registration (``separable_from_registration``), so it may carry that run's own
-    misregistration (a trusted run covering part of a sweep: reports/trusted_subsets.md)."""
+    misregistration (a trusted run covering part of a sweep: reports/trusted_subsets.md);
+    ``tolerance_px``: that run's shared-error threshold (how well a run's registration is
+    known when it passes, or when the user asserts it; nan where the summary has none)."""
 
     rotation: np.ndarray
     focal_scale: float
     translation: np.ndarray
     separable: bool = True
+    tolerance_px: float = math.nan
 
     @classmethod
     def from_estimate(cls, est: Any) -> CameraCalibration | None:
@@ -125,9 +128,12 @@ def frame_homographies(
     return per_cam, per_frame
 
 
-def _trusted_entry(path: str, cam_id: str, entry: Any) -> CameraCalibration | None:
+def _trusted_entry(
+    path: str, cam_id: str, entry: Any, tolerance_px: float = math.nan
+) -> CameraCalibration | None:
     """One camera's entry of a trusted summary, checked strictly (InputError naming the field):
-    None when it carries no estimate (rotation and focal scale both null or absent)."""
+    None when it carries no estimate (rotation and focal scale both null or absent).
+    ``tolerance_px``: the trusted run's shared threshold (``CameraCalibration.tolerance_px``)."""
     where = f"{path}: shared_errors.calibration[{cam_id!r}]"
     if not isinstance(entry, Mapping):
         raise InputError(f"{where}: expected a table; got {type(entry).__name__}")
@@ -155,7 +161,7 @@ def _trusted_entry(path: str, cam_id: str, entry: Any) -> CameraCalibration | No
         if t.shape != (3,) or not np.all(np.isfinite(t)):
             raise InputError(f"{where}.translation: expected 3 finite numbers; got {trans!r:.80}")
     separable = entry.get("separable_from_registration") is not False
-    return CameraCalibration(r, float(scale), t, separable)
+    return CameraCalibration(r, float(scale), t, separable, tolerance_px)
 
 
 def load_trusted_calibrations(path: str) -> dict[str, CameraCalibration]:
@@ -177,9 +183,12 @@ def load_trusted_calibrations(path: str) -> dict[str, CameraCalibration]:
             f"{path}: expected the summary.json of a pgt-check run with a table "
             "shared_errors.calibration (--calibration-from)"
         )
+    thr = shared.get("threshold_px") if isinstance(shared, dict) else None
+    tolerance = (float(thr) if isinstance(thr, (int, float)) and not isinstance(thr, bool)
+                 and math.isfinite(thr) and thr > 0 else math.nan)  # older summaries: none
     usable = {}
     for c, e in se.items():
-        cal = _trusted_entry(path, str(c), e)
+        cal = _trusted_entry(path, str(c), e, tolerance)
         if cal is not None:
             usable[str(c)] = cal
     if not usable:

@@ -36,6 +36,7 @@ __all__ = [
     "frame_screen_entry",
     "registration_entry",
     "shared_or_not",
+    "trusted_allowance",
 ]
 
 
@@ -51,21 +52,29 @@ def finite_or_none(x: Any) -> float | None:
     return x if math.isfinite(x) else None
 
 
-def check_status(success: bool, effect_ci: Any, effect: float, threshold: float) -> str:
+def check_status(
+    success: bool, effect_ci: Any, effect: float, threshold: float, allowance: float = 0.0
+) -> str:
+    """PASSED below ``threshold`` with confidence, FAILED above ``threshold + allowance`` with
+    confidence, else INCONCLUSIVE. ``allowance``: an error the check cannot attribute (a
+    trusted calibration that may carry its own run's misregistration, ``trusted_allowance``)."""
     if not success:
         return NOT_CHECKED
     lo, hi = effect_ci if finite_interval(effect_ci) else (effect, effect)
-    if lo > threshold:
+    if lo > threshold + allowance:
         return FAILED
     if hi <= threshold:
         return PASSED
     return INCONCLUSIVE
 
 
-def registration_entry(est: Any, threshold: float, kind: str) -> RegistrationCheck:
+def registration_entry(
+    est: Any, threshold: float, kind: str, allowance_px: float = 0.0
+) -> RegistrationCheck:
     """The rigid or similarity check of a ``RegistrationEstimate`` (``kind``), with its
-    message."""
-    status = check_status(est.success, est.effect_px_ci, est.effect_px, threshold)
+    message. ``allowance_px``: what a trusted calibration removed first may carry of its own
+    run's misregistration (``trusted_allowance``): FAILED only above threshold + allowance."""
+    status = check_status(est.success, est.effect_px_ci, est.effect_px, threshold, allowance_px)
     coherence_p = finite_or_none(est.coherence_p) if est.success else None
     if status == FAILED and not coherent(coherence_p, est.n_frames):
         status = INCONCLUSIVE
@@ -94,7 +103,7 @@ def registration_entry(est: Any, threshold: float, kind: str) -> RegistrationChe
             else np.asarray(est.corrected_world_from_world).tolist()
         ),
     )
-    return replace(check, message=registration_message(check, threshold))
+    return replace(check, message=registration_message(check, threshold, allowance_px))
 
 
 def coherent(p_value: float | None, n_frames: int) -> bool:
@@ -109,7 +118,9 @@ def coherent(p_value: float | None, n_frames: int) -> bool:
     return p_value <= COHERENCE_ALPHA
 
 
-def registration_message(e: RegistrationCheck, threshold: float) -> str:
+def registration_message(
+    e: RegistrationCheck, threshold: float, allowance_px: float = 0.0
+) -> str:
     """The one-line message of the registration check ``e`` (its ``message`` not yet set)."""
     what = "similarity" if e.kind == "similarity" else "rigid registration"
     if e.status == NOT_CHECKED:
@@ -136,6 +147,8 @@ def registration_message(e: RegistrationCheck, threshold: float) -> str:
         verdict = (f"inconclusive: above {threshold:.1f} px, but the frames do not pull "
                    f"together (sign-flip p = {e.coherence_p:.2g}): their own errors may add up "
                    "to it")
+    elif e.status == INCONCLUSIVE and allowance_px > 0 and lo is not None and lo > threshold:
+        verdict = f"inconclusive: above {threshold:.1f} px, but {untold(allowance_px)}"
     amb = (
         " (not separable from a calibration error with these views)"
         if e.ambiguous_with_calibration
@@ -202,8 +215,33 @@ def calibration_entry(
     return replace(check, message=message)
 
 
+def trusted_allowance(trusted: Any, threshold: float) -> float:
+    """What a trusted calibration (``verdict.calibration.CameraCalibration``) may carry of its
+    own run's misregistration, in px: none when that run told calibration from registration;
+    else up to its shared threshold (``tolerance_px``; this run's ``threshold`` where the
+    summary has none): a registration is known only to within that when the run passes or the
+    user asserts it (``--remove-calibration``), and views that cannot tell the two apart put
+    all of it into the calibration (a trusted run covering one segment of a sweep,
+    reports/trusted_subsets.md). Errors add, so a check run after removing it fails only above
+    its threshold plus this."""
+    if trusted is None or trusted.separable:
+        return 0.0
+    tol = float(trusted.tolerance_px)
+    return tol if math.isfinite(tol) and tol > 0 else float(threshold)
+
+
+def untold(allowance_px: float) -> str:
+    """The clause of a check held INCONCLUSIVE by ``trusted_allowance``."""
+    return (
+        f"within {allowance_px:.1f} px more, what the trusted calibration may carry of its own "
+        "run's misregistration (that run could not tell the two apart; it is known only to "
+        "within its shared threshold): calibrate on a run spread over the views this one sees "
+        "to tell (docs/run-level-checks.md)"
+    )
+
+
 def calibration_change_entry(
-    est: Any, threshold: float, trusted_separable: bool = True
+    est: Any, threshold: float, trusted_separable: bool = True, allowance_px: float = 0.0
 ) -> CalibrationCheck:
     """This run's calibration against a trusted run's (``--calibration-from``): the estimate on
     the evidence after removing the trusted calibration. FAILED when it moves the images by
@@ -211,13 +249,14 @@ def calibration_change_entry(
     principal point, mounting) since the trusted run, and its frames are not PASS. With
     ``trusted_separable`` false (the trusted run could not tell this calibration from its own
     registration) a FAILED message also names the other explanation: the trusted estimate
-    took in that run's own misregistration."""
+    took in that run's own misregistration, and ``allowance_px`` (``trusted_allowance``) how
+    much of it: FAILED only above threshold + allowance, INCONCLUSIVE between."""
     entry = calibration_entry(est, threshold, threshold)
     if entry.status == NOT_CHECKED:
         return replace(
             entry, message=f"calibration change not checked: no absolute evidence ({est.reason})"
         )
-    status = check_status(est.success, est.effect_px_ci, est.effect_px, threshold)
+    status = check_status(est.success, est.effect_px_ci, est.effect_px, threshold, allowance_px)
     lo, hi = entry.effect_px_ci or (est.effect_px, est.effect_px)
     what = {
         FAILED: "calibration CHANGED since the trusted run",
@@ -230,7 +269,9 @@ def calibration_change_entry(
         f"{hi:.1f}, threshold {threshold:.1f}): principal point ({pp[0]:+.1f}, {pp[1]:+.1f}) px, "
         f"roll {est.roll_deg:+.2f} deg, focal length x{est.focal_scale:.4f}"
     )
-    if status == FAILED and not trusted_separable:
+    if status == INCONCLUSIVE and allowance_px > 0 and lo > threshold:
+        message += f"; above {threshold:.1f} px, but {untold(allowance_px)}"
+    elif status == FAILED and not trusted_separable:
         message += (
             "; or the trusted calibration took in part of the trusted run's own "
             "misregistration (that run could not tell the two apart): calibrate on a run "

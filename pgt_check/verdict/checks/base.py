@@ -25,7 +25,11 @@ from pgt_check.verdict.calibration import (
     frame_homographies,
     trusted_calibration,
 )
-from pgt_check.verdict.shared_entries import calibration_change_entry, calibration_entry
+from pgt_check.verdict.shared_entries import (
+    calibration_change_entry,
+    calibration_entry,
+    trusted_allowance,
+)
 from pgt_check.verdict.shared_results import CalibrationCheck
 from pgt_check.verdict.status import FAILED, FINDING, INCONCLUSIVE, NOT_CHECKED
 
@@ -97,6 +101,9 @@ class Calibrations:
     checks: dict[str, CalibrationCheck]
     estimates: dict[str, CameraCalibration]
     change: dict[str, CalibrationCheck] = field(default_factory=dict)
+    #: with ``calibration_from``: what the trusted calibrations removed may carry of their own
+    #: run's misregistration (px, the largest over this run's cameras; ``trusted_allowance``)
+    allowance_px: float = 0.0
 
 
 @dataclass
@@ -152,6 +159,12 @@ class CheckContext:
     def removes_calibration(self) -> bool:
         """The evidence is corrected by the calibration before registration and drift."""
         return bool(self.config.run_checks.removes_calibration and self.calibrations.estimates)
+
+    @property
+    def allowance_px(self) -> float:
+        """What the registration fits cannot attribute: the trusted calibration removed first
+        may carry that much of its own run's misregistration (``Calibrations.allowance_px``)."""
+        return self.calibrations.allowance_px if self.removes_calibration else 0.0
 
     @property
     def mode(self) -> str:
@@ -266,6 +279,7 @@ def _calibration_checks(
             estimated=False,
         )
     change: dict[str, CalibrationCheck] = {}
+    allowance = 0.0
     if v.calibration_from:
         # a calibration known from a trusted run (same cameras): removed before judging, so
         # this run's own shared error cannot be taken for calibration; what is left of the
@@ -273,6 +287,8 @@ def _calibration_checks(
         intrinsics = {m.camera_id: m.intrinsics for m in measurements if m.intrinsics}
         cals = trusted_calibration(v.calibration_from, sorted(intrinsics))
         rest = [without(cals, e) for e in ev]
+        allowance = max([trusted_allowance(cals.get(c), thr) for c in intrinsics if c in cals],
+                        default=0.0)
         # calibration only: the change is what the trusted calibration leaves unexplained (a
         # joint fit would trade part of it against a world correction, and re-split the same
         # run's calibration differently)
@@ -280,7 +296,8 @@ def _calibration_checks(
             if cam_id:
                 trusted = cals.get(cam_id)
                 change[cam_id] = calibration_change_entry(
-                    est, thr, trusted is None or trusted.separable
+                    est, thr, trusted is None or trusted.separable,
+                    trusted_allowance(trusted, thr),
                 )
-    return Calibrations(calib, cals, change)
+    return Calibrations(calib, cals, change, allowance)
 

@@ -23,7 +23,8 @@ def _fit_on(ctx: CheckContext, ev: list[Any], similarity: bool) -> RegistrationC
         ev, se.FitSettings(calibration_translation=ctx.translation),
         similarity=similarity, calibration=ctx.mode,
     )  # fmt: skip
-    entry = registration_entry(est, ctx.threshold_px, "similarity" if similarity else "rigid")
+    entry = registration_entry(est, ctx.threshold_px, "similarity" if similarity else "rigid",
+                               ctx.allowance_px)
     agree = ctx.agreement_of(ev) or (frame_residuals(ev, est), ctx.own_error_px)
     return shared_or_not(entry, *agree)
 
