@@ -37,13 +37,16 @@ class CameraCalibration:
     registration (``separable_from_registration``), so it may carry that run's own
     misregistration (a trusted run covering part of a sweep: reports/trusted_subsets.md);
     ``tolerance_px``: that run's shared-error threshold (how well a run's registration is
-    known when it passes, or when the user asserts it; nan where the summary has none)."""
+    known when it passes, or when the user asserts it; nan where the summary has none);
+    ``views``: (N, 6) the camera centres and optical axes it was estimated on (None where the
+    summary has none)."""
 
     rotation: np.ndarray
     focal_scale: float
     translation: np.ndarray
     separable: bool = True
     tolerance_px: float = math.nan
+    views: np.ndarray | None = None
 
     @classmethod
     def from_estimate(cls, est: Any) -> CameraCalibration | None:
@@ -99,6 +102,54 @@ def _vec3(t: Any) -> np.ndarray:
     return v
 
 
+def views_of(poses: Sequence[np.ndarray]) -> np.ndarray:
+    """(N, 6) camera centre and optical axis (world) of ``world_from_cam`` poses (4x4)."""
+    if not len(poses):
+        return np.zeros((0, 6))
+    p = np.asarray(poses, np.float64)
+    if p.ndim != 3 or p.shape[1:] != (4, 4):
+        raise ValueError(f"poses: expected (N, 4, 4) world_from_cam; got {p.shape}")
+    return np.concatenate([p[:, :3, 3], p[:, :3, 2]], axis=1)
+
+
+def uncovered_share(trusted: np.ndarray | None, views: np.ndarray, depth: float) -> float:
+    """The share of ``views`` (N, 6) that a trusted run's views (M, 6; ``views_of``) do not
+    cover: farther from every trusted view than the trusted views are from each other (the
+    largest gap between a trusted view and its nearest neighbour). The distance of two views
+    is their centres' distance over the scene ``depth`` plus the angle (rad) between their
+    axes. A trusted run spread along a sweep covers held-out frames of it; one on a segment
+    leaves ~3/4 of them out (reports/trusted_subsets.md). None (a summary without views): 0,
+    as before views were recorded."""
+    if trusted is None or not len(views):
+        return 0.0
+    if trusted.ndim != 2 or trusted.shape[1] != 6 or views.ndim != 2 or views.shape[1] != 6:
+        raise ValueError(f"views: expected (M, 6) and (N, 6); got {trusted.shape}, {views.shape}")
+    if not (math.isfinite(depth) and depth > 0):
+        raise ValueError(f"depth: expected a positive number; got {depth}")
+
+    def dist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        centre = np.linalg.norm(a[:, None, :3] - b[None, :, :3], axis=2) / depth
+        ua = a[:, 3:] / np.linalg.norm(a[:, 3:], axis=1, keepdims=True)
+        ub = b[:, 3:] / np.linalg.norm(b[:, 3:], axis=1, keepdims=True)
+        return np.asarray(centre + np.arccos(np.clip(ua @ ub.T, -1.0, 1.0)))
+
+    own = dist(trusted, trusted)
+    np.fill_diagonal(own, np.inf)
+    radius = float(own.min(axis=1).max()) if len(trusted) > 1 else 0.0
+    return float(np.mean(dist(views, trusted).min(axis=1) > radius))
+
+
+def frame_depths(evidence: Sequence[Any]) -> dict[str, float]:
+    """Frame id -> the median depth of its evidence points (frames with none left out)."""
+    depth = {}
+    for e in evidence:
+        z = (e.pts3d - e.world_from_cam[:3, 3]) @ e.world_from_cam[:3, 2]
+        z = z[np.isfinite(z) & (z > 0)]
+        if len(z):
+            depth[e.frame_id] = float(np.median(z))
+    return depth
+
+
 def frame_homographies(
     cals: Mapping[str, CameraCalibration],
     evidence: Sequence[Any],
@@ -108,12 +159,7 @@ def frame_homographies(
     """(per camera, per frame) photo_from_render of the calibration error: per frame at the
     median depth of its evidence, per camera at the median over its frames (for frames
     without evidence). ``cameras``: frame id -> camera id of every frame."""
-    depth = {}
-    for e in evidence:
-        z = (e.pts3d - e.world_from_cam[:3, 3]) @ e.world_from_cam[:3, 2]
-        z = z[np.isfinite(z) & (z > 0)]
-        if len(z):
-            depth[e.frame_id] = float(np.median(z))
+    depth = frame_depths(evidence)
     per_cam, per_frame = {}, {}
     for cam_id, cal in cals.items():
         if cam_id not in intrinsics:
@@ -161,7 +207,16 @@ def _trusted_entry(
         if t.shape != (3,) or not np.all(np.isfinite(t)):
             raise InputError(f"{where}.translation: expected 3 finite numbers; got {trans!r:.80}")
     separable = entry.get("separable_from_registration") is not False
-    return CameraCalibration(r, float(scale), t, separable, tolerance_px)
+    views = entry.get("views")
+    if views is not None:
+        try:
+            views = np.asarray(views, dtype=np.float64)
+        except (TypeError, ValueError):
+            views = np.zeros(0)
+        if views.ndim != 2 or views.shape[1] != 6 or not np.all(np.isfinite(views)):
+            raise InputError(f"{where}.views: expected rows of 6 finite numbers (camera centre "
+                             "and optical axis)")
+    return CameraCalibration(r, float(scale), t, separable, tolerance_px, views)
 
 
 def load_trusted_calibrations(path: str) -> dict[str, CameraCalibration]:

@@ -215,28 +215,33 @@ def calibration_entry(
     return replace(check, message=message)
 
 
-def trusted_allowance(trusted: Any, threshold: float) -> float:
+def trusted_allowance(trusted: Any, threshold: float, uncovered: float) -> float:
     """What a trusted calibration (``verdict.calibration.CameraCalibration``) may carry of its
-    own run's misregistration, in px: none when that run told calibration from registration;
-    else up to its shared threshold (``tolerance_px``; this run's ``threshold`` where the
-    summary has none): a registration is known only to within that when the run passes or the
-    user asserts it (``--remove-calibration``), and views that cannot tell the two apart put
-    all of it into the calibration (a trusted run covering one segment of a sweep,
-    reports/trusted_subsets.md). Errors add, so a check run after removing it fails only above
-    its threshold plus this."""
+    own run's misregistration that this run's views do not share, in px: none when that run
+    told calibration from registration; else its shared threshold (``tolerance_px``; this
+    run's ``threshold`` where the summary has none) times ``uncovered``, the share of this
+    run's views the trusted run's do not cover (``verdict.calibration.uncovered_share``). A
+    registration is known only to within that threshold when the run passes or the user
+    asserts it (``--remove-calibration``), views that cannot tell the two apart put all of it
+    into the calibration, and views the trusted run did not see need not share its offset (the
+    segments of a 7-Scenes sweep differ by up to ~4 px, reports/trusted_subsets.md). Errors
+    add, so a check run after removing it fails only above its threshold plus this. A trusted
+    run over the same views (a moved copy of it, a run spread along the sweep) gives none: a
+    moved trajectory still fails at the threshold."""
     if trusted is None or trusted.separable:
         return 0.0
     tol = float(trusted.tolerance_px)
-    return tol if math.isfinite(tol) and tol > 0 else float(threshold)
+    tol = tol if math.isfinite(tol) and tol > 0 else float(threshold)
+    return tol * min(max(float(uncovered), 0.0), 1.0)
 
 
 def untold(allowance_px: float) -> str:
     """The clause of a check held INCONCLUSIVE by ``trusted_allowance``."""
     return (
         f"within {allowance_px:.1f} px more, what the trusted calibration may carry of its own "
-        "run's misregistration (that run could not tell the two apart; it is known only to "
-        "within its shared threshold): calibrate on a run spread over the views this one sees "
-        "to tell (docs/run-level-checks.md)"
+        "run's misregistration on views this run's do not share (that run could not tell the "
+        "two apart; it is known only to within its shared threshold): calibrate on a run "
+        "spread over the views this one sees to tell (docs/run-level-checks.md)"
     )
 
 

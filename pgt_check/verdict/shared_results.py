@@ -209,6 +209,10 @@ class CalibrationCheck:
     translation: list[float] | None = None
     translation_ci: list[list[float] | None] | None = None
     estimated: bool = True
+    #: the views the estimate rests on: per frame its camera centre and optical axis in world
+    #: coordinates (cx, cy, cz, ax, ay, az); a run that removes this calibration
+    #: (``--calibration-from``) sees which of its views these cover (``verdict.calibration``)
+    views: list[list[float]] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The summary.json entry (``shared_errors.calibration[camera]``)."""
@@ -231,6 +235,7 @@ class CalibrationCheck:
             "translation": self.translation,
             "translation_ci": self.translation_ci,
             "message": self.message,
+            **({"views": self.views} if self.views is not None else {}),
         }
 
     @classmethod

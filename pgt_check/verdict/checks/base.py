@@ -10,8 +10,9 @@ A check module (``pgt_check.verdict.checks``) turns the context into its entry; 
 from __future__ import annotations
 
 import logging
+import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from typing import Any
 
@@ -22,8 +23,11 @@ from pgt_check.constants import OWN_ERROR_FRACTION
 from pgt_check.measure.record import FrameMeasurement
 from pgt_check.verdict.calibration import (
     CameraCalibration,
+    frame_depths,
     frame_homographies,
     trusted_calibration,
+    uncovered_share,
+    views_of,
 )
 from pgt_check.verdict.shared_entries import (
     calibration_change_entry,
@@ -270,6 +274,9 @@ def _calibration_checks(
         ev, settings, registration="none" if asserted else "auto"
     ).items():
         calib[cam_id] = calibration_entry(est, thr, frame_thr, asserted=asserted)
+        if calib[cam_id].estimated:
+            views = views_of([e.world_from_cam for e in ev if e.camera_id == cam_id])
+            calib[cam_id] = replace(calib[cam_id], views=np.round(views, 4).tolist())
         cal = CameraCalibration.from_estimate(est)
         if cal is not None:
             cals[cam_id] = cal
@@ -287,8 +294,14 @@ def _calibration_checks(
         intrinsics = {m.camera_id: m.intrinsics for m in measurements if m.intrinsics}
         cals = trusted_calibration(v.calibration_from, sorted(intrinsics))
         rest = [without(cals, e) for e in ev]
-        allowance = max([trusted_allowance(cals.get(c), thr) for c in intrinsics if c in cals],
-                        default=0.0)
+        zs = list(frame_depths(ev).values())
+        depth = float(np.median(zs)) if zs else math.nan
+        allowed = {
+            c: trusted_allowance(cal, thr, uncovered_share(
+                cal.views, views_of([e.world_from_cam for e in ev if e.camera_id == c]), depth))
+            for c, cal in cals.items()
+        } if math.isfinite(depth) else {}
+        allowance = max([allowed.get(c, 0.0) for c in intrinsics], default=0.0)
         # calibration only: the change is what the trusted calibration leaves unexplained (a
         # joint fit would trade part of it against a world correction, and re-split the same
         # run's calibration differently)
@@ -296,8 +309,7 @@ def _calibration_checks(
             if cam_id:
                 trusted = cals.get(cam_id)
                 change[cam_id] = calibration_change_entry(
-                    est, thr, trusted is None or trusted.separable,
-                    trusted_allowance(trusted, thr),
+                    est, thr, trusted is None or trusted.separable, allowed.get(cam_id, 0.0)
                 )
     return Calibrations(calib, cals, change, allowance)
 
