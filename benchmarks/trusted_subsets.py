@@ -35,8 +35,12 @@ SUBSETS = ("spread", "first third", "last third")
 
 
 def trusted_frames(traj: Trajectory, subset: str, n: int = 20) -> Trajectory:
-    """``n`` frames of ``traj``: evenly spread along it, or within its first or last third."""
+    """``n`` frames of ``traj``: evenly spread along it, within its first or last third, or
+    (``window:K``) the ``n`` consecutive frames from its ``K``-th."""
     f = traj.frames
+    if subset.startswith("window:"):
+        k = int(subset.split(":")[1])
+        return Trajectory(tuple(f[k:k + n]), traj.source, traj.format)
     third = len(f) // 3
     pool = {"spread": f, "first third": f[:third], "last third": f[-third:]}[subset]
     step = max(1, len(pool) // n)
@@ -49,6 +53,11 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--calibration-translation", action="store_true",
                    help="fit the camera-frame translation too, in the trusted and the judged "
                         "runs (pgt-check --calibration-translation)")
+    p.add_argument("--subsets", nargs="+", default=list(SUBSETS),
+                   help="trusted subsets: spread, 'first third', 'last third', window:K "
+                        "(20 consecutive shared frames from the K-th)")
+    p.add_argument("--clean-only", action="store_true",
+                   help="judge only the clean held-out run (not the one with 40 %% wrong)")
     p.add_argument("--report-only", action="store_true",
                    help="write the Markdown from reports/trusted_subsets.json")
     a = p.parse_args(argv)
@@ -65,7 +74,7 @@ def main(argv: list[str] | None = None) -> int:
     ct = a.calibration_translation
     tag = "-ct" if ct else ""
     rows = []
-    for subset in SUBSETS:
+    for subset in a.subsets:
         t = trusted_frames(shared, subset)
         _, t_ms, _ = measure(t, mesh, cfgd, f"trusted-{subset.replace(' ', '_')}")
         rm = L._cfg(mesh, {**cfgd, "run_checks": {"remove_calibration": True,
@@ -85,21 +94,23 @@ def main(argv: list[str] | None = None) -> int:
                "trusted_verdicts": dict(sorted({v: sum(r["verdict"] == v for r in tj.rows())
                                                for v in ("PASS", "FAIL", "UNVERIFIABLE")}
                                               .items())),
-               "calibration_deg": cal.get("rotation_deg"), "calibration_status": cal["status"],
+               "calibration_deg": cal.get("rotation_deg"), "focal_scale": cal.get("focal_scale"), "calibration_status": cal["status"],
                "separable": cal.get("separable_from_registration"),
                "trusted_registration": se["registration"]["status"]}
-        for case, traj, ms, labels in (("clean", held, held_ms, set()),
-                                       ("40 % wrong", bad, bad_ms, wrong)):
+        cases = [("clean", held, held_ms, set()), ("40 % wrong", bad, bad_ms, wrong)]
+        for case, traj, ms, labels in cases[:1] if a.clean_only else cases:
             r_ms, probes = as_run(traj, ms, cf, f"trusted-held-n{a.frames}-{case[:5].strip()}"
                                   f"-from-{subset.replace(' ', '_')}{tag}")
             j = judge_run(r_ms, cf, probes)
             jr = j.rows()
             ok = [r for r in jr if r["frame_id"] not in labels]
+            js = j.shared.summary()
+            chg = list(js.get("calibration_change", {}).values())
             row[case] = {"correct_pass": f"{sum(r['verdict'] == 'PASS' for r in ok)}/{len(ok)}",
-                         "registration": j.shared.summary()["registration"]["status"],
-                         "calibration_change": ";".join(
-                             e["status"] for e in j.shared.summary().get(
-                                 "calibration_change", {}).values())}
+                         "registration": js["registration"]["status"],
+                         "registration_px": js["registration"].get("effect_px"),
+                         "calibration_change": ";".join(e["status"] for e in chg),
+                         "calibration_change_px": [e.get("effect_px") for e in chg]}
             if labels:
                 ev = evaluate(case, {"labels": labels}, r_ms, cf, probes)
                 row[case].update(wrong_flagged=ev["flagged_bad"], auc=ev["frame_auc"])
@@ -108,12 +119,17 @@ def main(argv: list[str] | None = None) -> int:
     out = REPORTS / "trusted_subsets.json"
     notes = json.loads(out.read_text()).get("notes", []) if out.is_file() else []
     old = json.loads(out.read_text()).get("rows", []) if out.is_file() else []
-    rows += [r for r in old if r.get("calibration_translation", False) != ct]  # the other fit
+    done = {(r["trusted"], ct) for r in rows}  # rows of other subsets or the other fit kept
+    rows += [r for r in old if (r["trusted"], r.get("calibration_translation", False)) not in done]
     doc = {"command": command_line(), "machine": machine(), "frames": a.frames, "rows": rows,
            "notes": notes}  # the hand-written reading is kept
     out.write_text(json.dumps(doc, indent=1, default=str) + "\n")
     write_report(doc)
     return 0
+
+
+def px(v: float | None) -> str:
+    return "" if v is None else f" {v:.1f} px"
 
 
 def write_report(doc: dict) -> None:
@@ -123,17 +139,19 @@ def write_report(doc: dict) -> None:
             "40 % wrong: correct PASS", "wrong flagged", "per-frame AUC"]
     table = []
     for r in doc["rows"]:
-        c, w = r["clean"], r["40 % wrong"]
+        c, w = r["clean"], r.get("40 % wrong")
         ct = r.get("calibration_translation", False)
         cal = f"{r['calibration_deg']:.2f}"
         if ct and r.get("translation_cm") is not None:
             cal += " + t (" + ", ".join(f"{x:+.1f}" for x in r["translation_cm"]) + ") cm"
         table.append([
-            r["trusted"] + (" (+ translation)" if ct else ""), ", ".join(f"{k} {v}" for k, v in r["trusted_verdicts"].items() if v),
+            r["trusted"] + (" (+ translation)" if ct else ""),
+            ", ".join(f"{k} {v}" for k, v in r["trusted_verdicts"].items() if v),
             f"{cal} ({r['calibration_status']}; "
             f"{'yes' if r['separable'] else 'no'})", r["trusted_registration"],
-            f"{c['correct_pass']} ({c['registration']}, {c['calibration_change']})",
-            w["correct_pass"], w["wrong_flagged"], f"{w['auc']:.3f}"])
+            f"{c['correct_pass']} ({c['registration']}{px(c.get('registration_px'))}, "
+            f"{c['calibration_change']}{px((c.get('calibration_change_px') or [None])[0])})",
+            *([w["correct_pass"], w["wrong_flagged"], f"{w['auc']:.3f}"] if w else ["-"] * 3)])
     (REPORTS / "trusted_subsets.md").write_text("\n".join([
         "# The trusted-calibration workflow on subsets of a real sweep", "",
         (__doc__ or "").split("\n\n    python")[0].split("\n", 2)[2].strip(), "",
