@@ -386,6 +386,33 @@ def test_a_change_a_non_separable_trusted_run_may_carry_is_inconclusive(truth, t
                                                "registration:")) for r in run.rows())
 
 
+def test_an_asserted_registration_that_fails_names_the_calibration_translation(truth):
+    """--remove-calibration asserts the registration; the photos' camera sits 10 cm beside the
+    posed one (a camera-frame translation, which a rotation-and-zoom calibration cannot
+    express): on an arc the registration check fails on what is left, and its message names
+    --calibration-translation, with which the same run's registration passes."""
+    from pgt_check.verdict.checks.registration import TRANSLATION_HINT
+
+    arc = Trajectory(truth.frames[:10], "synthetic", "lamar")
+    beside = np.eye(4)
+    beside[:3, 3] = [0.1, 0.0, 0.0]
+    posed = Trajectory(tuple(Frame(f.frame_id, f.camera, f.world_from_cam @ beside,
+                                   timestamp=f.timestamp) for f in arc.frames),
+                       "synthetic", "lamar")
+    regs = {}
+    for ct in (False, True):
+        cfg = RunConfig.from_dict({"run_checks": {"remove_calibration": True,
+                                                  "calibration_translation": ct}})
+        regs[ct] = judge_run(measurements(arc, posed), cfg).shared.summary()["registration"]
+    assert regs[False]["status"] == "failed", regs[False]["message"]
+    assert regs[False]["message"].endswith(TRANSLATION_HINT)
+    assert regs[True]["status"] == "passed", regs[True]["message"]
+    # not asserted: a failed registration is a misregistration, no hint
+    moved = judge_run(measurements(truth, _move(truth, 3.0, 0.0)), RunConfig())
+    reg = moved.shared.summary()["registration"]
+    assert reg["status"] == "failed" and "calibration-translation" not in reg["message"]
+
+
 def test_a_changed_camera_fails_frames_the_other_checks_pass():
     from pgt_check.verdict.decide import _run_level
     from pgt_check.verdict.shared import SharedChecks
