@@ -4,15 +4,19 @@
 offset every frame shares. The documented workflow (docs/run-level-checks.md): judge a run you
 trust with ``--remove-calibration``, then every other run with ``--calibration-from`` its
 summary. "The same workflow must work on any subset of a sweep": here the trusted run is 20
-frames of the shared 7-Scenes frames (spread along the sweep, or its first or last third), and
-the judged runs are frames no rule was fitted on (``7scenes_redkitchen_train``, held out):
+frames of the shared 7-Scenes frames (spread along the sweep, its first or last third, or 20
+consecutive frames from the K-th: ``window:K``), and the judged runs are frames no rule was
+fitted on (``7scenes_redkitchen_train``, held out):
 ``--frames`` frames spread along the sweep, clean, and the same frames with 40 % of them wrong
 (0.5-4 deg + 1-8 % of the scene depth, in runs of 2-4: neighbours wrong too), judged as a run
 (``shared_errors.as_run``). Per trusted subset: the calibration it estimates, and on the judged
 runs the share of correct frames PASS, of wrong frames flagged, the per-frame AUC and the
-registration and calibration-change checks. Writes reports/trusted_subsets.{md,json}.
+registration and calibration-change checks (sizes in px). ``--calibration-translation`` fits a
+camera-frame translation too, in both runs. Writes reports/trusted_subsets.{md,json} (rows of
+other subsets and of the other fit kept).
 
-    python benchmarks/trusted_subsets.py [--frames 40] [--calibration-translation] [--report-only]
+    python benchmarks/trusted_subsets.py [--frames 40] [--subsets S ...] [--clean-only]
+        [--calibration-translation] [--report-only]
 """
 
 from __future__ import annotations
@@ -88,6 +92,7 @@ def main(argv: list[str] | None = None) -> int:
         cf = L._cfg(mesh, {**cfgd, "run_checks": {"calibration_from": str(summary),
                                                   "calibration_translation": ct}})
         row = {"trusted": subset, "calibration_translation": ct,
+               "commit": machine().rsplit("commit ", 1)[-1],
                "translation_cm": [100 * float(x) for x in cal["translation"]]
                if ct and cal.get("translation") is not None else None,
                "trusted_frames": len(t.frames),
@@ -133,19 +138,24 @@ def px(v: float | None) -> str:
 
 
 def write_report(doc: dict) -> None:
-    head = ["trusted run (20 shared frames, --remove-calibration)", "its verdicts",
+    head = ["trusted run (20 shared frames, --remove-calibration)", "commit", "its verdicts",
             "calibration (deg; separable from registration)", "its registration",
             f"{doc['frames']} held-out clean frames: PASS (registration, calibration change)",
             "40 % wrong: correct PASS", "wrong flagged", "per-frame AUC"]
+    def order(r: dict) -> tuple:
+        t = r["trusted"]
+        k = SUBSETS.index(t) if t in SUBSETS else 10 + int(t.split(":")[1])
+        return (r.get("calibration_translation", False), k)
+
     table = []
-    for r in doc["rows"]:
+    for r in sorted(doc["rows"], key=order):
         c, w = r["clean"], r.get("40 % wrong")
         ct = r.get("calibration_translation", False)
         cal = f"{r['calibration_deg']:.2f}"
         if ct and r.get("translation_cm") is not None:
             cal += " + t (" + ", ".join(f"{x:+.1f}" for x in r["translation_cm"]) + ") cm"
         table.append([
-            r["trusted"] + (" (+ translation)" if ct else ""),
+            r["trusted"] + (" (+ translation)" if ct else ""), r.get("commit", "?"),
             ", ".join(f"{k} {v}" for k, v in r["trusted_verdicts"].items() if v),
             f"{cal} ({r['calibration_status']}; "
             f"{'yes' if r['separable'] else 'no'})", r["trusted_registration"],
