@@ -213,9 +213,10 @@ def _trusted_entry(
             views = np.asarray(views, dtype=np.float64)
         except (TypeError, ValueError):
             views = np.zeros(0)
-        if views.ndim != 2 or views.shape[1] != 6 or not np.all(np.isfinite(views)):
+        if (views.ndim != 2 or views.shape[1] != 6 or not np.all(np.isfinite(views))
+                or not np.all(np.linalg.norm(views[:, 3:], axis=1) > 0)):
             raise InputError(f"{where}.views: expected rows of 6 finite numbers (camera centre "
-                             "and optical axis)")
+                             "and a non-zero optical axis)")
     return CameraCalibration(r, float(scale), t, separable, tolerance_px, views)
 
 

@@ -67,7 +67,8 @@ def test_the_trusted_summary_carries_views_threshold_and_separability(tmp_path):
     assert old.views is None
 
 
-@pytest.mark.parametrize("views", [[[0, 0, 0]], [[0, 0, 0, 0, 0, float("nan")]], "x", [1, 2]])
+@pytest.mark.parametrize("views", [[[0, 0, 0]], [[0, 0, 0, 0, 0, float("nan")]], "x", [1, 2],
+                                   [[1, 2, 3, 0, 0, 0]]])
 def test_malformed_views_name_the_field(tmp_path, views):
     with pytest.raises(InputError, match=r"calibration\['cam0'\]\.views"):
         load_trusted_calibrations(_summary(tmp_path, views))
