@@ -12,11 +12,12 @@ fitted on (``7scenes_redkitchen_train``, held out):
 (``shared_errors.as_run``). Per trusted subset: the calibration it estimates, and on the judged
 runs the share of correct frames PASS, of wrong frames flagged, the per-frame AUC and the
 registration and calibration-change checks (sizes in px). ``--calibration-translation`` fits a
-camera-frame translation too, in both runs. Writes reports/trusted_subsets.{md,json} (rows of
-other subsets and of the other fit kept).
+camera-frame translation too, in both runs; ``--moved`` also judges the held-out frames moved
+by 1 deg + 2 % of the depth (``MOVED_SEEDS``). Writes reports/trusted_subsets.{md,json} (rows
+of other subsets and of the other fit kept, and a row's cases this call did not judge again).
 
     python benchmarks/trusted_subsets.py [--frames 40] [--subsets S ...] [--clean-only]
-        [--calibration-translation] [--report-only]
+        [--moved] [--calibration-translation] [--report-only]
 """
 
 from __future__ import annotations
@@ -111,7 +112,8 @@ def main(argv: list[str] | None = None) -> int:
                "trusted_verdicts": dict(sorted({v: sum(r["verdict"] == v for r in tj.rows())
                                                for v in ("PASS", "FAIL", "UNVERIFIABLE")}
                                               .items())),
-               "calibration_deg": cal.get("rotation_deg"), "focal_scale": cal.get("focal_scale"), "calibration_status": cal["status"],
+               "calibration_deg": cal.get("rotation_deg"), "focal_scale": cal.get("focal_scale"),
+               "calibration_status": cal["status"],
                "separable": cal.get("separable_from_registration"),
                "trusted_registration": se["registration"]["status"]}
         cases = [("clean", held, held_ms, set()), ("40 % wrong", bad, bad_ms, wrong)]
