@@ -87,6 +87,14 @@ def _move(traj: Trajectory, deg: float, shift: float, scale: float = 1.0) -> Tra
     return move_trajectory(traj, shared_transform(traj, deg, shift, scale=scale, seed=4))
 
 
+def _with_pp_shift(ms: list[FrameMeasurement], dx: float) -> list[FrameMeasurement]:
+    """The measurements with every photo point moved by ``dx`` px in x: a principal point off
+    by ``dx`` in the photo camera (every frame shifted the same way)."""
+    return [m.__class__(**{**m.__dict__, "evidence": AbsoluteEvidence(
+        ("raw",), tuple((u + dx, v) for u, v in m.evidence.pts2d), m.evidence.pts_cam)})
+        for m in ms]
+
+
 @pytest.fixture(scope="module")
 def truth() -> Trajectory:
     return _trajectory()
@@ -213,9 +221,7 @@ def test_calibration_is_a_finding_and_can_be_removed(truth):
     shifted = change_intrinsics(truth, principal_shift=(5.0, 0.0))
     ms = measurements(truth, truth)
     # the photo points move by +5 px in x (the photo camera's principal point)
-    ms = [m.__class__(**{**m.__dict__, "evidence": AbsoluteEvidence(
-        ("raw",), tuple((u + 5.0, v) for u, v in m.evidence.pts2d), m.evidence.pts_cam)})
-        for m in ms]
+    ms = _with_pp_shift(ms, 5.0)
     assert shifted.frames[0].camera.principal_point[0] == pytest.approx(324.5)
     j = judge_run(ms, RunConfig())
     cal = next(iter(j.shared.summary()["calibration"].values()))
@@ -257,22 +263,17 @@ def test_calibration_from_a_trusted_run_keeps_misregistration_visible(truth, tmp
 
     shift = 5.0
 
-    def with_pp_shift(ms):
-        return [m.__class__(**{**m.__dict__, "evidence": AbsoluteEvidence(
-            ("raw",), tuple((u + shift, v) for u, v in m.evidence.pts2d), m.evidence.pts_cam)})
-            for m in ms]
-
-    trusted = judge_run(with_pp_shift(measurements(truth, truth)), RunConfig())
+    trusted = judge_run(_with_pp_shift(measurements(truth, truth), shift), RunConfig())
     path = tmp_path / "summary.json"
     path.write_text(json.dumps({"shared_errors": trusted.shared.summary()}))
     moved = _move(truth, 2.0, 0.0)
-    ms = with_pp_shift(measurements(truth, moved))
+    ms = _with_pp_shift(measurements(truth, moved), shift)
     cfg = RunConfig.from_dict({"run_checks": {"calibration_from": str(path)}})
     reg = judge_run(ms, cfg).shared.summary()["registration"]
     assert reg["status"] == "failed"
     assert reg["angle_deg"] == pytest.approx(2.0, rel=0.3)
     # the given trajectory with the trusted calibration passes
-    ok = judge_run(with_pp_shift(measurements(truth, truth)), cfg)
+    ok = judge_run(_with_pp_shift(measurements(truth, truth), shift), cfg)
     assert ok.shared.summary()["registration"]["status"] == "passed"
     assert all(r["verdict"] == "PASS" for r in ok.rows())
 
@@ -283,20 +284,15 @@ def test_calibration_from_a_trusted_run_sees_the_camera_change(truth, tmp_path):
     change FAILs and so do the frames, where the same run with the trusted camera passes."""
     import json
 
-    def with_pp_shift(ms, dx):
-        return [m.__class__(**{**m.__dict__, "evidence": AbsoluteEvidence(
-            ("raw",), tuple((u + dx, v) for u, v in m.evidence.pts2d), m.evidence.pts_cam)})
-            for m in ms]
-
-    trusted = judge_run(with_pp_shift(measurements(truth, truth), 5.0), RunConfig())
+    trusted = judge_run(_with_pp_shift(measurements(truth, truth), 5.0), RunConfig())
     path = tmp_path / "summary.json"
     path.write_text(json.dumps({"shared_errors": trusted.shared.summary()}))
     cfg = RunConfig.from_dict({"run_checks": {"calibration_from": str(path)}})
-    same = judge_run(with_pp_shift(measurements(truth, truth, seed=1), 5.0), cfg)
+    same = judge_run(_with_pp_shift(measurements(truth, truth, seed=1), 5.0), cfg)
     change = next(iter(same.shared.summary()["calibration_change"].values()))
     assert change["status"] == "passed", change["message"]
     assert all(r["verdict"] == "PASS" for r in same.rows())
-    changed = judge_run(with_pp_shift(measurements(truth, truth, seed=1), 11.0), cfg)
+    changed = judge_run(_with_pp_shift(measurements(truth, truth, seed=1), 11.0), cfg)
     change = next(iter(changed.shared.summary()["calibration_change"].values()))
     assert change["status"] == "failed", change["message"]
     assert change["principal_point_shift_px"][0] == pytest.approx(6.0, rel=0.3)
@@ -315,13 +311,8 @@ def test_a_camera_change_names_a_trusted_run_that_could_not_separate(truth, tmp_
     what to do; against a separable trusted run it does not."""
     import json
 
-    def with_pp_shift(ms, dx):
-        return [m.__class__(**{**m.__dict__, "evidence": AbsoluteEvidence(
-            ("raw",), tuple((u + dx, v) for u, v in m.evidence.pts2d), m.evidence.pts_cam)})
-            for m in ms]
-
-    trusted = judge_run(with_pp_shift(measurements(truth, truth), 5.0), RunConfig()).shared
-    changed = with_pp_shift(measurements(truth, truth, seed=1), 11.0)
+    trusted = judge_run(_with_pp_shift(measurements(truth, truth), 5.0), RunConfig()).shared
+    changed = _with_pp_shift(measurements(truth, truth, seed=1), 11.0)
     messages = {}
     for separable in (True, False):
         se = trusted.summary()
@@ -349,14 +340,9 @@ def test_a_change_a_non_separable_trusted_run_may_carry_is_inconclusive(truth, t
     run saw (a moved copy of it), or above both, the same kind of change FAILs."""
     import json
 
-    def with_pp_shift(ms, dx):
-        return [m.__class__(**{**m.__dict__, "evidence": AbsoluteEvidence(
-            ("raw",), tuple((u + dx, v) for u, v in m.evidence.pts2d), m.evidence.pts_cam)})
-            for m in ms]
-
     arc, other = (Trajectory(f, "synthetic", "lamar") for f in (truth.frames[:12],
                                                                 truth.frames[15:]))
-    trusted = judge_run(with_pp_shift(measurements(arc, arc), 5.0), RunConfig()).shared
+    trusted = judge_run(_with_pp_shift(measurements(arc, arc), 5.0), RunConfig()).shared
     thr = trusted.threshold_px
     for judged, shift, separable, expected in ((other, 1.6 * thr, True, "failed"),
                                                (other, 1.6 * thr, False, "inconclusive"),
@@ -370,7 +356,7 @@ def test_a_change_a_non_separable_trusted_run_may_carry_is_inconclusive(truth, t
         path = tmp_path / f"summary-{separable}-{shift:.0f}-{len(judged.frames)}.json"
         path.write_text(json.dumps({"shared_errors": se}))
         cfg = RunConfig.from_dict({"run_checks": {"calibration_from": str(path)}})
-        run = judge_run(with_pp_shift(measurements(judged, judged, seed=1), 5.0 + shift), cfg)
+        run = judge_run(_with_pp_shift(measurements(judged, judged, seed=1), 5.0 + shift), cfg)
         (change,) = run.shared.summary()["calibration_change"].values()
         case = (len(judged.frames), shift, separable, change["message"])
         assert change["status"] == expected, case
