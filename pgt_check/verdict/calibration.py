@@ -127,16 +127,27 @@ def uncovered_share(trusted: np.ndarray | None, views: np.ndarray, depth: float)
     if not (math.isfinite(depth) and depth > 0):
         raise ValueError(f"depth: expected a positive number; got {depth}")
 
-    def dist(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-        centre = np.linalg.norm(a[:, None, :3] - b[None, :, :3], axis=2) / depth
-        ua = a[:, 3:] / np.linalg.norm(a[:, 3:], axis=1, keepdims=True)
-        ub = b[:, 3:] / np.linalg.norm(b[:, 3:], axis=1, keepdims=True)
-        return np.asarray(centre + np.arccos(np.clip(ua @ ub.T, -1.0, 1.0)))
+    radius = (float(_nearest_view(trusted, trusted, depth, skip_self=True).max())
+              if len(trusted) > 1 else 0.0)
+    return float(np.mean(_nearest_view(views, trusted, depth) > radius))
 
-    own = dist(trusted, trusted)
-    np.fill_diagonal(own, np.inf)
-    radius = float(own.min(axis=1).max()) if len(trusted) > 1 else 0.0
-    return float(np.mean(dist(views, trusted).min(axis=1) > radius))
+
+def _nearest_view(a: np.ndarray, b: np.ndarray, depth: float, *, skip_self: bool = False,
+                  rows: int = 256) -> np.ndarray:
+    """(len(a),) distance of each view of ``a`` to its nearest in ``b`` (``uncovered_share``'s
+    distance; ``skip_self``: ``a`` is ``b`` and a view is not its own neighbour), ``rows`` views
+    of ``a`` at a time so that long runs (thousands of frames) never hold an (N, M, 3) array."""
+    ub = b[:, 3:] / np.linalg.norm(b[:, 3:], axis=1, keepdims=True)
+    out = np.empty(len(a))
+    for i in range(0, len(a), rows):
+        blk = a[i:i + rows]
+        ua = blk[:, 3:] / np.linalg.norm(blk[:, 3:], axis=1, keepdims=True)
+        d = (np.linalg.norm(blk[:, None, :3] - b[None, :, :3], axis=2) / depth
+             + np.arccos(np.clip(ua @ ub.T, -1.0, 1.0)))
+        if skip_self:
+            d[np.arange(len(blk)), np.arange(i, i + len(blk))] = np.inf
+        out[i:i + rows] = d.min(axis=1)
+    return out
 
 
 def frame_depths(evidence: Sequence[Any]) -> dict[str, float]:
