@@ -37,6 +37,7 @@ from pgt_check.verdict import judge_run
 from pgt_eval import move_trajectory, perturb_runs, shared_transform
 
 SUBSETS = ("spread", "first third", "last third")
+SEVEN = "7scenes_redkitchen"
 #: the moved runs' seeds: scenes_loso's moved case (1, 101: 3.6-4.5 px on the shared frames)
 #: and two more directions
 MOVED_SEEDS = (1, 101, 0, 100)
@@ -58,6 +59,11 @@ def trusted_frames(traj: Trajectory, subset: str, n: int = 20) -> Trajectory:
 def main(argv: list[str] | None = None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     p.add_argument("--frames", type=int, default=40)
+    p.add_argument("--scene", default=SEVEN, choices=L.SCENES,
+                   help="7-Scenes: trusted runs from its 100 shared frames, judged frames "
+                        "from its held-out pool; any other scene (60 frames or more): "
+                        "trusted runs from its even-numbered frames, judged frames from the "
+                        "odd-numbered ones")
     p.add_argument("--calibration-translation", action="store_true",
                    help="fit the camera-frame translation too, in the trusted and the judged "
                         "runs (pgt-check --calibration-translation)")
@@ -76,27 +82,29 @@ def main(argv: list[str] | None = None) -> int:
     if a.report_only:
         write_report(json.loads((REPORTS / "trusted_subsets.json").read_text()))
         return 0
-    shared, mesh, cfgd = L.load_scene("7scenes_redkitchen", 100)
-    held, _, _ = L.load_scene("7scenes_redkitchen_train", a.frames)
-    _, held_ms, _ = measure(held, mesh, cfgd, f"trusted-held-n{a.frames}-given")
+    shared, held, mesh, cfgd = split_scene(a.scene, a.frames)
+    # 7-Scenes' keys are the ones its earlier rows were measured under (the cache holds them)
+    pre = "trusted" if a.scene == SEVEN else f"trusted-{a.scene}"
+    _, held_ms, _ = measure(held, mesh, cfgd, f"{pre}-held-n{a.frames}-given")
     depth = scene_depth(held_ms)
     bad, inj = perturb_runs(held, 0.4, (0.5, 4.0), (0.01 * depth, 0.08 * depth), seed=7)
     wrong = {q.frame_id for q in inj}
-    _, bad_ms, _ = measure(bad, mesh, cfgd, f"trusted-held-n{a.frames}-wrong")
+    _, bad_ms, _ = measure(bad, mesh, cfgd, f"{pre}-held-n{a.frames}-wrong")
     moved = {}
     for seed in MOVED_SEEDS if a.moved else ():
         m = move_trajectory(held, shared_transform(held, 1.0, 0.02 * depth, seed=seed))
         moved[f"moved seed {seed}"] = (m, measure(m, mesh, cfgd,
-                                                  f"trusted-held-n{a.frames}-moved{seed}")[1])
+                                                  f"{pre}-held-n{a.frames}-moved{seed}")[1])
     ct = a.calibration_translation
     tag = "-ct" if ct else ""
     rows = []
     for subset in a.subsets:
         t = trusted_frames(shared, subset)
-        _, t_ms, _ = measure(t, mesh, cfgd, f"trusted-{subset.replace(' ', '_')}")
+        tkey = f"{pre}-{subset.replace(' ', '_')}"
+        _, t_ms, _ = measure(t, mesh, cfgd, tkey)
         rm = L._cfg(mesh, {**cfgd, "run_checks": {"remove_calibration": True,
                                                   "calibration_translation": ct}})
-        t_ms, t_probes = as_run(t, t_ms, rm, f"trusted-{subset.replace(' ', '_')}-rm{tag}")
+        t_ms, t_probes = as_run(t, t_ms, rm, f"{tkey}-rm{tag}")
         tj = judge_run(t_ms, rm, t_probes)
         se = tj.shared.summary()
         summary = Path(tempfile.mkdtemp(prefix="trusted_")) / "summary.json"
@@ -104,7 +112,7 @@ def main(argv: list[str] | None = None) -> int:
         (cal,) = se["calibration"].values()
         cf = L._cfg(mesh, {**cfgd, "run_checks": {"calibration_from": str(summary),
                                                   "calibration_translation": ct}})
-        row = {"trusted": subset, "calibration_translation": ct,
+        row = {"scene": a.scene, "trusted": subset, "calibration_translation": ct,
                "commit": machine().rsplit("commit ", 1)[-1],
                "translation_cm": [100 * float(x) for x in cal["translation"]]
                if ct and cal.get("translation") is not None else None,
@@ -121,7 +129,7 @@ def main(argv: list[str] | None = None) -> int:
         cases += [(k, m, m_ms, {f.frame_id for f in m.frames}) for k, (m, m_ms) in moved.items()]
         for case, traj, ms, labels in cases:
             name = case[:5].strip() if case in ("clean", "40 % wrong") else case.replace(" ", "_")
-            r_ms, probes = as_run(traj, ms, cf, f"trusted-held-n{a.frames}-{name}"
+            r_ms, probes = as_run(traj, ms, cf, f"{pre}-held-n{a.frames}-{name}"
                                   f"-from-{subset.replace(' ', '_')}{tag}")
             j = judge_run(r_ms, cf, probes)
             jr = j.rows()
@@ -144,17 +152,39 @@ def main(argv: list[str] | None = None) -> int:
     notes = json.loads(out.read_text()).get("notes", []) if out.is_file() else []
     old = json.loads(out.read_text()).get("rows", []) if out.is_file() else []
     for r in rows:  # the cases this call did not judge again are kept from the earlier row
-        prev = next((o for o in old if (o["trusted"], o.get("calibration_translation", False))
-                     == (r["trusted"], ct)), {})
+        prev = next((o for o in old if row_key(o) == row_key(r)), {})
         for k, v in prev.items():
             r.setdefault(k, v)
-    done = {(r["trusted"], ct) for r in rows}  # rows of other subsets or the other fit kept
-    rows += [r for r in old if (r["trusted"], r.get("calibration_translation", False)) not in done]
-    doc = {"command": command_line(), "machine": machine(), "frames": a.frames, "rows": rows,
+    done = {row_key(r) for r in rows}  # rows of other scenes, subsets or the other fit kept
+    rows += [r for r in old if row_key(r) not in done]
+    cmd = json.loads(out.read_text()).get("command", "") if out.is_file() else ""
+    cmd = cmd if command_line() in cmd else "; ".join(filter(None, [cmd, command_line()]))
+    doc = {"command": cmd, "machine": machine(), "frames": a.frames, "rows": rows,
            "notes": notes}  # the hand-written reading is kept
     out.write_text(json.dumps(doc, indent=1, default=str) + "\n")
     write_report(doc)
     return 0
+
+
+def split_scene(scene: str, n: int) -> tuple[Trajectory, Trajectory, Path, dict]:
+    """The trusted runs' pool and ``n`` judged frames of ``scene``, disjoint. 7-Scenes: the
+    100 shared frames and the held-out training pool; any other scene: its even-numbered
+    frames (in trajectory order) and ``n`` frames spread over its odd-numbered ones."""
+    if scene == SEVEN:
+        shared, mesh, cfgd = L.load_scene(SEVEN, 100)
+        return shared, L.load_scene("7scenes_redkitchen_train", n)[0], mesh, cfgd
+    every, mesh, cfgd = L.load_scene(scene, 10**6)
+    if len(every.frames) < 60:
+        raise SystemExit(f"{scene}: {len(every.frames)} frames; a 20-frame trusted run and "
+                         "judged frames apart from it need at least 60")
+    odd = every.frames[1::2]
+    step = max(1, len(odd) // n)
+    return (Trajectory(every.frames[::2], every.source, every.format),
+            Trajectory(tuple(odd[::step][:n]), every.source, every.format), mesh, cfgd)
+
+
+def row_key(r: dict) -> tuple:
+    return (r.get("scene", SEVEN), r["trusted"], r.get("calibration_translation", False))
 
 
 def px(v: float | None) -> str:
@@ -162,9 +192,9 @@ def px(v: float | None) -> str:
 
 
 def write_report(doc: dict) -> None:
-    head = ["trusted run (20 shared frames, --remove-calibration)", "commit", "its verdicts",
+    head = ["trusted run (20 frames, --remove-calibration)", "commit", "its verdicts",
             "calibration (deg; separable from registration)", "its registration",
-            f"{doc['frames']} held-out clean frames: PASS (registration, calibration change)",
+            f"{doc['frames']} judged clean frames: PASS (registration, calibration change)",
             "40 % wrong: correct PASS", "wrong flagged", "per-frame AUC",
             "moved 1 deg + 2 % (seeds " + ", ".join(map(str, MOVED_SEEDS))
             + "): flagged (registration, calibration change)"]
@@ -173,8 +203,24 @@ def write_report(doc: dict) -> None:
         k = SUBSETS.index(t) if t in SUBSETS else 10 + int(t.split(":")[1])
         return (r.get("calibration_translation", False), k)
 
+    scenes = sorted({r.get("scene", SEVEN) for r in doc["rows"]}, key=L.SCENES.index)
+    tables = []
+    for scene in scenes:
+        rows = [r for r in doc["rows"] if r.get("scene", SEVEN) == scene]
+        what = ("trusted: 20 of the 100 shared frames; judged: the held-out pool"
+                if scene == SEVEN else "trusted: 20 of the even-numbered frames; judged: "
+                "frames spread over the odd-numbered ones")
+        tables += [f"## {scene} ({what})", "", md_table(head, _table(rows, order)), ""]
+    (REPORTS / "trusted_subsets.md").write_text("\n".join([
+        "# The trusted-calibration workflow on subsets of a real sweep", "",
+        (__doc__ or "").split("\n\n    python")[0].split("\n", 2)[2].strip(), "",
+        f"`{doc['command']}`; {doc['machine']}", "", *tables,
+        *doc.get("notes", [])]) + "\n")
+
+
+def _table(rows: list[dict], order) -> list[list[str]]:
     table = []
-    for r in sorted(doc["rows"], key=order):
+    for r in sorted(rows, key=order):
         c, w = r["clean"], r.get("40 % wrong")
         ct = r.get("calibration_translation", False)
         cal = f"{r['calibration_deg']:.2f}"
@@ -191,11 +237,7 @@ def write_report(doc: dict) -> None:
             "; ".join(f"{r[k]['flagged']} ({r[k]['registration']}{px(r[k].get('registration_px'))}"
                       f", {r[k]['calibration_change']})" for k in
                       (f"moved seed {i}" for i in MOVED_SEEDS) if k in r) or "-"])
-    (REPORTS / "trusted_subsets.md").write_text("\n".join([
-        "# The trusted-calibration workflow on subsets of a real sweep", "",
-        (__doc__ or "").split("\n\n    python")[0].split("\n", 2)[2].strip(), "",
-        f"`{doc['command']}`; {doc['machine']}", "", md_table(head, table), "",
-        *doc.get("notes", [])]) + "\n")
+    return table
 
 
 if __name__ == "__main__":
