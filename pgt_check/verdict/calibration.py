@@ -56,17 +56,6 @@ class CameraCalibration:
         t = getattr(est, "translation", None)
         return cls(np.asarray(est.rotation, float), float(est.focal_scale), _vec3(t))
 
-    @classmethod
-    def from_summary(cls, entry: Mapping[str, Any]) -> CameraCalibration | None:
-        """From a summary.json calibration entry (None without rotation or focal scale)."""
-        if entry.get("rotation") is None or entry.get("focal_scale") is None:
-            return None
-        return cls(
-            np.asarray(entry["rotation"], float),
-            float(entry["focal_scale"]),
-            _vec3(entry.get("translation")),
-        )
-
     def homography(self, intrinsics: Sequence[float], depth: float | None = None) -> np.ndarray:
         """(3, 3) photo_from_render: K_zoom (R + t n^T / depth) K^-1, the map this error
         induces for a fronto-parallel plane at ``depth`` (exact for R and zoom; the
