@@ -142,13 +142,15 @@ def registration_message(
         FAILED: f"FAILED: the trajectory is misregistered to the mesh (above {threshold:.1f} px)",
         INCONCLUSIVE: f"inconclusive: the interval straddles {threshold:.1f} px",
     }[e.status]
-    if e.status == INCONCLUSIVE and e.coherence_p is not None and lo is not None and lo > threshold:
-        # above it, but the frames do not pull together (``coherent``)
-        verdict = (f"inconclusive: above {threshold:.1f} px, but the frames do not pull "
-                   f"together (sign-flip p = {e.coherence_p:.2g}): their own errors may add up "
-                   "to it")
-    elif e.status == INCONCLUSIVE and allowance_px > 0 and lo is not None and lo > threshold:
-        verdict = f"inconclusive: above {threshold:.1f} px, but {untold(allowance_px)}"
+    if e.status == INCONCLUSIVE and lo is not None and lo > threshold:
+        # above it, but the frames do not pull together (``coherent``), or within what a
+        # trusted calibration may carry (``trusted_allowance``): the one that held it back
+        if not coherent(e.coherence_p, e.n_frames):
+            verdict = (f"inconclusive: above {threshold:.1f} px, but the frames do not pull "
+                       f"together (sign-flip p = {e.coherence_p:.2g}): their own errors may "
+                       "add up to it")
+        elif allowance_px > 0:
+            verdict = f"inconclusive: above {threshold:.1f} px, but {untold(allowance_px)}"
     amb = (
         " (not separable from a calibration error with these views)"
         if e.ambiguous_with_calibration

@@ -125,6 +125,21 @@ def test_registration_entry_fails_only_when_the_frames_pull_together(p, n_frames
                               2.4, "rigid").status == PASSED
 
 
+def test_registration_held_back_by_a_trusted_allowance_says_so_not_incoherence():
+    """Above the threshold but within threshold + allowance, frames that pull together: the
+    message names the trusted calibration's allowance, not a sign-flip test it passed (seen on
+    bm_virgin_child, p = 0.0005 reported as "the frames do not pull together")."""
+    e = registration_entry(_registration(3.0, (2.8, 3.2), coherence_p=0.0005, n_frames=32),
+                           2.4, "rigid", allowance_px=1.0)
+    assert e.status == INCONCLUSIVE
+    assert "do not pull together" not in e.message
+    assert "what the trusted calibration may carry" in e.message
+    # incoherent frames keep their reason, allowance or not
+    e = registration_entry(_registration(3.0, (2.8, 3.2), coherence_p=0.4, n_frames=32),
+                           2.4, "rigid", allowance_px=1.0)
+    assert e.status == INCONCLUSIVE and "do not pull together (sign-flip p = 0.4)" in e.message
+
+
 def test_registration_entry_similarity_passed_and_ambiguous():
     e = registration_entry(
         _registration(1.0, (0.5, 1.5), scale=1.01, ambiguous_with_calibration=True),
