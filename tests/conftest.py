@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import logging
 import os
 from pathlib import Path
 
@@ -47,3 +48,21 @@ def check_frames():
         return apply_verdicts(recs, cfg)
 
     return _check
+
+
+@pytest.fixture(autouse=True)
+def _pgt_check_logging():
+    """Each test leaves the ``pgt_check`` loggers as it found them. A command run in-process
+    sets the ``pgt_check`` logger's level (``--quiet``: ERROR) and handler
+    (``commands.common.configure_logging``), which hid the warnings a later test on the same
+    worker asserted with ``caplog`` (test_correction's "unreadable": order-dependent under
+    pytest-xdist)."""
+    root = logging.getLogger("pgt_check")
+    saved = (root.level, root.handlers[:], root.propagate)
+    yield
+    root.setLevel(saved[0])
+    root.handlers[:] = saved[1]
+    root.propagate = saved[2]
+    for name, logger in list(logging.Logger.manager.loggerDict.items()):
+        if name.startswith("pgt_check") and isinstance(logger, logging.Logger):
+            logger.disabled = False
