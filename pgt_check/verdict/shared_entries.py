@@ -96,6 +96,7 @@ def registration_entry(
         n_points=est.n_points,
         n_inliers=est.n_inliers,
         coherence_p=coherence_p,
+        allowance_px=float(allowance_px) if allowance_px > 0 else None,
         ambiguous_with_calibration=bool(est.ambiguous_with_calibration),
         corrected_world_from_world=(
             None
@@ -284,7 +285,8 @@ def calibration_change_entry(
             "misregistration (that run could not tell the two apart): calibrate on a run "
             "spread over the views this one sees (docs/run-level-checks.md)"
         )
-    return replace(entry, status=status, message=message)
+    return replace(entry, status=status, message=message,
+                   allowance_px=float(allowance_px) if allowance_px > 0 else None)
 
 
 def drift_coverage(

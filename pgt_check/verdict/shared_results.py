@@ -69,6 +69,9 @@ class RegistrationCheck:
     sensitivity: Sensitivity | None = None
     #: the summary's ``refinement`` block (first pass, rounds, why they stopped)
     refinement: Mapping[str, Any] | None = None
+    #: px above the threshold this check allowed for what a non-separable trusted calibration
+    #: may carry (``shared_entries.trusted_allowance``): FAILED only above threshold + this
+    allowance_px: float | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The summary.json entry (``shared_errors.registration`` / ``.similarity``)."""
@@ -102,6 +105,8 @@ class RegistrationCheck:
             out["sensitivity"] = self.sensitivity.to_json()
         if self.refinement is not None:
             out["refinement"] = dict(self.refinement)
+        if self.allowance_px is not None:
+            out["allowance_px"] = self.allowance_px
         return out
 
     @classmethod
@@ -213,6 +218,9 @@ class CalibrationCheck:
     #: coordinates (cx, cy, cz, ax, ay, az); a run that removes this calibration
     #: (``--calibration-from``) sees which of its views these cover (``verdict.calibration``)
     views: list[list[float]] | None = None
+    #: the calibration change only: px above the threshold allowed for what a non-separable
+    #: trusted calibration may carry (``shared_entries.trusted_allowance``)
+    allowance_px: float | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The summary.json entry (``shared_errors.calibration[camera]``)."""
@@ -236,6 +244,7 @@ class CalibrationCheck:
             "translation_ci": self.translation_ci,
             "message": self.message,
             **({"views": self.views} if self.views is not None else {}),
+            **({"allowance_px": self.allowance_px} if self.allowance_px is not None else {}),
         }
 
     @classmethod

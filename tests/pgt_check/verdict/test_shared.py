@@ -361,6 +361,16 @@ def test_a_change_a_non_separable_trusted_run_may_carry_is_inconclusive(truth, t
         case = (len(judged.frames), shift, separable, change["message"])
         assert change["status"] == expected, case
         assert change["effect_px"] > thr, case
+        # the summary says how much it allowed (absent where it allowed nothing)
+        allowance = change.get("allowance_px")
+        if separable or judged is arc:
+            assert allowance is None and "allowance_px" not in run.shared.summary()[
+                "registration"], case
+        else:
+            assert 0 < allowance <= thr, case
+            assert run.shared.summary()["registration"]["allowance_px"] == pytest.approx(
+                allowance)
+            assert (change["effect_px_ci"][0] > thr + allowance) == (expected == "failed"), case
         if expected == "inconclusive":
             assert "may carry of its own run's misregistration" in change["message"]
             reg = run.shared.summary()["registration"]

@@ -20,6 +20,7 @@ from pgt_check.verdict.shared_entries import (
     registration_entry,
     shared_or_not,
 )
+from pgt_check.verdict.shared_results import RegistrationCheck
 from pgt_check.verdict.status import FAILED, FINDING, INCONCLUSIVE, NOT_CHECKED, PASSED
 
 
@@ -134,6 +135,10 @@ def test_registration_held_back_by_a_trusted_allowance_says_so_not_incoherence()
     assert e.status == INCONCLUSIVE
     assert "do not pull together" not in e.message
     assert "what the trusted calibration may carry" in e.message
+    assert e.to_json()["allowance_px"] == 1.0  # the summary says how much was allowed
+    assert RegistrationCheck.from_json(json.loads(json.dumps(e.to_json()))) == e
+    assert "allowance_px" not in registration_entry(
+        _registration(3.0, (2.8, 3.2), coherence_p=0.0005, n_frames=32), 2.4, "rigid").to_json()
     # incoherent frames keep their reason, allowance or not
     e = registration_entry(_registration(3.0, (2.8, 3.2), coherence_p=0.4, n_frames=32),
                            2.4, "rigid", allowance_px=1.0)
