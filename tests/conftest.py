@@ -52,11 +52,11 @@ def check_frames():
 
 @pytest.fixture(autouse=True)
 def _pgt_check_logging():
-    """Each test leaves the ``pgt_check`` loggers as it found them. A command run in-process
-    sets the ``pgt_check`` logger's level (``--quiet``: ERROR) and handler
-    (``commands.common.configure_logging``), which hid the warnings a later test on the same
-    worker asserted with ``caplog`` (test_correction's "unreadable": order-dependent under
-    pytest-xdist)."""
+    """After each test the ``pgt_check`` logger has the level, handlers and propagation it had
+    before, and no ``pgt_check`` logger is disabled. A command run in-process sets that level
+    and handler (``commands.common.configure_logging``; ``enhance -q`` / ``compare -q``:
+    ERROR), which hid the warnings a later test on the same worker asserted with ``caplog``
+    (test_correction's "unreadable": order-dependent under pytest-xdist)."""
     root = logging.getLogger("pgt_check")
     saved = (root.level, root.handlers[:], root.propagate)
     yield
