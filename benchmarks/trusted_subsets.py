@@ -151,6 +151,8 @@ def main(argv: list[str] | None = None) -> int:
             row[case] = {"correct_pass": f"{sum(r['verdict'] == 'PASS' for r in ok)}/{len(ok)}",
                          "registration": js["registration"]["status"],
                          "registration_px": js["registration"].get("effect_px"),
+                         # what the checks allowed for the trusted calibration (None: nothing)
+                         "allowance_px": js["registration"].get("allowance_px"),
                          "calibration_change": ";".join(e["status"] for e in chg),
                          "calibration_change_px": [e.get("effect_px") for e in chg]}
             if case.startswith("moved"):  # and the move's own image effect (a random
@@ -214,6 +216,12 @@ def px(v: float | None) -> str:
     return "" if v is None else f" {v:.1f} px"
 
 
+def _allowed(case: dict) -> str:
+    """The allowance the checks applied (rows measured before it was recorded: nothing)."""
+    a = case.get("allowance_px")
+    return "" if a is None else f" (+{a:.1f} allowed)"
+
+
 def write_report(doc: dict) -> None:
     head = ["trusted run (up to 20 frames, --remove-calibration)", "commit", "its verdicts",
             "calibration (deg; separable from registration)", "its registration",
@@ -255,10 +263,12 @@ def _table(rows: list[dict], order) -> list[list[str]]:
             ", ".join(f"{k} {v}" for k, v in r["trusted_verdicts"].items() if v),
             f"{cal} ({r['calibration_status']}; "
             f"{'yes' if r['separable'] else 'no'})", r["trusted_registration"],
-            f"{c['correct_pass']} ({c['registration']}{px(c.get('registration_px'))}, "
+            f"{c['correct_pass']} ({c['registration']}{px(c.get('registration_px'))}"
+            f"{_allowed(c)}, "
             f"{c['calibration_change']}{px((c.get('calibration_change_px') or [None])[0])})",
             *([w["correct_pass"], w["wrong_flagged"], f"{w['auc']:.3f}"] if w else ["-"] * 3),
             "; ".join(f"{r[k]['flagged']} ({r[k]['registration']}{px(r[k].get('registration_px'))}"
+                      f"{_allowed(r[k])}"
                       f", {r[k]['calibration_change']}{_move(r[k])})" for k in
                       (f"moved seed {i}" for i in MOVED_SEEDS) if k in r) or "-"])
     return table
