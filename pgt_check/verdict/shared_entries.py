@@ -104,7 +104,7 @@ def registration_entry(
             else np.asarray(est.corrected_world_from_world).tolist()
         ),
     )
-    return replace(check, message=registration_message(check, threshold, allowance_px))
+    return replace(check, message=registration_message(check, threshold))
 
 
 def coherent(p_value: float | None, n_frames: int) -> bool:
@@ -119,9 +119,7 @@ def coherent(p_value: float | None, n_frames: int) -> bool:
     return p_value <= COHERENCE_ALPHA
 
 
-def registration_message(
-    e: RegistrationCheck, threshold: float, allowance_px: float = 0.0
-) -> str:
+def registration_message(e: RegistrationCheck, threshold: float) -> str:
     """The one-line message of the registration check ``e`` (its ``message`` not yet set)."""
     what = "similarity" if e.kind == "similarity" else "rigid registration"
     if e.status == NOT_CHECKED:
@@ -150,8 +148,8 @@ def registration_message(
             verdict = (f"inconclusive: above {threshold:.1f} px, but the frames do not pull "
                        f"together (sign-flip p = {e.coherence_p:.2g}): their own errors may "
                        "add up to it")
-        elif allowance_px > 0:
-            verdict = f"inconclusive: above {threshold:.1f} px, but {untold(allowance_px)}"
+        elif e.allowance_px is not None:
+            verdict = f"inconclusive: above {threshold:.1f} px, but {untold(e.allowance_px)}"
     amb = (
         " (not separable from a calibration error with these views)"
         if e.ambiguous_with_calibration
