@@ -166,15 +166,15 @@ def main(argv: list[str] | None = None) -> int:
         print(json.dumps(row, default=str), flush=True)
         rows.append(row)
     out = REPORTS / "trusted_subsets.json"
-    notes = json.loads(out.read_text()).get("notes", []) if out.is_file() else []
-    old = json.loads(out.read_text()).get("rows", []) if out.is_file() else []
+    before = json.loads(out.read_text()) if out.is_file() else {}
+    notes, old = before.get("notes", []), before.get("rows", [])
     for r in rows:  # the cases this call did not judge again are kept from the earlier row
         prev = next((o for o in old if row_key(o) == row_key(r)), {})
         for k, v in prev.items():
             r.setdefault(k, v)
     done = {row_key(r) for r in rows}  # rows of other scenes, subsets or the other fit kept
     rows += [r for r in old if row_key(r) not in done]
-    cmd = json.loads(out.read_text()).get("command", "") if out.is_file() else ""
+    cmd = before.get("command", "")
     cmd = cmd if command_line() in cmd else "; ".join(filter(None, [cmd, command_line()]))
     doc = {"command": cmd, "machine": machine(), "frames": a.frames, "rows": rows,
            "notes": notes}  # the hand-written reading is kept
